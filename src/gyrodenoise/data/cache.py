@@ -1,0 +1,93 @@
+"""Load sequences through a preprocessing cache keyed by the source files' content and the settings.
+
+A changed data file or setting gives a new key and so a rebuild; files are written atomically
+(temporary file + rename), so an interrupted run never leaves a cache file that looks whole.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gyrodenoise.data.readers import find_groundtruth_file, read_groundtruth, read_imu
+from gyrodenoise.data.sequence import Sequence, build_sequence, sequence_folder
+
+CACHE_VERSION = 1
+_ARRAYS = ("t", "gyro", "acc", "rot", "pos", "gt_mask")
+
+
+def default_cache_dir() -> Path:
+    return Path(os.environ.get("GYRODENOISE_CACHE", Path.home() / ".cache" / "gyrodenoise"))
+
+
+def _file_digest(path: Path) -> str:
+    h = hashlib.sha1()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def cache_key(files: list[Path], settings: dict) -> str:
+    h = hashlib.sha1()
+    h.update(json.dumps({"v": CACHE_VERSION, "settings": settings}, sort_keys=True).encode())
+    for f in files:
+        h.update(_file_digest(f).encode())
+    return h.hexdigest()[:16]
+
+
+def atomic_save_npz(path: Path, **arrays: np.ndarray) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
+    os.close(fd)
+    try:
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def load_sequence(
+    root: str | Path,
+    name: str,
+    gt_file: str | None = None,
+    max_gap_factor: float = 3.0,
+    cache_dir: str | Path | None = None,
+) -> Sequence:
+    """Read <root>/<name>/mav0 (IMU + ground truth), through the cache.
+
+    gt_file: ground-truth file relative to mav0 (default: the dataset's standard one).
+    cache_dir: None uses $GYRODENOISE_CACHE or ~/.cache/gyrodenoise; "" disables the cache.
+    """
+    mav0 = sequence_folder(root, name)
+    imu_path = mav0 / "imu0" / "data.csv"
+    gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
+    if not gt_path.is_file():
+        raise FileNotFoundError(f"{gt_path}: ground-truth file not found (dataset config gt_file={gt_file!r}).")
+    if not imu_path.is_file():
+        raise FileNotFoundError(f"{imu_path}: IMU file not found (ASL layout mav0/imu0/data.csv).")
+    settings = {"max_gap_factor": max_gap_factor, "name": name}
+    use_cache = cache_dir != ""
+    cache_path = None
+    if use_cache:
+        key = cache_key([imu_path, gt_path], settings)
+        cache_path = Path(cache_dir or default_cache_dir()) / f"{name}-{key}.npz"
+        if cache_path.is_file():
+            with np.load(cache_path, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                return Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
+    seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
+    if cache_path is not None:
+        atomic_save_npz(
+            cache_path,
+            t0_ns=np.int64(seq.t0_ns),
+            meta=np.array(json.dumps(seq.meta)),
+            **{k: getattr(seq, k) for k in _ARRAYS},
+        )
+    return seq

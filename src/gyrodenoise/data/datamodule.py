@@ -1,0 +1,198 @@
+"""Datasets and the LightningDataModule with the paper's splits.
+
+Training: the first `train_duration_s` of each training sequence, served as random crops whose
+start is a multiple of the longest loss increment, so that the ground-truth increments over
+`base_increment` samples are computed once per sequence and only sliced afterwards.
+Validation: the rest of the training sequences, whole. Test: the test sequences, whole.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import lightning.pytorch as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from gyrodenoise.data.augment import AugmentConfig, augment_window
+from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.sequence import Sequence
+
+
+def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """dR_k = R_{k*step}^T R_{(k+1)*step} and its availability (ground truth at every sample of it)."""
+    n = (len(seq) - 1) // step
+    R = seq.rot[: n * step + 1 : step]
+    dR = np.swapaxes(R[:-1], -1, -2) @ R[1:]
+    m = seq.gt_mask[: n * step + 1]
+    ok = np.array([m[k * step : (k + 1) * step + 1].all() for k in range(n)], dtype=bool)
+    return dR, ok
+
+
+def sequence_item(seq: Sequence, step: int, block: int) -> dict:
+    """A whole sequence as a batch item, truncated to 1 + multiple of `block` samples."""
+    n = 1 + ((len(seq) - 1) // block) * block
+    s = seq.slice(0, n)
+    dR, ok = gt_increments(s, step)
+    return {
+        "imu": torch.from_numpy(s.imu).float(),
+        "dt": torch.from_numpy(s.dt),
+        "dR": torch.from_numpy(dR),
+        "dR_mask": torch.from_numpy(ok),
+        "rot": torch.from_numpy(s.rot),
+        "pos": torch.from_numpy(s.pos),
+        "gt_mask": torch.from_numpy(s.gt_mask),
+        "t": torch.from_numpy(s.t),
+        "name": s.name,
+    }
+
+
+class RandomCrops(Dataset):
+    """`crops_per_epoch` random windows of `window` (+1) samples from each training sequence."""
+
+    def __init__(
+        self,
+        seqs: list[Sequence],
+        window: int,
+        step: int,
+        block: int,
+        crops_per_epoch: int,
+        augment: AugmentConfig,
+    ) -> None:
+        self.seqs, self.step, self.block = seqs, step, block
+        self.crops_per_epoch, self.augment = crops_per_epoch, augment
+        shortest = min(len(s) for s in seqs)
+        self.window = min(window, ((shortest - 1) // block) * block)
+        if self.window < block:
+            raise ValueError(f"training sequences are too short ({shortest} samples) for one {block}-sample block")
+        self.increments = [gt_increments(s, step) for s in seqs]  # computed once
+        self.imu = [torch.from_numpy(s.imu).float() for s in seqs]
+        self.dt = [torch.from_numpy(s.dt) for s in seqs]
+
+    def __len__(self) -> int:
+        return len(self.seqs) * self.crops_per_epoch
+
+    def __getitem__(self, i: int) -> dict:
+        k = i % len(self.seqs)
+        n_blocks = (len(self.seqs[k]) - 1 - self.window) // self.block + 1
+        start = int(torch.randint(0, n_blocks, ()).item()) * self.block
+        stop = start + self.window + 1
+        dR, ok = self.increments[k]
+        a, b = start // self.step, (start + self.window) // self.step
+        return {
+            "imu": augment_window(self.imu[k][start:stop], self.augment),
+            "dt": self.dt[k][start:stop],
+            "dR": torch.from_numpy(dR[a:b]),
+            "dR_mask": torch.from_numpy(ok[a:b]),
+        }
+
+
+class ImuDataModule(L.LightningDataModule):
+    """Splits by sequence name and time, as in the paper (Section IV-A)."""
+
+    def __init__(
+        self,
+        name: str,
+        root: str,
+        train_seqs: list[str],
+        test_seqs: list[str],
+        val_seqs: list[str] | None = None,
+        train_duration_s: float = 50.0,
+        gt_files: Mapping[str, str] | None = None,
+        eval_gt_variants: Mapping[str, Mapping[str, str]] | None = None,
+        window: int = 9600,
+        crops_per_epoch: int = 1,
+        increments: tuple[int, ...] = (16, 32),
+        augment: Mapping | None = None,
+        max_gap_factor: float = 3.0,
+        cache_dir: str | None = None,
+        sensor: Mapping | None = None,
+    ) -> None:
+        super().__init__()
+        self.name, self.root = name, str(root)
+        self.train_names = list(train_seqs)
+        self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
+        self.test_names = list(test_seqs)
+        self.train_duration_s = train_duration_s
+        self.gt_files = dict(gt_files or {})
+        # evaluation only: {sequence: {label: gt_file}}, extra rows against another ground truth
+        self.eval_gt_variants = {k: dict(v) for k, v in (eval_gt_variants or {}).items()}
+        self.window, self.crops_per_epoch = window, crops_per_epoch
+        self.step, self.block = min(increments), max(increments)
+        if any(j & (j - 1) for j in increments) or self.block % self.step:
+            raise ValueError(f"increments must be powers of two, got {list(increments)}")
+        self.sensor = dict(sensor or {})
+        self.augment = self._augment_config(dict(augment or {}))
+        self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
+        self.train_part: list[Sequence] = []
+        self.val_part: list[Sequence] = []
+        self.test_part: list[Sequence] = []
+
+    def _augment_config(self, aug: dict) -> AugmentConfig:
+        """Noise std defaults to `noise_scale` (0.5, the paper) x the sensor's per-sample noise."""
+        scale = aug.pop("noise_scale", 0.5)
+        for kind in ("gyro", "acc"):
+            if aug.get(f"{kind}_noise_std") is None:
+                density = self.sensor.get(f"{kind}_noise_density", 0.0)
+                aug[f"{kind}_noise_std"] = noise_std_from_density(density, self.sensor.get("rate_hz", 200.0), scale)
+        return AugmentConfig(**aug)
+
+    def load(self, name: str) -> Sequence:
+        return load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
+
+    def setup(self, stage: str | None = None) -> None:
+        if stage in (None, "fit", "validate") and not self.train_part:
+            for name in sorted(set(self.train_names) | set(self.val_names)):
+                seq = self.load(name)
+                cut = seq.index_at(self.train_duration_s)
+                if name in self.train_names:
+                    self.train_part.append(seq.slice(0, cut + 1, name))
+                if name in self.val_names:
+                    self.val_part.append(seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]"))
+        if stage in (None, "test", "predict") and not self.test_part:
+            self.test_part = [self.load(n) for n in self.test_names]
+
+    def normalization(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-channel mean and std of the training IMU data (never validation or test)."""
+        if not self.train_part:
+            self.setup("fit")
+        x = np.concatenate([s.imu for s in self.train_part])
+        return x.mean(0), x.std(0) + 1e-8
+
+    @property
+    def rate_hz(self) -> float:
+        seqs = self.train_part or self.test_part
+        return float(np.median([s.rate_hz for s in seqs]))
+
+    def train_dataloader(self) -> DataLoader:
+        ds = RandomCrops(
+            self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment
+        )
+        return DataLoader(ds, batch_size=len(self.train_part), shuffle=False, num_workers=0)
+
+    def _whole(self, seqs: list[Sequence]) -> DataLoader:
+        items = [sequence_item(s, self.step, self.block) for s in seqs]
+        return DataLoader(items, batch_size=1, shuffle=False, collate_fn=_collate_one)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._whole(self.val_part)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._whole(self.test_part)
+
+
+def _collate_one(items: list[dict]) -> dict:
+    (item,) = items
+    return {k: (v.unsqueeze(0) if torch.is_tensor(v) else v) for k, v in item.items()}
+
+
+def noise_std_from_density(density: float, rate_hz: float, scale: float = 0.5) -> float:
+    """Per-sample std of white noise with a given density (unit/sqrt(Hz)), times `scale`."""
+    return scale * density * math.sqrt(rate_hz)
+
+
+def data_available(root: str | Path, names: list[str]) -> bool:
+    return all((Path(root) / n / "mav0" / "imu0" / "data.csv").is_file() for n in names)

@@ -1,0 +1,155 @@
+"""Readers for the ASL folder format (EuRoC, TUM-VI, simulated data) with input validation.
+
+Every error names the file, the line (1-based, as an editor shows it) or column, what is wrong,
+and what to do. Nothing is dropped silently.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+QUAT_NORM_TOL = 1e-3  # |q| may deviate this much (6-decimal files reach ~1e-6); renormalised after
+
+
+class DataFormatError(ValueError):
+    """A data file does not have the expected content."""
+
+
+@dataclass(frozen=True)
+class ImuData:
+    t_ns: np.ndarray  # (N,) int64
+    gyro: np.ndarray  # (N, 3) rad/s
+    acc: np.ndarray  # (N, 3) m/s^2
+    path: Path
+
+
+@dataclass(frozen=True)
+class GroundTruthData:
+    t_ns: np.ndarray  # (M,) int64
+    pos: np.ndarray  # (M, 3) m
+    quat_xyzw: np.ndarray  # (M, 4) unit, scalar-last
+    path: Path
+
+
+def read_csv_table(path: Path, min_cols: int, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a comma-separated numeric table with '#' comment lines.
+
+    Returns (t_ns int64, values float64 with the `min_cols - 1` columns after the time, line numbers).
+    Columns beyond `min_cols` are ignored (optional extras such as velocity and biases).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path}: {what} file not found. Expected the ASL layout <sequence>/mav0/...; "
+            "check the dataset root and sequence name in the config."
+        )
+    stamps: list[int] = []
+    rows: list[list[str]] = []
+    line_numbers: list[int] = []
+    with open(path, encoding="utf-8") as fh:
+        for lineno, line in enumerate(fh, start=1):
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            fields = [f.strip() for f in s.split(",")]
+            if len(fields) < min_cols:
+                raise DataFormatError(
+                    f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least "
+                    f"{min_cols}. Fix or remove the truncated line."
+                )
+            try:
+                stamps.append(int(fields[0]))
+            except ValueError:
+                raise DataFormatError(
+                    f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number "
+                    "of nanoseconds."
+                ) from None
+            rows.append(fields[1:min_cols])
+            line_numbers.append(lineno)
+    if not rows:
+        raise DataFormatError(f"{path}: no data lines in {what} file (only comments or empty).")
+    try:
+        values = np.array(rows, dtype=np.float64)
+    except ValueError:
+        for lineno, r in zip(line_numbers, rows, strict=True):
+            for col, f in enumerate(r, start=2):
+                try:
+                    float(f)
+                except ValueError:
+                    raise DataFormatError(
+                        f"{path}:{lineno}: column {col} is {f!r}, not a number."
+                    ) from None
+        raise
+    t_ns = np.array(stamps, dtype=np.int64)
+    lines = np.array(line_numbers)
+    _check_values(path, values, lines, what)
+    _check_time(path, t_ns, lines, what)
+    return t_ns, values, lines
+
+
+def _check_values(path: Path, values: np.ndarray, lines: np.ndarray, what: str) -> None:
+    bad = ~np.isfinite(values)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise DataFormatError(
+            f"{path}:{lines[r]}: column {c + 2} of the {what} is {values[r, c]} (NaN/inf) "
+            f"({int(bad.any(1).sum())} such lines). Remove or repair these samples; gyrodenoise does not "
+            "fill them in silently."
+        )
+
+
+def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> None:
+    d = np.diff(t_ns)
+    if (d == 0).any():
+        k = int(np.argmax(d == 0))
+        raise DataFormatError(
+            f"{path}:{lines[k + 1]}: duplicate timestamp {t_ns[k + 1]} (same as line {lines[k]}) in the "
+            f"{what}. Remove the duplicated sample."
+        )
+    if (d < 0).any():
+        k = int(np.argmax(d < 0))
+        raise DataFormatError(
+            f"{path}:{lines[k + 1]}: timestamp {t_ns[k + 1]} goes back in time (previous line {lines[k]} "
+            f"has {t_ns[k]}). The {what} must be sorted by time."
+        )
+
+
+def read_imu(path: str | Path) -> ImuData:
+    """ASL IMU file: t[ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]."""
+    t, v, _ = read_csv_table(Path(path), 7, "IMU")
+    return ImuData(t_ns=t, gyro=v[:, 0:3], acc=v[:, 3:6], path=Path(path))
+
+
+def read_groundtruth(path: str | Path) -> GroundTruthData:
+    """ASL ground truth: t[ns], p_x, p_y, p_z [m], q_w, q_x, q_y, q_z, then optional columns."""
+    path = Path(path)
+    t, v, lines = read_csv_table(path, 8, "ground truth")
+    q_wxyz = v[:, 3:7]
+    norm = np.linalg.norm(q_wxyz, axis=1)
+    bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise DataFormatError(
+            f"{path}:{lines[k]}: quaternion (columns 5-8, w x y z) has norm {norm[k]:.6f}, more than "
+            f"{QUAT_NORM_TOL} from 1 ({int(bad.sum())} such lines). Check the column order "
+            "(t, p_x, p_y, p_z, q_w, q_x, q_y, q_z) and the file's units."
+        )
+    q_wxyz = q_wxyz / norm[:, None]
+    quat_xyzw = np.concatenate([q_wxyz[:, 1:], q_wxyz[:, :1]], axis=1)
+    return GroundTruthData(t_ns=t, pos=v[:, 0:3], quat_xyzw=quat_xyzw, path=path)
+
+
+def find_groundtruth_file(mav0: Path) -> Path:
+    """EuRoC keeps ground truth in state_groundtruth_estimate0/, TUM-VI in mocap0/."""
+    for sub in ("state_groundtruth_estimate0", "mocap0"):
+        p = mav0 / sub / "data.csv"
+        if p.is_file():
+            return p
+    raise FileNotFoundError(
+        f"{mav0}: no ground truth found (looked for state_groundtruth_estimate0/data.csv and "
+        "mocap0/data.csv). Training and evaluation need ground truth; use gyrodenoise.correct for "
+        "IMU-only recordings."
+    )

@@ -1,0 +1,125 @@
+"""A Sequence: IMU samples with ground-truth attitude at the IMU timestamps.
+
+Building one from files: crop both streams to their common span, SLERP the ground-truth
+orientation (and linearly interpolate position) at the IMU stamps, and mark the IMU samples that
+fall in a ground-truth gap (TUM-VI mocap occlusions) as unavailable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from gyrodenoise.data.readers import DataFormatError, GroundTruthData, ImuData
+
+
+@dataclass
+class Sequence:
+    name: str
+    t0_ns: int  # absolute time of the first sample
+    t: np.ndarray  # (N,) float64 s since t0_ns
+    gyro: np.ndarray  # (N, 3) rad/s
+    acc: np.ndarray  # (N, 3) m/s^2
+    rot: np.ndarray  # (N, 3, 3) ground-truth body-to-world rotation at each IMU stamp
+    pos: np.ndarray  # (N, 3) ground-truth position (m)
+    gt_mask: np.ndarray  # (N,) bool, ground truth available at this sample
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def imu(self) -> np.ndarray:
+        """(N, 6) gyro then accelerometer, the network's input."""
+        return np.concatenate([self.gyro, self.acc], axis=1)
+
+    @property
+    def dt(self) -> np.ndarray:
+        """(N,) dt_n = t_n - t_{n-1}; dt_0 repeats dt_1 (unused by integration)."""
+        d = np.diff(self.t)
+        return np.concatenate([d[:1], d])
+
+    @property
+    def rate_hz(self) -> float:
+        return float(1.0 / np.median(np.diff(self.t)))
+
+    def slice(self, start: int, stop: int, name: str | None = None) -> Sequence:
+        """Samples [start, stop), time kept relative to the original start."""
+        return Sequence(
+            name=name or self.name,
+            t0_ns=self.t0_ns,
+            t=self.t[start:stop],
+            gyro=self.gyro[start:stop],
+            acc=self.acc[start:stop],
+            rot=self.rot[start:stop],
+            pos=self.pos[start:stop],
+            gt_mask=self.gt_mask[start:stop],
+            meta=dict(self.meta),
+        )
+
+    def index_at(self, seconds: float) -> int:
+        """First sample index at or after `seconds` from the sequence start."""
+        return int(np.searchsorted(self.t - self.t[0], seconds))
+
+
+def build_sequence(name: str, imu: ImuData, gt: GroundTruthData, max_gap_factor: float = 3.0) -> Sequence:
+    """Align ground truth to the IMU stamps.
+
+    A sample has ground truth when the ground-truth samples around it are at most
+    `max_gap_factor` x the median ground-truth period apart; elsewhere SLERP would bridge an
+    occlusion and the mask is False.
+    """
+    t_imu, t_gt = imu.t_ns, gt.t_ns
+    if len(t_gt) < 2:
+        raise DataFormatError(f"{gt.path}: fewer than 2 ground-truth samples.")
+    lo, hi = max(t_imu[0], t_gt[0]), min(t_imu[-1], t_gt[-1])
+    if hi <= lo:
+        raise DataFormatError(
+            f"{gt.path}: ground truth [{t_gt[0]}, {t_gt[-1]}] ns does not overlap the IMU "
+            f"{imu.path} [{t_imu[0]}, {t_imu[-1]}] ns. Both must use the same clock (ns)."
+        )
+    keep = (t_imu >= lo) & (t_imu <= hi)
+    t_ns = t_imu[keep]
+    t0 = int(t_ns[0])
+    # float64 seconds relative to a common origin: exact enough (sub-ns for hours)
+    ts_imu = (t_ns - t0) * 1e-9
+    ts_gt = (t_gt - t0) * 1e-9
+    rots = Rotation.from_quat(gt.quat_xyzw)
+    rot = Slerp(ts_gt, rots)(ts_imu).as_matrix()
+    pos = np.stack([np.interp(ts_imu, ts_gt, gt.pos[:, k]) for k in range(3)], axis=1)
+
+    period = float(np.median(np.diff(ts_gt)))
+    right = np.clip(np.searchsorted(ts_gt, ts_imu, side="left"), 1, len(ts_gt) - 1)
+    span = ts_gt[right] - ts_gt[right - 1]
+    exact = ts_gt[right] == ts_imu  # an IMU stamp on a ground-truth stamp is always covered
+    gt_mask = exact | (span <= max_gap_factor * period)
+    return Sequence(
+        name=name,
+        t0_ns=t0,
+        t=ts_imu,
+        gyro=imu.gyro[keep],
+        acc=imu.acc[keep],
+        rot=rot,
+        pos=pos,
+        gt_mask=gt_mask,
+        meta={
+            "imu_file": str(imu.path),
+            "gt_file": str(gt.path),
+            "imu_samples_cropped": int((~keep).sum()),
+            "gt_period_s": period,
+        },
+    )
+
+
+def sequence_folder(root: str | Path, name: str) -> Path:
+    """<root>/<name>/mav0, with an error that says what was looked for."""
+    mav0 = Path(root) / name / "mav0"
+    if not mav0.is_dir():
+        raise FileNotFoundError(
+            f"{mav0}: sequence folder not found. Set dataset.root to the folder that holds "
+            f"'{name}/mav0/imu0/data.csv' (ASL layout)."
+        )
+    return mav0

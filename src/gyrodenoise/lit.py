@@ -1,0 +1,114 @@
+"""LightningModule: the correction model trained with the increment loss.
+
+Hyperparameters are plain dicts and numbers only, so checkpoints reload under torch's
+`weights_only` default. Validation integrates the corrected gyro over each whole validation
+sequence and logs its AOE; figures go to TensorBoard when that logger is active.
+"""
+
+from __future__ import annotations
+
+import math
+
+import lightning.pytorch as L
+import numpy as np
+import torch
+from lightning.pytorch.loggers import TensorBoardLogger
+
+from gyrodenoise import plots
+from gyrodenoise.losses import IncrementLoss
+from gyrodenoise.metrics import aoe
+from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.so3 import integrate_gyro
+
+
+class DenoiserModule(L.LightningModule):
+    def __init__(self, model: dict, optim: dict, loss: dict, figure_every_n_val: int = 5) -> None:
+        super().__init__()
+        self.save_hyperparameters()
+        self.model = build_model(**model)
+        self.loss_fn = IncrementLoss(**loss)
+        self.figure_every_n_val = figure_every_n_val
+        self._val_outputs: list[dict] = []
+        self._val_count = 0
+
+    def setup(self, stage: str) -> None:
+        dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        if stage == "fit" and dm is not None:
+            mean, std = dm.normalization()  # training data only; a resumed checkpoint overrides
+            self.model.set_normalization(mean, std)
+
+    def forward(self, imu: torch.Tensor) -> torch.Tensor:
+        return self.model(imu)
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        w_hat = self.model(batch["imu"])
+        loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
+        self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
+        return loss
+
+    def _evaluate_sequence(self, batch: dict) -> dict:
+        w_hat = self.model(batch["imu"])
+        loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
+        w = w_hat[0].double().cpu().numpy()
+        rot = batch["rot"][0].cpu().numpy()
+        R_est = integrate_gyro(rot[0], w, batch["dt"][0].cpu().numpy())
+        mask = batch["gt_mask"][0].cpu().numpy()
+        a3d, ayaw = aoe(rot, R_est, mask)
+        return {
+            "name": batch["name"],
+            "loss": float(loss),
+            "aoe": a3d,
+            "aoe_yaw": ayaw,
+            "t": batch["t"][0].cpu().numpy(),
+            "rot": rot,
+            "R_est": R_est,
+            "w_tilde": w - batch["imu"][0, :, :3].double().cpu().numpy(),
+        }
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        self._val_outputs.append(self._evaluate_sequence(batch))
+
+    def on_validation_epoch_end(self) -> None:
+        outs, self._val_outputs = self._val_outputs, []
+        if not outs:
+            return
+        self.log("val/loss", float(np.mean([o["loss"] for o in outs])))
+        self.log("val/aoe_deg", math.degrees(np.mean([o["aoe"] for o in outs])), prog_bar=True)
+        self.log("val/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in outs])))
+        if not self.trainer.sanity_checking:
+            self._val_count += 1
+            if self._val_count % self.figure_every_n_val == 1 or self.figure_every_n_val == 1:
+                self._log_figures(outs[0], "val")
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        o = self._evaluate_sequence(batch)
+        self.log(f"test/aoe_deg/{o['name']}", math.degrees(o["aoe"]), batch_size=1)
+        self.log(f"test/aoe_yaw_deg/{o['name']}", math.degrees(o["aoe_yaw"]), batch_size=1)
+        self.log("test/aoe_deg", math.degrees(o["aoe"]), batch_size=1)  # averaged over sequences
+        self.log("test/aoe_yaw_deg", math.degrees(o["aoe_yaw"]), batch_size=1)
+
+    def _log_figures(self, o: dict, prefix: str) -> None:
+        for logger in self.loggers:
+            if isinstance(logger, TensorBoardLogger):
+                tb = logger.experiment
+                step = self.global_step
+                title = f"{o['name']} (epoch {self.current_epoch})"
+                tb.add_figure(
+                    f"{prefix}/orientation",
+                    plots.orientation_figure(o["t"], o["rot"], {"corrected": o["R_est"]}, title),
+                    step,
+                )
+                tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(o["t"], o["w_tilde"], title), step)
+
+    def configure_optimizers(self):
+        o = self.hparams.optim
+        opt = torch.optim.Adam(self.parameters(), lr=o["lr"], weight_decay=o.get("weight_decay", 0.0))
+        sched = o.get("scheduler") or {"name": "constant"}
+        if sched["name"] == "constant":
+            return opt
+        if sched["name"] == "cosine_warm_restarts":
+            s = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
+                opt, T_0=sched["T_0"], T_mult=sched.get("T_mult", 1), eta_min=sched.get("eta_min", 0.0)
+            )
+            return {"optimizer": opt, "lr_scheduler": {"scheduler": s, "interval": "epoch"}}
+        raise ValueError(f"optim.scheduler.name={sched['name']!r}; choose 'cosine_warm_restarts' or 'constant'")

@@ -1,0 +1,52 @@
+"""Increment loss of the paper, eqs. (8)-(10).
+
+For each increment length j (16 and 32 samples by default), the estimated increments
+dR_hat_{i,i+j} = prod_{k=i+1}^{i+j} exp(w_hat_k dt_k), i = 0, j, 2j, ... are built as a log2(j)-deep
+tree of batched products (float64) and compared with the precomputed ground-truth increments:
+r = Log(dR dR_hat^T), rho = Huber with threshold `huber_delta` (rad) on each component.
+The Huber value is divided by delta^2 so that the loss is O(1) (Adam's epsilon stays negligible).
+Terms whose ground truth is missing (mask False) are left out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch.nn import functional as F
+
+from gyrodenoise import so3
+
+
+class IncrementLoss(torch.nn.Module):
+    def __init__(self, increments: tuple[int, ...] = (16, 32), huber_delta: float = 0.005) -> None:
+        super().__init__()
+        self.increments = sorted(int(j) for j in increments)
+        self.base = self.increments[0]
+        if any(j & (j - 1) or j % self.base for j in self.increments):
+            raise ValueError(f"loss.increments must be powers of two, got {self.increments}")
+        self.delta = huber_delta
+
+    def residuals(self, w_hat: torch.Tensor, dt: torch.Tensor, dR: torch.Tensor, mask: torch.Tensor):
+        """Yield (j, r, mask_j) for each increment length.
+
+        w_hat: (B, 1 + L, 3) corrected gyro; dt: (B, 1 + L); dR: (B, L / base, 3, 3) ground-truth
+        increments over `base` samples; mask: (B, L / base).
+        """
+        steps = so3.exp(w_hat[:, 1:].double() * dt[:, 1:, None])  # step k -> k+1 uses sample k+1
+        est = so3.tree_product(steps, int(math.log2(self.base)))
+        gt, m = dR, mask
+        for j in self.increments:
+            while est.shape[1] > dR.shape[1] * self.base // j:  # pair up until blocks span j samples
+                est = est[:, 0::2] @ est[:, 1::2]
+                gt = gt[:, 0::2] @ gt[:, 1::2]
+                m = m[:, 0::2] & m[:, 1::2]
+            yield j, so3.log(gt @ est.transpose(-1, -2)), m
+
+    def forward(self, w_hat, dt, dR, mask) -> torch.Tensor:
+        total = w_hat.new_zeros((), dtype=torch.float64)
+        for _, r, m in self.residuals(w_hat, dt, dR, mask):
+            if m.any():
+                rho = F.huber_loss(r[m], torch.zeros_like(r[m]), reduction="mean", delta=self.delta)
+                total = total + rho / self.delta**2
+        return total

@@ -1,0 +1,92 @@
+"""Figures shared by TensorBoard logging and the evaluation report (matplotlib, Agg backend)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from gyrodenoise.so3 import rpy_of  # noqa: E402
+
+AXES = ("roll", "pitch", "yaw")
+
+
+def orientation_figure(t: np.ndarray, R_gt: np.ndarray, estimates: dict[str, np.ndarray], title: str = ""):
+    """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6)."""
+    fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    gt = np.degrees(np.unwrap(rpy_of(R_gt), axis=0))
+    for k, ax in enumerate(axs):
+        ax.plot(t, gt[:, k], "k", lw=1.5, label="ground truth")
+        for name, R in estimates.items():
+            ax.plot(t, np.degrees(np.unwrap(rpy_of(R), axis=0))[:, k], lw=1, label=name)
+        ax.set_ylabel(f"{AXES[k]} (deg)")
+        ax.grid(alpha=0.3)
+    axs[0].legend(loc="best", fontsize=8)
+    axs[-1].set_xlabel("t (s)")
+    axs[0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def error_figure(t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):
+    """3D and yaw orientation error (deg) over time for each method (Fig. 7)."""
+    fig, axs = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    for name, (e3d, eyaw) in errors.items():
+        axs[0].plot(t, np.degrees(e3d), lw=1, label=name)
+        axs[1].plot(t, np.degrees(np.abs(eyaw)), lw=1, label=name)
+    axs[0].set_ylabel("3D error (deg)")
+    axs[1].set_ylabel("|yaw error| (deg)")
+    axs[1].set_xlabel("t (s)")
+    for ax in axs:
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3, which="both")
+    axs[0].legend(loc="best", fontsize=8)
+    axs[0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = ""):
+    """Gyro correction w_hat - w_imu per axis (deg/s) over time (Fig. 8)."""
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    for k, lab in enumerate("xyz"):
+        ax.plot(t, np.degrees(w_tilde[:, k]), lw=0.8, label=f"$\\tilde\\omega_{lab}$")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("correction (deg/s)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], title: str = ""):
+    """Box plots of ROE (3D and yaw) per travelled distance and method (Fig. 5)."""
+    dists = sorted(roe)
+    methods = list(next(iter(roe.values())).keys()) if roe else []
+    fig, axs = plt.subplots(1, 2, figsize=(11, 4))
+    width = 0.8 / max(len(methods), 1)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for a, ax in enumerate(axs):
+        for m, name in enumerate(methods):
+            data = [np.degrees(roe[d][name][a]) for d in dists]
+            pos = np.arange(len(dists)) + (m - (len(methods) - 1) / 2) * width
+            bp = ax.boxplot(data, positions=pos, widths=width * 0.9, patch_artist=True, showfliers=False)
+            for box in bp["boxes"]:
+                box.set_facecolor(colors[m % len(colors)])
+            ax.plot([], [], color=colors[m % len(colors)], lw=6, label=name)
+        ax.set_xticks(np.arange(len(dists)), [f"{d:g} m" for d in dists])
+        ax.set_yscale("log")
+        ax.set_ylabel(("3D" if a == 0 else "yaw") + " ROE (deg)")
+        ax.grid(alpha=0.3, which="both")
+    axs[0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def save(fig, path) -> None:
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,135 @@
+"""Hydra entry point: train a correction model, keep the best checkpoint on validation, test it.
+
+    python -m gyrodenoise.train dataset=euroc model.act=gelu
+    python -m gyrodenoise.train dataset=euroc model=calibrated
+    python -m gyrodenoise.train ckpt_path=outputs/.../checkpoints/last.ckpt   # resume
+
+Outputs (in the run folder): checkpoints/, tensorboard/, csv/, model.pt (the best model in the
+shipped-model format) and summary.json (wall time, best validation and test metrics).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import hydra
+import lightning.pytorch as L
+import torch
+from lightning.pytorch.loggers import TensorBoardLogger
+from omegaconf import DictConfig, OmegaConf
+
+from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.pretrained import save_model
+
+
+def machine_description() -> str:
+    cpu = platform.processor() or platform.machine()
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
+    return f"{platform.node()} ({cpu}, {os.cpu_count()} CPU threads, torch {torch.__version__}, {gpu})"
+
+
+def write_json(path: Path, data: dict) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        json.dump(data, fh, indent=2, default=float)
+    os.replace(tmp, path)
+
+
+def flat_hparams(cfg: DictConfig) -> dict:
+    """Scalar hyperparameters for TensorBoard's hparams view."""
+    out = {}
+    for group in ("model", "optim", "loss"):
+        node = OmegaConf.to_container(cfg[group], resolve=True)
+        stack = [(group, node)]
+        while stack:
+            prefix, n = stack.pop()
+            for k, v in n.items():
+                key = f"{prefix}.{k}"
+                if isinstance(v, dict):
+                    stack.append((key, v))
+                else:
+                    out[key] = v if isinstance(v, int | float | str | bool) else str(v)
+    out["dataset"] = cfg.dataset.name
+    out["seed"] = cfg.seed
+    return out
+
+
+def train(cfg: DictConfig) -> dict:
+    if cfg.get("seed") is not None:
+        L.seed_everything(cfg.seed, workers=True)
+    out_dir = Path(cfg.paths.output_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    dm = hydra.utils.instantiate(cfg.dataset)
+    module = DenoiserModule(
+        model=OmegaConf.to_container(cfg.model, resolve=True),
+        optim=OmegaConf.to_container(cfg.optim, resolve=True),
+        loss=OmegaConf.to_container(cfg.loss, resolve=True),
+    )
+    callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
+    loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
+    trainer: L.Trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
+
+    start = time.time()
+    trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
+    wall_s = time.time() - start
+
+    ckpt_cb = trainer.checkpoint_callback
+    best_path = ckpt_cb.best_model_path if ckpt_cb is not None else ""
+    if best_path:
+        module = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+    val = trainer.validate(module, datamodule=dm, verbose=False)[0]
+    test = {}
+    if cfg.get("test"):
+        test = trainer.test(module, datamodule=dm, verbose=False)[0]
+
+    summary = {
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "dataset": cfg.dataset.name,
+        "model": OmegaConf.to_container(cfg.model, resolve=True),
+        "train_wall_time_s": wall_s,
+        "epochs": trainer.current_epoch,
+        "machine": machine_description(),
+        "best_checkpoint": best_path,
+        "val": val,
+        "test": test,
+    }
+    save_model(
+        module.model,
+        OmegaConf.to_container(cfg.model, resolve=True),
+        out_dir / "model.pt",
+        meta={
+            "dataset": cfg.dataset.name,
+            "sensor": OmegaConf.to_container(cfg.dataset.sensor, resolve=True),
+            "rate_hz": dm.rate_hz,
+            "train_seqs": list(dm.train_names),
+            "train_duration_s": dm.train_duration_s,
+            "val_aoe_deg": val.get("val/aoe_deg"),
+            "test": test,
+            "train_wall_time_s": wall_s,
+            "machine": summary["machine"],
+            "command": summary["command"],
+        },
+    )
+    write_json(out_dir / "summary.json", summary)
+    for lg in trainer.loggers:
+        if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
+            metrics = {k: v for k, v in {**val, **test}.items() if k.count("/") == 1}
+            lg.log_hyperparams(flat_hparams(cfg), metrics)
+    return summary
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
+def main(cfg: DictConfig) -> float | None:
+    summary = train(cfg)
+    # the value an Optuna sweep minimises
+    return summary["val"].get("val/aoe_deg")
+
+
+if __name__ == "__main__":
+    main()
