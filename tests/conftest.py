@@ -1,0 +1,39 @@
+"""Shared fixtures. Real-data tests read ../shared/data; they skip when it is absent, except under CI
+(CI=true), where a missing data folder is a failure."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA_ROOT = Path(os.environ.get("GYRODENOISE_DATA", REPO.parent / "shared" / "data"))
+
+
+def require_data(*parts: str) -> Path:
+    """Path under the shared data folder, or skip (fail under CI) when it is missing."""
+    path = DATA_ROOT.joinpath(*parts)
+    if not path.exists():
+        msg = f"real data not found at {path} (set GYRODENOISE_DATA to the folder holding euroc/ and tumvi/)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return path
+
+
+@pytest.fixture(scope="session")
+def euroc_root() -> Path:
+    return require_data("euroc")
+
+
+@pytest.fixture(scope="session")
+def tumvi_root() -> Path:
+    return require_data("tumvi")
+
+
+@pytest.fixture(autouse=True)
+def _isolated_cache(tmp_path_factory, monkeypatch):
+    """Keep the preprocessing cache of tests out of the user's home."""
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
