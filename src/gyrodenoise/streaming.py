@@ -1,0 +1,262 @@
+"""Causal streaming inference: correct the gyro sample by sample (or chunk by chunk), as onboard.
+
+The batch model pads the whole sequence on the left by replicating its first sample, then runs
+"valid" dilated convolutions. Streaming keeps, per conv layer, a ring buffer of the layer's last
+dilation*(k-1) inputs, so one new sample costs one k-tap dot product per layer: O(1) per sample,
+whatever the sequence length. The initial state is what the batch model computes on its padding:
+every layer fed a constant input (the first sample) outputs a constant, so each buffer starts as
+that constant repeated. Outputs therefore match `predict_gyro` from the first sample on.
+
+Batch norm (eval mode) is folded into its convolution; dropout is the identity at inference.
+
+    sc = StreamingCorrector(model)          # a trained GyroCorrection
+    w = sc.push(imu_sample)                 # (6,) raw gyro rad/s + acc m/s^2 -> (3,) rad/s
+    W = sc.push_chunk(imu_block)            # (N, 6) -> (N, 3), same state
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import special
+from torch import nn
+
+from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser, GyroCorrection
+
+BACKENDS = ("numpy", "torch")
+
+
+def _softplus(x: np.ndarray) -> np.ndarray:
+    return np.logaddexp(x, 0.0).astype(x.dtype, copy=False)
+
+
+# numpy twins of the torch activations (same formulas as torch's defaults)
+NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "gelu": lambda x: 0.5 * x * (1.0 + special.erf(x * np.float32(1.0 / np.sqrt(2.0)))),
+    "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0))),
+    "silu": lambda x: x * special.expit(x),
+    "relu": lambda x: np.maximum(x, 0),
+    "tanh": np.tanh,
+    "softplus": _softplus,
+    "mish": lambda x: x * np.tanh(_softplus(x)),
+}
+
+
+@dataclass
+class _Layer:
+    """One dilated conv (batch norm folded in) followed by an activation."""
+
+    weight: np.ndarray  # (C_out, C_in, k)
+    bias: np.ndarray  # (C_out,)
+    dilation: int
+    act: str
+
+    @property
+    def kernel_size(self) -> int:
+        return self.weight.shape[2]
+
+    @property
+    def span(self) -> int:
+        """Number of inputs the output at time t depends on: t - span + 1 .. t."""
+        return self.dilation * (self.kernel_size - 1) + 1
+
+
+def _act_name(module: nn.Module) -> str:
+    for name, cls in ACTIVATIONS.items():
+        if type(module) is cls:
+            return name
+    raise TypeError(f"activation {type(module).__name__} has no streaming implementation")
+
+
+def _fold(model: DilatedCNNDenoiser) -> tuple[list[_Layer], np.ndarray, np.ndarray]:
+    """Walk model.net (Conv1d [BatchNorm1d] act Dropout)* Conv1d_head; fold BN into the conv."""
+    mods = list(model.net)
+    head = mods.pop()
+    if not (isinstance(head, nn.Conv1d) and head.kernel_size == (1,)):
+        raise TypeError("the last module of model.net must be the 1x1 head convolution")
+    layers: list[_Layer] = []
+    i = 0
+    while i < len(mods):
+        conv = mods[i]
+        if not isinstance(conv, nn.Conv1d):
+            raise TypeError(f"model.net[{i}] is {type(conv).__name__}, expected Conv1d")
+        w = conv.weight.detach().double()
+        b = conv.bias.detach().double() if conv.bias is not None else torch.zeros(w.shape[0], dtype=w.dtype)
+        i += 1
+        if isinstance(mods[i], nn.BatchNorm1d):
+            bn = mods[i]
+            scale = bn.weight.detach().double() / torch.sqrt(bn.running_var.double() + bn.eps)
+            w = w * scale[:, None, None]
+            b = (b - bn.running_mean.double()) * scale + bn.bias.detach().double()
+            i += 1
+        act = _act_name(mods[i])
+        i += 1
+        if i < len(mods) and isinstance(mods[i], nn.Dropout):
+            i += 1
+        layers.append(_Layer(w.numpy(), b.numpy(), conv.dilation[0], act))
+    hw = head.weight.detach().double()[:, :, 0].numpy() * model.output_scale
+    hb = head.bias.detach().double().numpy() * model.output_scale
+    return layers, hw, hb
+
+
+class StreamingCorrector:
+    """Stateful causal gyro corrector, equal to the batch model run on everything pushed so far.
+
+    backend: "numpy" (fastest for single samples) or "torch". dtype: float32 (as the batch model
+    runs) or float64. Outputs are float64 rad/s.
+    """
+
+    def __init__(self, model: GyroCorrection, backend: str = "numpy", dtype: str = "float32") -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"backend={backend!r}; choose one of {BACKENDS}")
+        self.backend = backend
+        self.np_dtype = np.dtype(dtype)
+        self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
+        model = model.cpu()
+        self.C_hat = model.C_hat.detach().double().numpy()
+        self.mean = model.mean.detach().double().numpy()
+        self.std = model.std.detach().double().numpy()
+        if isinstance(model, DilatedCNNDenoiser):
+            self.layers, self.head_w, self.head_b = _fold(model)
+            self.constant = np.zeros(3)
+        elif isinstance(model, CalibratedImu):
+            self.layers, self.head_w, self.head_b = [], np.zeros((3, 6)), np.zeros(3)
+            self.constant = model.bias.detach().double().numpy()
+        else:
+            raise TypeError(f"no streaming implementation for {type(model).__name__}")
+        self.receptive_field = 1 + sum(ly.span - 1 for ly in self.layers)
+        self._prepare()
+        self.reset()
+
+    # ------------------------------------------------------------------ setup
+    def _prepare(self) -> None:
+        dt = self.np_dtype
+        # numpy per-sample path: weights flattened tap-major, matching buffer[window][::d].ravel()
+        self._w_flat = [ly.weight.transpose(0, 2, 1).reshape(ly.weight.shape[0], -1).astype(dt) for ly in self.layers]
+        self._b = [ly.bias.astype(dt) for ly in self.layers]
+        self._acts_np = [NUMPY_ACTIVATIONS[ly.act] for ly in self.layers]
+        self._head_w = self.head_w.astype(dt)
+        self._head_b = (self.head_b + self.constant).astype(dt)
+        self._mean, self._inv_std = self.mean.astype(dt), (1.0 / self.std).astype(dt)
+        self._C = self.C_hat.astype(dt)
+        if self.backend == "torch":
+            to = lambda a: torch.from_numpy(np.ascontiguousarray(a))  # noqa: E731
+            self._t_w_flat = [to(w) for w in self._w_flat]
+            self._t_w = [to(ly.weight.astype(dt)) for ly in self.layers]
+            self._t_b = [to(b) for b in self._b]
+            self._t_acts = [ACTIVATIONS[ly.act]() for ly in self.layers]
+            self._t_head_w, self._t_head_b = to(self._head_w), to(self._head_b)
+            self._t_mean, self._t_inv_std, self._t_C = to(self._mean), to(self._inv_std), to(self._C)
+
+    def reset(self) -> None:
+        """Forget the past: the next sample pushed is treated as the first of a sequence."""
+        self._buf: list = []
+        self._pos = 0
+        self.n_pushed = 0
+
+    def _init_state(self, x0: np.ndarray) -> None:
+        """Buffers as if the sequence had been preceded by copies of its first sample."""
+        v = x0.astype(np.float64)
+        self._buf, self._len = [], []
+        for ly in self.layers:
+            L = ly.span
+            self._len.append(L)
+            # doubled ring buffer: row i and i+L hold the same sample, so a window is one slice
+            buf = np.broadcast_to(v, (2 * L, len(v))).astype(self.np_dtype)
+            self._buf.append(torch.from_numpy(buf) if self.backend == "torch" else buf)
+            v = NUMPY_ACTIVATIONS[ly.act](ly.weight.sum(2) @ v + ly.bias)
+        self._pos = [ly.span - 1 for ly in self.layers]  # index of the newest row
+
+    # ------------------------------------------------------------------ per sample
+    def push(self, sample) -> np.ndarray:
+        """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64."""
+        if self.backend == "torch":
+            return self._push_torch(sample)
+        x = np.asarray(sample, dtype=self.np_dtype)
+        if x.shape != (6,):
+            raise ValueError(f"push expects one (6,) sample (gyro rad/s, acc m/s^2), got shape {x.shape}")
+        h = (x - self._mean) * self._inv_std
+        if self.n_pushed == 0:
+            self._init_state(h)
+        for j, ly in enumerate(self.layers):
+            L, buf = self._len[j], self._buf[j]
+            p = self._pos[j] + 1
+            if p == L:
+                p = 0
+            buf[p] = h
+            buf[p + L] = h
+            self._pos[j] = p
+            taps = buf[p + 1 : p + L + 1 : ly.dilation].ravel()  # k taps, oldest first
+            h = self._acts_np[j](self._w_flat[j] @ taps + self._b[j])
+        self.n_pushed += 1
+        out = self._C @ x[:3] + self._head_w @ h + self._head_b
+        return out.astype(np.float64)
+
+    @torch.no_grad()
+    def _push_torch(self, sample) -> np.ndarray:
+        x = torch.as_tensor(np.asarray(sample), dtype=self.t_dtype)
+        if x.shape != (6,):
+            raise ValueError(f"push expects one (6,) sample (gyro rad/s, acc m/s^2), got shape {tuple(x.shape)}")
+        h = (x - self._t_mean) * self._t_inv_std
+        if self.n_pushed == 0:
+            self._init_state(h.double().numpy())
+        for j, ly in enumerate(self.layers):
+            L, buf = self._len[j], self._buf[j]
+            p = (self._pos[j] + 1) % L
+            buf[p] = h
+            buf[p + L] = h
+            self._pos[j] = p
+            taps = buf[p + 1 : p + L + 1 : ly.dilation].reshape(-1)
+            h = self._t_acts[j](torch.addmv(self._t_b[j], self._t_w_flat[j], taps))
+        self.n_pushed += 1
+        out = self._t_C @ x[:3] + torch.addmv(self._t_head_b, self._t_head_w, h)
+        return out.double().numpy()
+
+    # ------------------------------------------------------------------ chunks
+    def push_chunk(self, chunk) -> np.ndarray:
+        """(N, 6) raw IMU samples -> (N, 3) corrected gyro, float64; continues the same state.
+
+        Each layer runs as a valid convolution over [its past inputs, the chunk], vectorised over
+        the chunk (O(1) per sample, amortised).
+        """
+        x = np.asarray(chunk, dtype=self.np_dtype)
+        if x.ndim != 2 or x.shape[1] != 6:
+            raise ValueError(f"push_chunk expects (N, 6) samples, got shape {x.shape}")
+        if len(x) == 0:
+            return np.zeros((0, 3))
+        h = (x - self._mean) * self._inv_std
+        if self.n_pushed == 0:
+            self._init_state(h[0])
+        for j in range(len(self.layers)):
+            L = self._len[j]
+            past = self._history(j)  # (L-1, C_in), oldest first
+            xc = np.concatenate([past, h]) if self.backend == "numpy" else torch.cat([past, torch.from_numpy(h)])
+            self._set_history(j, xc[-(L - 1) :])
+            h = self._conv_valid(j, xc)
+        self.n_pushed += len(x)
+        head = h @ self._head_w.T + self._head_b
+        return (x[:, :3] @ self._C.T + head).astype(np.float64)
+
+    def _history(self, j: int):
+        L, p = self._len[j], self._pos[j]
+        return self._buf[j][p + 2 : p + L + 1]  # the L-1 newest rows (oldest first)
+
+    def _set_history(self, j: int, hist) -> None:
+        L, buf = self._len[j], self._buf[j]
+        buf[: L - 1] = hist
+        buf[L : 2 * L - 1] = hist
+        self._pos[j] = L - 2  # newest row; the next push writes row L-1
+
+    def _conv_valid(self, j: int, xc) -> np.ndarray:
+        ly = self.layers[j]
+        if self.backend == "torch":
+            with torch.no_grad():
+                y = nn.functional.conv1d(xc.T[None], self._t_w[j], self._t_b[j], dilation=ly.dilation)
+                return self._t_acts[j](y)[0].T.numpy()
+        win = sliding_window_view(xc, ly.span, axis=0)[:, :, :: ly.dilation]  # (N, C_in, k)
+        y = np.tensordot(win, ly.weight.astype(self.np_dtype), axes=([1, 2], [1, 2])) + self._b[j]
+        return self._acts_np[j](y)

@@ -1,0 +1,103 @@
+"""Streaming corrector == batch model (predict_gyro), from the first sample on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from gyrodenoise.data.readers import read_imu
+from gyrodenoise.models.denoiser import build_model, predict_gyro
+from gyrodenoise.pretrained import available_models, load_model
+from gyrodenoise.streaming import StreamingCorrector
+
+ATOL = 2e-5  # rad/s; float32 network, different summation order
+
+
+def random_model(seed: int = 0, **kwargs):
+    """A model with non-trivial weights everywhere (BN statistics, head, C_hat), in eval mode."""
+    torch.manual_seed(seed)
+    m = build_model("denoiser", **kwargs)
+    for mod in m.modules():
+        if isinstance(mod, torch.nn.BatchNorm1d):
+            mod.running_mean.normal_()
+            mod.running_var.uniform_(0.5, 2.0)
+            mod.weight.data.normal_(1.0, 0.2)
+            mod.bias.data.normal_(0.0, 0.2)
+    torch.nn.init.normal_(m.net[-1].weight, std=0.3)
+    m.C_delta.data.normal_(std=0.01)
+    m.set_normalization([0, 0, 0, 0, 0, 9.8], [0.3, 0.3, 0.3, 1.0, 1.0, 1.0])
+    return m.eval()
+
+
+def random_imu(n: int, seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.concatenate([rng.normal(0, 0.5, (n, 3)), rng.normal(0, 1, (n, 3)) + [0, 0, 9.8]], axis=1)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_push_matches_batch(backend):
+    model, imu = random_model(), random_imu(800)
+    ref = predict_gyro(model, imu).numpy()
+    sc = StreamingCorrector(model, backend=backend)
+    out = np.stack([sc.push(s) for s in imu])
+    assert np.abs(out - ref).max() < ATOL
+    assert np.abs(ref - imu[:, :3]).max() > 1e-2  # the correction is not trivially zero
+
+
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_chunks_and_samples_mixed(backend):
+    model, imu = random_model(), random_imu(900)
+    ref = predict_gyro(model, imu).numpy()
+    sc = StreamingCorrector(model, backend=backend)
+    parts = [sc.push_chunk(imu[:5]), sc.push_chunk(imu[5:400])]
+    parts += [sc.push(s)[None] for s in imu[400:420]]
+    parts += [sc.push_chunk(imu[420:421]), sc.push_chunk(imu[421:])]
+    assert np.abs(np.concatenate(parts) - ref).max() < ATOL
+
+
+@pytest.mark.parametrize("act", ["elu", "silu", "tanh", "softplus", "mish", "relu"])
+def test_other_activations_and_no_batchnorm(act):
+    model = random_model(seed=3, act=act, batch_norm=act != "elu", channels=(8, 8), dilations=(1, 3))
+    imu = random_imu(200)
+    ref = predict_gyro(model, imu).numpy()
+    sc = StreamingCorrector(model, dtype="float64")
+    assert np.abs(np.stack([sc.push(s) for s in imu]) - ref).max() < ATOL
+
+
+def test_reset_starts_a_new_sequence():
+    model, imu = random_model(), random_imu(300)
+    sc = StreamingCorrector(model)
+    sc.push_chunk(random_imu(100, seed=9))
+    sc.reset()
+    assert np.abs(sc.push_chunk(imu) - predict_gyro(model, imu).numpy()).max() < ATOL
+
+
+def test_calibrated_model():
+    model = build_model("calibrated")
+    model.bias.data[:] = torch.tensor([0.01, -0.02, 0.03])
+    model.C_delta.data.normal_(std=0.01)
+    imu = random_imu(50)
+    sc = StreamingCorrector(model)
+    assert np.abs(np.stack([sc.push(s) for s in imu]) - predict_gyro(model, imu).numpy()).max() < 1e-6
+
+
+def test_bad_sample_shape():
+    sc = StreamingCorrector(random_model())
+    with pytest.raises(ValueError, match=r"\(6,\)"):
+        sc.push([1.0, 2.0, 3.0])
+
+
+def test_real_euroc_slice(euroc_root):
+    """Parity on real data: the shipped EuRoC model when present, else a random one normalised on the data."""
+    imu_data = read_imu(euroc_root / "V1_01_easy" / "mav0" / "imu0" / "data.csv")
+    imu = np.concatenate([imu_data.gyro, imu_data.acc], axis=1)[2000:4000]
+    if "euroc" in available_models():
+        model, _ = load_model("euroc")
+    else:
+        model = random_model()
+        model.set_normalization(imu.mean(0), imu.std(0))
+    ref = predict_gyro(model, imu).numpy()
+    sc = StreamingCorrector(model)
+    out = np.concatenate([np.stack([sc.push(s) for s in imu[:700]]), sc.push_chunk(imu[700:])])
+    assert np.abs(out - ref).max() < ATOL
