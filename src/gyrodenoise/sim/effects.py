@@ -1,0 +1,548 @@
+"""The gyro error-effect library: one class per named physical effect.
+
+Each effect has
+- parameters in SI (rad/s, s, rad, dimensionless) and a conversion to datasheet units
+  (`DATASHEET`: name -> (unit, factor), datasheet value = factor x SI value);
+- a prior range of plausible magnitudes (`PRIOR`, SI), used to judge identifiability;
+- `apply(sig, rng)`: the effect in continuous time, applied at the simulator's internal rate;
+- the detector side: `columns(fc)` (the effect's regressors: residual contribution per unit
+  coefficient, shape (N, 3, k)), `prepare(...)` (search of its nonlinear parameter, e.g. a frequency)
+  and `params_from_fit(...)` (coefficients -> parameters with standard errors).
+
+Residual convention: r = measured gyro - true body rate. Stages give the order of application:
+0 inputs (time offset), 1 sensor response to the true inputs, 2 additive errors, 3 front-end limits,
+4 output (after decimation to the IMU rate).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy import signal
+
+DEG = np.pi / 180.0
+G0 = 9.80665
+_MISALIGN_PAIRS = [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
+
+
+@dataclass
+class SignalContext:
+    """What an effect sees when it is applied (high internal rate)."""
+
+    t: np.ndarray  # (M,) s since power-on / sequence start
+    omega: np.ndarray  # (M, 3) true body rate
+    alpha: np.ndarray  # (M, 3) true body angular acceleration
+    f: np.ndarray  # (M, 3) true specific force
+    rate_hz: float
+    kinematics_at: Any = None  # callable t -> Kinematics, for the time offset
+
+
+@dataclass
+class FitContext:
+    """One measured sequence as the detector sees it (IMU rate)."""
+
+    name: str
+    t: np.ndarray  # (N,) s since the first IMU sample
+    gyro: np.ndarray  # (N, 3) measured
+    omega: np.ndarray  # (N, 3) true rate from the smooth ground-truth fit
+    alpha: np.ndarray
+    f: np.ndarray
+    rate_hz: float
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.gyro - self.omega
+
+
+EFFECTS: dict[str, type[Effect]] = {}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    EFFECTS[cls.name] = cls
+    return cls
+
+
+class Effect:
+    name: ClassVar[str] = ""
+    stage: ClassVar[int] = 2
+    per_sequence: ClassVar[bool] = False  # coefficients fitted separately for each sequence
+    stochastic: ClassVar[bool] = False  # no regressors; parameters from the residual's statistics
+    DATASHEET: ClassVar[dict[str, tuple[str, float]]] = {}
+    PRIOR: ClassVar[tuple[float, float]] = (0.0, np.inf)  # plausible |parameter| range, SI
+    DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, **params: Any) -> None:
+        unknown = set(params) - set(self.DEFAULTS)
+        if unknown:
+            raise ValueError(
+                f"effect {self.name!r}: unknown parameter(s) {sorted(unknown)}; expected {sorted(self.DEFAULTS)}"
+            )
+        self.params = {k: np.asarray(params.get(k, v), dtype=np.float64) for k, v in self.DEFAULTS.items()}
+
+    # ----------------------------------------------------------------- units
+    @classmethod
+    def from_datasheet(cls, **values: Any) -> Effect:
+        si = {}
+        for k, v in values.items():
+            unit_factor = cls.DATASHEET.get(k)
+            si[k] = np.asarray(v, dtype=np.float64) / (unit_factor[1] if unit_factor else 1.0)
+        return cls(**si)
+
+    def datasheet(self) -> dict[str, dict]:
+        out = {}
+        for k, v in self.params.items():
+            unit, factor = self.DATASHEET.get(k, ("SI", 1.0))
+            out[k] = {"value": (v * factor).tolist(), "unit": unit}
+        return out
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "params": {k: v.tolist() for k, v in self.params.items()}}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(f'{k}={v.tolist()}' for k, v in self.params.items())})"
+
+    # ----------------------------------------------------------------- simulation
+    def apply(self, sig: SignalContext, y: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        raise NotImplementedError
+
+    # ----------------------------------------------------------------- detection
+    def prepare(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
+        """Set the nonlinear parameters (frequency, time constant, limit) from the current residuals."""
+
+    def columns(self, fc: FitContext) -> np.ndarray:
+        """(N, 3, k) contribution to the residual per unit coefficient."""
+        raise NotImplementedError
+
+    def params_from_fit(self, coef: np.ndarray, se: np.ndarray) -> tuple[dict, dict]:
+        """Coefficients (k,) or (n_seq, k) with standard errors -> (params SI, standard errors SI)."""
+        raise NotImplementedError
+
+    def magnitude(self) -> float:
+        """Size of the main parameter, compared with PRIOR."""
+        v = next(iter(self.params.values()))
+        return float(np.max(np.abs(v)))
+
+
+def _axis_columns(values: np.ndarray) -> np.ndarray:
+    """(N, 3) per-axis regressor -> (N, 3, 3) with column i acting on axis i only."""
+    n = len(values)
+    c = np.zeros((n, 3, 3))
+    for i in range(3):
+        c[:, i, i] = values[:, i]
+    return c
+
+
+def _mean_over_sequences(coef: np.ndarray, se: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    coef, se = np.atleast_2d(coef), np.atleast_2d(se)
+    return coef.mean(0), np.sqrt((se**2).sum(0)) / len(coef)
+
+
+# ===================================================================== deterministic effects
+
+
+@register
+class Bias(Effect):
+    """Constant bias b: y = w + b (per sequence: turn-on bias changes between power cycles)."""
+
+    name = "bias"
+    per_sequence = True
+    DATASHEET = {"bias": ("deg/s", 1 / DEG)}
+    PRIOR = (1e-4, 0.2)
+    DEFAULTS = {"bias": np.zeros(3)}
+
+    def apply(self, sig, y, rng):
+        return y + self.params["bias"]
+
+    def columns(self, fc):
+        return _axis_columns(np.ones((len(fc.t), 3)))
+
+    def params_from_fit(self, coef, se):
+        coef = np.atleast_2d(coef)
+        m, s = _mean_over_sequences(coef, se)
+        return {"bias": m, "bias_per_sequence": coef}, {"bias": s}
+
+
+@register
+class ScaleFactor(Effect):
+    """Scale-factor error s per axis: y_i = (1 + s_i) w_i."""
+
+    name = "scale_factor"
+    stage = 1
+    DATASHEET = {"scale": ("ppm", 1e6)}
+    PRIOR = (1e-4, 0.05)
+    DEFAULTS = {"scale": np.zeros(3)}
+
+    def apply(self, sig, y, rng):
+        return y + self.params["scale"] * sig.omega
+
+    def columns(self, fc):
+        return _axis_columns(fc.omega)
+
+    def params_from_fit(self, coef, se):
+        return {"scale": coef}, {"scale": se}
+
+
+@register
+class Misalignment(Effect):
+    """Axis misalignment: y = (I + M) w with M off-diagonal; `angles` = M[xy, xz, yx, yz, zx, zy]."""
+
+    name = "misalignment"
+    stage = 1
+    DATASHEET = {"angles": ("mrad", 1e3)}
+    PRIOR = (1e-4, 0.05)
+    DEFAULTS = {"angles": np.zeros(6)}
+
+    def matrix(self) -> np.ndarray:
+        M = np.zeros((3, 3))
+        for (i, j), a in zip(_MISALIGN_PAIRS, self.params["angles"], strict=True):
+            M[i, j] = a
+        return M
+
+    def apply(self, sig, y, rng):
+        return y + sig.omega @ self.matrix().T
+
+    def columns(self, fc):
+        c = np.zeros((len(fc.t), 3, 6))
+        for k, (i, j) in enumerate(_MISALIGN_PAIRS):
+            c[:, i, k] = fc.omega[:, j]
+        return c
+
+    def params_from_fit(self, coef, se):
+        return {"angles": coef}, {"angles": se}
+
+
+@register
+class GSensitivity(Effect):
+    """Gyro response to specific force: y = w + G f (G 3x3, row i = axis i)."""
+
+    name = "g_sensitivity"
+    stage = 1
+    DATASHEET = {"matrix": ("deg/s/g", G0 / DEG)}
+    PRIOR = (1e-5, 2e-3)
+    DEFAULTS = {"matrix": np.zeros((3, 3))}
+
+    def apply(self, sig, y, rng):
+        return y + sig.f @ self.params["matrix"].T
+
+    def columns(self, fc):
+        c = np.zeros((len(fc.t), 3, 9))
+        for i in range(3):
+            c[:, i, 3 * i : 3 * i + 3] = fc.f
+        return c
+
+    def params_from_fit(self, coef, se):
+        return {"matrix": coef.reshape(3, 3)}, {"matrix": se.reshape(3, 3)}
+
+
+@register
+class TimeOffset(Effect):
+    """The IMU sample stamped t holds the motion of t - delta (delta > 0: IMU stamps late)."""
+
+    name = "time_offset"
+    stage = 0
+    DATASHEET = {"delta": ("ms", 1e3)}
+    PRIOR = (2e-4, 0.05)
+    DEFAULTS = {"delta": 0.0}
+
+    def apply(self, sig, y, rng):
+        d = float(self.params["delta"])
+        if d == 0.0:
+            return y
+        kin = sig.kinematics_at(sig.t - d)
+        sig.omega, sig.alpha, sig.f = kin.omega, kin.alpha, kin.specific_force
+        return kin.omega.copy()
+
+    def columns(self, fc):
+        return -fc.alpha[:, :, None]  # w(t - d) = w(t) - d alpha(t) + O(d^2)
+
+    def params_from_fit(self, coef, se):
+        return {"delta": np.asarray(coef[0])}, {"delta": np.asarray(se[0])}
+
+
+@register
+class Nonlinearity(Effect):
+    """Quadratic scale-factor nonlinearity: y_i = w_i + k_i w_i |w_i|."""
+
+    name = "nonlinearity"
+    stage = 1
+    # k |w| is a relative error: ppm per deg/s of rate
+    DATASHEET = {"k": ("ppm/(deg/s)", 1e6 * DEG)}
+    PRIOR = (1e-5, 0.02)
+    DEFAULTS = {"k": np.zeros(3)}
+
+    def apply(self, sig, y, rng):
+        return y + self.params["k"] * sig.omega * np.abs(sig.omega)
+
+    def columns(self, fc):
+        return _axis_columns(fc.omega * np.abs(fc.omega))
+
+    def params_from_fit(self, coef, se):
+        return {"k": coef}, {"k": se}
+
+
+@register
+class WarmupBias(Effect):
+    """Bias settling after power-on: y = w + A exp(-t / tau), t from the sequence start."""
+
+    name = "warmup_bias"
+    DATASHEET = {"amplitude": ("deg/s", 1 / DEG), "tau": ("s", 1.0)}
+    PRIOR = (1e-4, 0.2)
+    DEFAULTS = {"amplitude": np.zeros(3), "tau": 30.0}
+    TAU_GRID = np.geomspace(2.0, 300.0, 40)
+
+    def apply(self, sig, y, rng):
+        return y + self.params["amplitude"] * np.exp(-sig.t / float(self.params["tau"]))[:, None]
+
+    def prepare(self, fcs, residuals):
+        # the time constant that explains most of the residual's decay, refit per axis amplitude
+        best, best_tau = -np.inf, float(self.params["tau"])
+        for tau in self.TAU_GRID:
+            gain = 0.0
+            for fc, r in zip(fcs, residuals, strict=True):
+                e = np.exp(-fc.t / tau)
+                e = e - e.mean()  # a per-sequence bias is in every model
+                gain += float(((e @ (r - r.mean(0))) ** 2).sum() / max(e @ e, 1e-12))
+            if gain > best:
+                best, best_tau = gain, float(tau)
+        self.params["tau"] = np.asarray(best_tau)
+
+    def columns(self, fc):
+        return _axis_columns(np.repeat(np.exp(-fc.t / float(self.params["tau"]))[:, None], 3, 1))
+
+    def params_from_fit(self, coef, se):
+        return {"amplitude": coef, "tau": self.params["tau"]}, {"amplitude": se}
+
+
+@register
+class Vibration(Effect):
+    """Vibration pick-up at `frequency_hz`: a sinusoid of amplitude A_i (random phase per sequence),
+    or, with bandwidth_hz > 0, band-limited noise of RMS A_i / sqrt(2) around the frequency."""
+
+    name = "vibration"
+    per_sequence = True
+    DATASHEET = {"frequency_hz": ("Hz", 1.0), "amplitude": ("deg/s", 1 / DEG), "bandwidth_hz": ("Hz", 1.0)}
+    PRIOR = (1e-4, 0.5)
+    DEFAULTS = {"frequency_hz": 30.0, "amplitude": np.zeros(3), "bandwidth_hz": 0.0}
+
+    def magnitude(self) -> float:
+        return float(np.max(np.abs(self.params["amplitude"])))
+
+    def apply(self, sig, y, rng):
+        f, a, bw = float(self.params["frequency_hz"]), self.params["amplitude"], float(self.params["bandwidth_hz"])
+        if bw <= 0:
+            phase = rng.uniform(0, 2 * np.pi, 3)
+            return y + a * np.sin(2 * np.pi * f * sig.t[:, None] + phase)
+        lo, hi = max(f - bw / 2, 1e-3), min(f + bw / 2, 0.49 * sig.rate_hz)
+        sos = signal.butter(4, [lo, hi], btype="bandpass", fs=sig.rate_hz, output="sos")
+        x = signal.sosfiltfilt(sos, rng.standard_normal((len(sig.t), 3)), axis=0)
+        return y + x / x.std(0) * a / np.sqrt(2)
+
+    def prepare(self, fcs, residuals):
+        # strongest spectral line of the residuals (summed periodograms), refined by zero padding
+        best_f, best_p = float(self.params["frequency_hz"]), -np.inf
+        rate = fcs[0].rate_hz
+        for r in residuals:
+            x = r - r.mean(0)
+            n = len(x)
+            nfft = 1 << int(np.ceil(np.log2(4 * n)))
+            p = (np.abs(np.fft.rfft(x * np.hanning(n)[:, None], nfft, axis=0)) ** 2).sum(1)
+            fr = np.fft.rfftfreq(nfft, 1.0 / rate)
+            ok = (fr > 0.5) & (fr < 0.48 * rate)
+            k = int(np.argmax(np.where(ok, p, -np.inf)))
+            # peak relative to the median level: sequences vote by prominence
+            prom = p[k] / np.median(p[ok])
+            if prom > best_p:
+                best_p, best_f = prom, float(fr[k])
+        self.params["frequency_hz"] = np.asarray(best_f)
+
+    def columns(self, fc):
+        w = 2 * np.pi * float(self.params["frequency_hz"]) * fc.t
+        c = np.zeros((len(fc.t), 3, 6))
+        for i in range(3):
+            c[:, i, i] = np.sin(w)
+            c[:, i, 3 + i] = np.cos(w)
+        return c
+
+    def params_from_fit(self, coef, se):
+        coef, se = np.atleast_2d(coef), np.atleast_2d(se)
+        amp = np.sqrt(coef[:, :3] ** 2 + coef[:, 3:] ** 2)
+        amp_se = np.sqrt((se[:, :3] ** 2 + se[:, 3:] ** 2) / 2)
+        m, s = _mean_over_sequences(amp, amp_se)
+        return {"frequency_hz": self.params["frequency_hz"], "amplitude": m, "bandwidth_hz": np.asarray(0.0)}, {
+            "amplitude": s
+        }
+
+
+@register
+class Saturation(Effect):
+    """Measurement range: y = clip(y, -limit, limit) (front end, before the output filter)."""
+
+    name = "saturation"
+    stage = 3
+    DATASHEET = {"limit": ("deg/s", 1 / DEG)}
+    PRIOR = (0.5, 40.0)
+    DEFAULTS = {"limit": 1e9}
+
+    def apply(self, sig, y, rng):
+        lim = float(self.params["limit"])
+        return np.clip(y, -lim, lim)
+
+    def prepare(self, fcs, residuals):
+        # the largest magnitude the sensor ever reported is the candidate range
+        self.params["limit"] = np.asarray(max(float(np.abs(fc.gyro).max()) for fc in fcs))
+
+    def columns(self, fc):
+        lim = float(self.params["limit"])
+        return (np.clip(fc.omega, -lim, lim) - fc.omega)[:, :, None]
+
+    def params_from_fit(self, coef, se):
+        return {"limit": self.params["limit"]}, {"limit": np.asarray(0.0)}
+
+    def magnitude(self) -> float:
+        return float(self.params["limit"])
+
+
+# ===================================================================== stochastic effects
+
+
+@register
+class WhiteNoise(Effect):
+    """Rate white noise of density N (rad/s/sqrt(Hz)): per-sample std N sqrt(rate) at any rate."""
+
+    name = "white_noise"
+    stochastic = True
+    DATASHEET = {"density": ("deg/sqrt(h)", 60 / DEG)}  # angle random walk
+    PRIOR = (1e-5, 1e-2)
+    DEFAULTS = {"density": np.zeros(3)}
+
+    def apply(self, sig, y, rng):
+        return y + rng.standard_normal(y.shape) * self.params["density"] * np.sqrt(sig.rate_hz)
+
+    def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
+        # first differences remove everything slow; white noise has var(diff) = 2 sigma^2
+        d = np.concatenate([np.diff(r, axis=0) for r in residuals])
+        sigma = d.std(0) / np.sqrt(2)
+        n = len(d)
+        dens = sigma / np.sqrt(fcs[0].rate_hz)
+        return {"density": dens}, {"density": dens / np.sqrt(2 * n)}
+
+
+@register
+class BiasRandomWalk(Effect):
+    """Rate random walk K (rad/s/sqrt(s) = rad/s^2/sqrt(Hz)): db/dt = K xi(t)."""
+
+    name = "bias_random_walk"
+    stochastic = False  # detected with piecewise-linear bias columns; K from the Allan variance
+    per_sequence = True
+    DATASHEET = {"density": ("deg/h/sqrt(h)", 3600 * 60 / DEG)}
+    PRIOR = (1e-6, 1e-2)
+    DEFAULTS = {"density": np.zeros(3)}
+    knot_spacing_s: float = 10.0
+
+    def apply(self, sig, y, rng):
+        dt = 1.0 / sig.rate_hz
+        steps = rng.standard_normal(y.shape) * self.params["density"] * np.sqrt(dt)
+        return y + np.cumsum(steps, axis=0)
+
+    def columns(self, fc):
+        # hat functions on knots every knot_spacing_s (the first knot left to the bias)
+        t = fc.t - fc.t[0]
+        n_knots = max(int(np.ceil(t[-1] / self.knot_spacing_s)), 1)
+        knots = np.linspace(0.0, t[-1], n_knots + 1)
+        h = knots[1] - knots[0]
+        hats = np.clip(1.0 - np.abs(t[:, None] - knots[None, 1:]) / h, 0.0, None)  # (N, n_knots)
+        c = np.zeros((len(t), 3, 3 * n_knots))
+        for i in range(3):
+            c[:, i, i * n_knots : (i + 1) * n_knots] = hats
+        return c
+
+    def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
+        from gyrodenoise.discrepancy.compare import fit_allan_noise  # detector-side statistics
+
+        n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz)
+        k = np.sqrt(np.clip(k2, 0.0, None))
+        se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+        return {"density": k}, {"density": se}
+
+    def params_from_fit(self, coef, se):
+        return {}, {}
+
+    def magnitude(self) -> float:
+        return float(np.max(self.params["density"]))
+
+
+@register
+class Quantization(Effect):
+    """Output quantisation: y = q round(y / q) (the LSB, applied at the output rate)."""
+
+    name = "quantization"
+    stage = 4
+    stochastic = True
+    DATASHEET = {"step": ("deg/s", 1 / DEG)}
+    PRIOR = (1e-5, 0.05)
+    DEFAULTS = {"step": 0.0}
+
+    def apply(self, sig, y, rng):
+        q = float(self.params["step"])
+        return q * np.round(y / q) if q > 0 else y
+
+    @staticmethod
+    def lattice_step(values: np.ndarray) -> tuple[float, float]:
+        """(step, fraction of samples on the lattice of that step). Unquantised data give ~0."""
+        v = np.asarray(values, dtype=np.float64).ravel()
+        u = np.unique(v)
+        d = np.diff(u)
+        d = d[d > 1e-12 * max(np.abs(u).max(), 1.0)]
+        if len(d) < 10:
+            return 0.0, 0.0
+        # the smallest frequent gap is the step; round-off in the files makes gaps q(1 + 1e-9)
+        q = float(np.median(np.sort(d)[: max(len(d) // 4, 1)]))
+        frac = float(np.mean(np.abs(v / q - np.round(v / q)) < 0.02))
+        return q, frac
+
+    def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
+        q, _ = self.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
+        return {"step": np.asarray(q)}, {"step": np.asarray(q * 1e-3)}
+
+
+def build_effect(name: str, **params: Any) -> Effect:
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(sorted(EFFECTS))}")
+    return EFFECTS[name](**params)
+
+
+def effect_from_config(cfg: dict) -> Effect:
+    """{'name': ..., 'units': 'si'|'datasheet', 'params': {...}} -> Effect."""
+    name = cfg.get("name")
+    if name not in EFFECTS:
+        raise ValueError(f"error model entry {cfg!r}: 'name' must be one of {', '.join(sorted(EFFECTS))}")
+    params = dict(cfg.get("params", {}))
+    if cfg.get("units", "si") == "datasheet":
+        return EFFECTS[name].from_datasheet(**params)
+    return EFFECTS[name](**params)
+
+
+# ===================================================================== sensor presets
+
+# Noise figures of the datasets' calibration files (EuRoC sensor.yaml, TUM-VI calibration).
+SENSORS = {
+    "ADIS16448": {"white_noise": 1.6968e-4, "bias_random_walk": 1.9393e-5, "quantization": 0.04 * DEG},
+    "BMI160": {"white_noise": 1.6e-4, "bias_random_walk": 2.2e-5, "quantization": DEG / 16.4},
+}
+
+
+def noise_model(sensor: str = "ADIS16448", quantize: bool = False) -> list[Effect]:
+    """The sensor's stochastic error model: white noise + bias random walk (+ quantisation)."""
+    if sensor not in SENSORS:
+        raise ValueError(f"unknown sensor {sensor!r}; presets: {', '.join(SENSORS)}")
+    s = SENSORS[sensor]
+    out: list[Effect] = [
+        WhiteNoise(density=np.full(3, s["white_noise"])),
+        BiasRandomWalk(density=np.full(3, s["bias_random_walk"])),
+    ]
+    if quantize:
+        out.append(Quantization(step=s["quantization"]))
+    return out
