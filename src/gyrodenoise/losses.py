@@ -3,9 +3,10 @@
 For each increment length j (16 and 32 samples by default), the estimated increments
 dR_hat_{i,i+j} = prod_{k=i+1}^{i+j} exp(w_hat_k dt_k), i = 0, j, 2j, ... are built as a log2(j)-deep
 tree of batched products (float64) and compared with the precomputed ground-truth increments:
-r = Log(dR dR_hat^T), rho = Huber with threshold `huber_delta` (rad) on each component.
-The Huber value is divided by delta^2 so that the loss is O(1) (Adam's epsilon stays negligible).
-Terms whose ground truth is missing (mask False) are left out.
+r = Log(dR dR_hat^T), rho = Huber with threshold `huber_delta` (rad) on each component, averaged.
+Each term is multiplied by `weight` (1e6 by default, the scale of the authors' implementation): with
+Adam's coupled weight decay, the loss scale sets how strongly the decay regularises, so it is a
+hyperparameter, not a cosmetic factor. Terms whose ground truth is missing (mask False) are left out.
 """
 
 from __future__ import annotations
@@ -19,13 +20,13 @@ from gyrodenoise import so3
 
 
 class IncrementLoss(torch.nn.Module):
-    def __init__(self, increments: tuple[int, ...] = (16, 32), huber_delta: float = 0.005) -> None:
+    def __init__(self, increments: tuple[int, ...] = (16, 32), huber_delta: float = 0.005, weight: float = 1e6) -> None:
         super().__init__()
         self.increments = sorted(int(j) for j in increments)
         self.base = self.increments[0]
         if any(j & (j - 1) or j % self.base for j in self.increments):
             raise ValueError(f"loss.increments must be powers of two, got {self.increments}")
-        self.delta = huber_delta
+        self.delta, self.weight = huber_delta, weight
 
     def residuals(self, w_hat: torch.Tensor, dt: torch.Tensor, dR: torch.Tensor, mask: torch.Tensor):
         """Yield (j, r, mask_j) for each increment length.
@@ -48,5 +49,5 @@ class IncrementLoss(torch.nn.Module):
         for _, r, m in self.residuals(w_hat, dt, dR, mask):
             if m.any():
                 rho = F.huber_loss(r[m], torch.zeros_like(r[m]), reduction="mean", delta=self.delta)
-                total = total + rho / self.delta**2
+                total = total + self.weight * rho
         return total

@@ -7,13 +7,12 @@ Lightning checkpoints of DenoiserModule load too.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from importlib import resources
 from pathlib import Path
 
 import torch
 
+from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.denoiser import GyroCorrection, build_model
 
 FORMAT = "gyrodenoise-model/1"
@@ -30,21 +29,14 @@ def available_models() -> list[str]:
 def save_model(model: GyroCorrection, model_cfg: dict, path: str | Path, meta: dict | None = None) -> Path:
     """Write atomically: an interrupted save never leaves a file that looks whole."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
         "format": FORMAT,
         "model": dict(model_cfg),
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         "meta": dict(meta or {}),
     }
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         torch.save(payload, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
     return path
 
 

@@ -10,20 +10,20 @@ shipped-model format) and summary.json (wall time, best validation and test metr
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import hydra
 import lightning.pytorch as L
 import torch
+from lightning.pytorch.callbacks import LearningRateMonitor
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
+from gyrodenoise.atomic import write_json
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.pretrained import save_model
 
@@ -32,13 +32,6 @@ def machine_description() -> str:
     cpu = platform.processor() or platform.machine()
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
     return f"{platform.node()} ({cpu}, {os.cpu_count()} CPU threads, torch {torch.__version__}, {gpu})"
-
-
-def write_json(path: Path, data: dict) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(data, fh, indent=2, default=float)
-    os.replace(tmp, path)
 
 
 def flat_hparams(cfg: DictConfig) -> dict:
@@ -71,8 +64,10 @@ def train(cfg: DictConfig) -> dict:
         optim=OmegaConf.to_container(cfg.optim, resolve=True),
         loss=OmegaConf.to_container(cfg.loss, resolve=True),
     )
-    callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
+    callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
+    if not loggers:  # Lightning refuses a learning-rate monitor without a logger
+        callbacks = [c for c in callbacks if not isinstance(c, LearningRateMonitor)]
     trainer: L.Trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
 
     start = time.time()

@@ -9,11 +9,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise.atomic import atomic_path
 from gyrodenoise.data.readers import find_groundtruth_file, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import Sequence, build_sequence, sequence_folder
 
@@ -42,15 +42,8 @@ def cache_key(files: list[Path], settings: dict) -> str:
 
 
 def atomic_save_npz(path: Path, **arrays: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=".npz") as tmp:  # np.savez appends .npz to other names
         np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def load_sequence(

@@ -168,9 +168,7 @@ class ImuDataModule(L.LightningDataModule):
         return float(np.median([s.rate_hz for s in seqs]))
 
     def train_dataloader(self) -> DataLoader:
-        ds = RandomCrops(
-            self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment
-        )
+        ds = RandomCrops(self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment)
         return DataLoader(ds, batch_size=len(self.train_part), shuffle=False, num_workers=0)
 
     def _whole(self, seqs: list[Sequence]) -> DataLoader:

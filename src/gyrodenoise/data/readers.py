@@ -79,9 +79,7 @@ def read_csv_table(path: Path, min_cols: int, what: str) -> tuple[np.ndarray, np
                 try:
                     float(f)
                 except ValueError:
-                    raise DataFormatError(
-                        f"{path}:{lineno}: column {col} is {f!r}, not a number."
-                    ) from None
+                    raise DataFormatError(f"{path}:{lineno}: column {col} is {f!r}, not a number.") from None
         raise
     t_ns = np.array(stamps, dtype=np.int64)
     lines = np.array(line_numbers)

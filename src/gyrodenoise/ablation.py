@@ -1,0 +1,288 @@
+"""Collect multirun folders into an ablation table: mean +- std over seeds per setting.
+
+    python -m gyrodenoise.ablation multirun/ablation_activation/2026-01-01_10-00-00 \
+        --out reports/ablation_activation
+    python -m gyrodenoise.ablation multirun/act multirun/bn --keys model.batch_norm \
+        --where model.act=gelu --out reports/ablation_batchnorm
+
+Each run folder holds the summary.json that gyrodenoise.train writes and Hydra's
+.hydra/overrides.yaml (+ config.yaml). A run's *setting* is the value of each ablated key: the key's
+command-line/sweep override when the run has one (config-group choices such as +model/shape=wide),
+else its value in the run's resolved config. By default the ablated keys are the overridden keys whose
+value differs between runs, except the seed. Writes PREFIX.md (Markdown table), PREFIX.csv and
+PREFIX.png (validation and test AOE per setting: every seed and mean +- std), each atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+SEED_KEY = "seed"
+IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, never a setting
+METRICS = {"val": "val/aoe_deg", "test": "test/aoe_deg"}
+
+
+@dataclass
+class Run:
+    path: Path
+    overrides: dict[str, str]  # key (without +/++ prefix) -> value as written
+    config: dict
+    summary: dict
+
+    @property
+    def seed(self) -> object:
+        return self.overrides.get(SEED_KEY, self.config.get(SEED_KEY))
+
+    def value(self, key: str) -> str:
+        """The run's value of `key`: its override if any, else its resolved config value."""
+        if key in self.overrides:
+            return self.overrides[key]
+        node: object = self.config
+        for part in key.replace("/", ".").split("."):
+            if not isinstance(node, dict) or part not in node:
+                return "-"
+            node = node[part]
+        return _fmt_value(node)
+
+    def metric(self, split: str) -> float:
+        table = self.summary.get(split) or {}
+        v = table.get(METRICS[split])
+        return float(v) if v is not None else math.nan
+
+
+@dataclass
+class Setting:
+    values: tuple[str, ...]
+    runs: list[Run] = field(default_factory=list)
+
+    def stats(self, split: str) -> tuple[float, float, int]:
+        xs = [r.metric(split) for r in self.runs]
+        xs = [x for x in xs if math.isfinite(x)]
+        if not xs:
+            return math.nan, math.nan, 0
+        sd = statistics.stdev(xs) if len(xs) > 1 else math.nan
+        return statistics.fmean(xs), sd, len(xs)
+
+    def wall_s(self) -> float:
+        ts = [float(r.summary.get("train_wall_time_s", math.nan)) for r in self.runs]
+        return statistics.fmean(ts) if ts else math.nan
+
+
+def _fmt_value(v: object) -> str:
+    if isinstance(v, list | tuple):
+        return "[" + ",".join(_fmt_value(x) for x in v) + "]"
+    if isinstance(v, bool):
+        return str(v).lower()
+    return str(v)
+
+
+def _parse_override(line: str) -> tuple[str, str] | None:
+    line = line.strip()
+    if not line or line.startswith("~") or "=" not in line:
+        return None
+    key, value = line.split("=", 1)
+    return key.lstrip("+"), value
+
+
+def load_run(run_dir: Path) -> Run:
+    hydra_dir = run_dir / ".hydra"
+    overrides_file = hydra_dir / "overrides.yaml"
+    if not overrides_file.is_file():
+        raise FileNotFoundError(f"{run_dir}: no .hydra/overrides.yaml; is this a Hydra run folder?")
+    overrides = {}
+    for line in yaml.safe_load(overrides_file.read_text()) or []:
+        parsed = _parse_override(str(line))
+        if parsed and not parsed[0].startswith("hydra."):
+            overrides[parsed[0]] = parsed[1]
+    config_file = hydra_dir / "config.yaml"
+    config = (yaml.safe_load(config_file.read_text()) or {}) if config_file.is_file() else {}
+    summary = json.loads((run_dir / "summary.json").read_text())
+    return Run(run_dir, overrides, config, summary)
+
+
+def find_runs(roots: Iterable[Path]) -> tuple[list[Run], list[Path]]:
+    """Finished runs (with summary.json) under the given folders, and unfinished run folders."""
+    runs, unfinished = [], []
+    for root in roots:
+        root = Path(root)
+        if not root.is_dir():
+            raise FileNotFoundError(f"{root}: no such folder")
+        for hydra_dir in sorted(root.rglob(".hydra")):
+            run_dir = hydra_dir.parent
+            if (run_dir / "summary.json").is_file():
+                runs.append(load_run(run_dir))
+            elif (hydra_dir / "overrides.yaml").is_file() and run_dir != root:
+                unfinished.append(run_dir)
+    return runs, unfinished
+
+
+def ablated_keys(runs: Sequence[Run]) -> list[str]:
+    """Overridden keys (not the seed) whose value differs between runs, in first-seen order."""
+    keys: list[str] = []
+    for r in runs:
+        for k in r.overrides:
+            if k not in keys and k != SEED_KEY and k not in IGNORED_KEYS:
+                keys.append(k)
+    return [k for k in keys if len({r.value(k) for r in runs}) > 1]
+
+
+def parse_where(items: Sequence[str]) -> list[tuple[str, str]]:
+    out = []
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"--where {item!r}: expected KEY=VALUE")
+        k, v = item.split("=", 1)
+        out.append((k.lstrip("+"), v))
+    return out
+
+
+def group(runs: Sequence[Run], keys: Sequence[str]) -> list[Setting]:
+    settings: dict[tuple[str, ...], Setting] = {}
+    for r in runs:
+        values = tuple(r.value(k) for k in keys)
+        settings.setdefault(values, Setting(values)).runs.append(r)
+    return list(settings.values())
+
+
+def _pm(mean: float, sd: float, digits: int = 2) -> str:
+    if not math.isfinite(mean):
+        return "-"
+    return f"{mean:.{digits}f}" if not math.isfinite(sd) else f"{mean:.{digits}f} ± {sd:.{digits}f}"
+
+
+def markdown_table(settings: Sequence[Setting], keys: Sequence[str]) -> str:
+    head = [*keys, "seeds", "val AOE (deg)", "test AOE (deg)", "val per seed", "test per seed", "train s/run"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for s in settings:
+        vm, vs, n = s.stats("val")
+        tm, ts, _ = s.stats("test")
+        runs = sorted(s.runs, key=lambda r: str(r.seed))
+        per_val = ", ".join(f"{r.metric('val'):.2f}" for r in runs)
+        per_test = ", ".join(f"{r.metric('test'):.2f}" for r in runs)
+        row = [*s.values, str(n), _pm(vm, vs), _pm(tm, ts), per_val, per_test, f"{s.wall_s():.0f}"]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def csv_text(settings: Sequence[Setting], keys: Sequence[str]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([*keys, "n_seeds", "val_aoe_mean_deg", "val_aoe_std_deg", "test_aoe_mean_deg", "test_aoe_std_deg",
+                "seeds", "val_aoe_per_seed_deg", "test_aoe_per_seed_deg", "train_wall_time_s_mean"])
+    for s in settings:
+        vm, vs, n = s.stats("val")
+        tm, ts, _ = s.stats("test")
+        runs = sorted(s.runs, key=lambda r: str(r.seed))
+        w.writerow([*s.values, n, f"{vm:.4f}", f"{vs:.4f}", f"{tm:.4f}", f"{ts:.4f}",
+                    " ".join(str(r.seed) for r in runs),
+                    " ".join(f"{r.metric('val'):.4f}" for r in runs),
+                    " ".join(f"{r.metric('test'):.4f}" for r in runs), f"{s.wall_s():.1f}"])
+    return buf.getvalue()
+
+
+def _with_ext(prefix: Path, ext: str) -> Path:
+    return prefix.parent / (prefix.name + ext)
+
+
+def atomic_write(path: Path, data: str | bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = ["\n".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
+              for s in settings]
+    fig, axes = plt.subplots(1, 2, figsize=(max(6.0, 1.1 * len(settings) + 3), 3.8), sharex=True)
+    for ax, split in zip(axes, ("val", "test"), strict=True):
+        for i, s in enumerate(settings):
+            ys = [r.metric(split) for r in s.runs]
+            ax.plot([i] * len(ys), ys, "o", color="0.6", ms=4, zorder=1)
+            m, sd, _ = s.stats(split)
+            ax.errorbar([i], [m], yerr=[0.0 if not math.isfinite(sd) else sd], fmt="s", color="C0",
+                        capsize=4, ms=6, zorder=2)
+        ax.set_title(f"{split} AOE (deg): seeds (grey), mean ± std (blue)", fontsize=9)
+        ax.set_xticks(range(len(settings)))
+        ax.set_xticklabels(labels, fontsize=7)
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=120)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def collect(
+    dirs: Sequence[Path],
+    out: Path,
+    keys: Sequence[str] | None = None,
+    where: Sequence[tuple[str, str]] = (),
+    title: str | None = None,
+) -> list[Setting]:
+    runs, unfinished = find_runs(dirs)
+    runs = [r for r in runs if all(r.value(k) == v for k, v in where)]
+    if not runs:
+        raise ValueError(f"no finished run (summary.json) under {[str(d) for d in dirs]} matches {list(where)}")
+    keys = list(keys) if keys else ablated_keys(runs)
+    if not keys:
+        raise ValueError("the runs do not differ in any overridden key: name the ablated keys with --keys")
+    settings = group(runs, keys)
+    title = title or f"Ablation over {', '.join(keys)} ({len(runs)} runs)"
+    md = [f"# {title}\n", f"Runs: {', '.join(str(d) for d in dirs)}", ""]
+    if where:
+        md += [f"Filter: {', '.join(f'{k}={v}' for k, v in where)}", ""]
+    md += [markdown_table(settings, keys)]
+    if unfinished:
+        md += [f"Unfinished runs left out: {len(unfinished)}", ""]
+    atomic_write(_with_ext(out, ".md"), "\n".join(md))
+    atomic_write(_with_ext(out, ".csv"), csv_text(settings, keys))
+    atomic_write(_with_ext(out, ".png"), plot_png(settings, keys, title))
+    return settings
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m gyrodenoise.ablation", description=__doc__.split("\n\n")[0])
+    p.add_argument("dirs", nargs="+", type=Path, help="multirun folders (searched recursively for runs)")
+    p.add_argument("--out", type=Path, required=True, help="output prefix: writes PREFIX.md, .csv and .png")
+    p.add_argument("--keys", default=None, help="comma-separated ablated keys (default: the swept ones)")
+    p.add_argument("--where", action="append", default=[], metavar="KEY=VALUE", help="keep matching runs only")
+    p.add_argument("--title", default=None)
+    a = p.parse_args(argv)
+    try:
+        keys = [k.strip().lstrip("+") for k in a.keys.split(",")] if a.keys else None
+        settings = collect(a.dirs, a.out, keys, parse_where(a.where), a.title)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(_with_ext(a.out, ".md").read_text())
+    print(f"wrote {a.out}.md, .csv, .png ({len(settings)} settings)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,192 @@
+"""Hydra entry point: compare attitude methods on the test sequences (Table 1, Figs. 5-8 of the paper).
+
+    python -m gyrodenoise.evaluate dataset=euroc                     # shipped models
+    python -m gyrodenoise.evaluate dataset=euroc model=outputs/.../model.pt calibrated_model=...
+
+Methods: raw IMU (integrated gyro), zero motion (initial orientation held), calibrated IMU (the
+12-parameter baseline), proposed (the denoiser). Every estimate is aligned on ground truth at the
+first instant. Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
+roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
+trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise import plots
+from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
+from gyrodenoise.models.denoiser import GyroCorrection, predict_gyro
+from gyrodenoise.pretrained import load_model
+from gyrodenoise.so3 import integrate_gyro
+
+METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
+
+
+def gyro_method(model: GyroCorrection | None) -> Callable[[Sequence], np.ndarray | None]:
+    """Corrected gyro of a sequence: raw IMU when `model` is None."""
+
+    def run(seq: Sequence) -> np.ndarray:
+        return seq.gyro if model is None else predict_gyro(model, seq.imu).numpy()
+
+    return run
+
+
+def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
+    """Open-loop attitude aligned at the first instant; gyro None means zero motion."""
+    if gyro is None:
+        return np.repeat(seq.rot[:1], len(seq), axis=0)
+    return integrate_gyro(seq.rot[0], gyro, seq.dt)
+
+
+def tum_text(seq: Sequence, R: np.ndarray) -> str:
+    """TUM trajectory lines `t tx ty tz qx qy qz qw` (absolute seconds; translation zeros)."""
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    t = seq.t0_ns * 1e-9 + seq.t
+    buf = io.StringIO()
+    buf.write("# t[s] tx ty tz qx qy qz qw (orientation only; translation set to zero)\n")
+    np.savetxt(buf, np.column_stack([t, np.zeros((len(t), 3)), q]), fmt=["%.9f"] + ["%.1f"] * 3 + ["%.9f"] * 4)
+    return buf.getvalue()
+
+
+def slug(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name).strip("_")
+
+
+def evaluate_sequence(seq: Sequence, gyros: dict[str, np.ndarray | None], distances: list[float]) -> dict:
+    out = {"estimates": {}, "aoe": {}, "roe": {}}
+    for name, gyro in gyros.items():
+        R = estimate(seq, gyro)
+        out["estimates"][name] = R
+        out["aoe"][name] = aoe(seq.rot, R, seq.gt_mask)
+        out["roe"][name] = {d: roe(seq.rot, R, seq.pos, d, seq.gt_mask) for d in distances}
+    return out
+
+
+def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]:
+    def cell(a: tuple[float, float]) -> str:
+        return f"{math.degrees(a[0]):.2f}/{math.degrees(a[1]):.2f}"
+
+    rows = [[name, *[cell(r["aoe"][m]) for m in METHODS]] for name, r in results.items()]
+    avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in METHODS]
+    rows.append(["average", *[cell(a) for a in avg]])
+    return rows
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def csv_text(header: list[str], rows: list[list[str]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def evaluate(cfg: DictConfig) -> dict:
+    out = Path(cfg.out_dir)
+    dm = hydra.utils.instantiate(cfg.dataset)
+    dm.setup("test")
+    proposed, proposed_meta = load_model(cfg.model)
+    calibrated, calibrated_meta = load_model(cfg.calibrated_model)
+    methods = {
+        "raw IMU": gyro_method(None),
+        "zero motion": lambda seq: None,
+        "calibrated IMU": gyro_method(calibrated),
+        "proposed": gyro_method(proposed),
+    }
+    sequences = {s.name: s for s in dm.test_part}
+    averaged = list(sequences)
+    for name, variants in dm.eval_gt_variants.items():
+        if name not in sequences:
+            continue
+        ref = dm.gt_files.get(name, "default")
+        sequences[f"{name} ({ref})"] = sequences.pop(name)
+        averaged[averaged.index(name)] = f"{name} ({ref})"
+        for label, gt_file in variants.items():
+            sequences[f"{name} ({label}: {gt_file})"] = load_sequence(
+                dm.root, name, gt_file, dm.max_gap_factor, dm.cache_dir
+            )
+
+    distances = [float(d) for d in cfg.roe_distances]
+    results: dict[str, dict] = {}
+    for label, seq in sequences.items():
+        gyros = {m: fn(seq) for m, fn in methods.items()}
+        r = evaluate_sequence(seq, gyros, distances)
+        results[label] = r
+        folder = out / "trajectories" / slug(label)
+        write_text(folder / "groundtruth.txt", tum_text(seq, seq.rot))
+        for m, R in r["estimates"].items():
+            write_text(folder / f"{slug(m)}.txt", tum_text(seq, R))
+        if cfg.figures:
+            figs = out / "figures"
+            figs.mkdir(parents=True, exist_ok=True)
+            shown = {m: r["estimates"][m] for m in ("raw IMU", "calibrated IMU", "proposed")}
+            plots.save(plots.orientation_figure(seq.t, seq.rot, shown, label), figs / f"orientation_{slug(label)}.png")
+            errs = {m: orientation_errors(seq.rot, R) for m, R in shown.items()}
+            plots.save(plots.error_figure(seq.t, errs, label), figs / f"error_{slug(label)}.png")
+            w_tilde = gyros["proposed"] - seq.gyro @ proposed.C_hat.detach().double().numpy().T
+            plots.save(plots.correction_figure(seq.t, w_tilde, label), figs / f"correction_{slug(label)}.png")
+
+    header = ["sequence", *[f"{m} (3D/yaw deg)" for m in METHODS]]
+    rows = table_rows(results, averaged)
+    write_text(out / "table.md", markdown_table(header, rows))
+    write_text(out / "table.csv", csv_text(header, rows))
+
+    # ROE pooled over the averaged test sequences
+    roe_pooled = {
+        d: {m: tuple(np.concatenate([results[n]["roe"][m][d][a] for n in averaged]) for a in (0, 1)) for m in METHODS}
+        for d in distances
+    }
+    roe_rows = []
+    for d in distances:
+        for m in METHODS:
+            s3, sy = (summarize(np.degrees(roe_pooled[d][m][a])) for a in (0, 1))
+            roe_rows.append(
+                [f"{d:g}", m, *[f"{s[k]:.2f}" for s in (s3, sy) for k in ("q1", "median", "q3")], str(s3["n"])]
+            )
+    roe_header = ["distance (m)", "method", "3D q1", "3D median", "3D q3", "yaw q1", "yaw median", "yaw q3", "pairs"]
+    write_text(out / "roe.md", markdown_table(roe_header, roe_rows))
+    write_text(out / "roe.csv", csv_text(roe_header, roe_rows))
+    if cfg.figures:
+        plots.save(plots.roe_boxplot(roe_pooled, f"ROE on {dm.name} test sequences"), out / "figures" / "roe.png")
+
+    summary = {
+        "dataset": dm.name,
+        "models": {"proposed": proposed_meta.get("path"), "calibrated IMU": calibrated_meta.get("path")},
+        "averaged_sequences": averaged,
+        "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in METHODS} for n, r in results.items()},
+        "average_aoe_deg": {
+            m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in METHODS
+        },
+    }
+    write_json(out / "results.json", summary)
+    print(f"\nAOE 3D/yaw (deg) on {dm.name} test sequences:\n")
+    print(markdown_table(header, rows))
+    print(f"outputs in {out}")
+    return summary
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
+def main(cfg: DictConfig) -> None:
+    evaluate(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,157 @@
+"""Export a trained correction model to ONNX and to a torch.export program.
+
+The exported graph is the whole correction: raw IMU (B, N, 6) [gyro rad/s, acc m/s^2] in,
+corrected gyro (B, N, 3) rad/s out. Input normalisation (the model's mean/std buffers), the causal
+left padding and C_hat are inside the graph; the length N (and batch B) are dynamic.
+
+    python -m gyrodenoise.export euroc --onnx euroc.onnx [--pt2 euroc.pt2]
+
+ONNX uses the torch.export-based exporter (`dynamo=True`, torch's default since 2.9), which needs
+`onnx` and `onnxscript` (pip install "gyrodenoise[export]").
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from gyrodenoise.models.denoiser import GyroCorrection
+from gyrodenoise.pretrained import load_model
+
+INPUT_NAME, OUTPUT_NAME = "imu", "gyro_corrected"
+OPSET = 18
+
+
+class ExportWrapper(nn.Module):
+    """A plain forward(imu) -> corrected gyro, in eval mode, float32, on the CPU."""
+
+    def __init__(self, model: GyroCorrection) -> None:
+        super().__init__()
+        self.model = copy.deepcopy(model).cpu().float()  # the caller's model stays as it was
+        self.eval()
+
+    def forward(self, imu: torch.Tensor) -> torch.Tensor:
+        return self.model(imu)
+
+
+def _example(model: GyroCorrection, n: int = 0) -> torch.Tensor:
+    # longer than the receptive field, so tracing sees no special case of short inputs
+    n = n or 2 * int(getattr(model, "receptive_field", 1)) + 7
+    return torch.randn(2, n, 6) + torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 9.81])
+
+
+def _dynamic_shapes() -> dict:
+    return {"imu": {0: torch.export.Dim("batch", min=1), 1: torch.export.Dim("length", min=1)}}
+
+
+def export_program(model: GyroCorrection) -> torch.export.ExportedProgram:
+    """torch.export program with dynamic batch and length."""
+    wrapper = ExportWrapper(model)
+    with torch.no_grad():
+        return torch.export.export(wrapper, (_example(model),), dynamic_shapes=_dynamic_shapes())
+
+
+@contextmanager
+def _atomic(path: Path, suffix: str) -> Iterator[Path]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def export_pt2(model: GyroCorrection, path: str | Path) -> Path:
+    """Save the torch.export program (load with torch.export.load(path).module())."""
+    path = Path(path)
+    program = export_program(model)
+    with _atomic(path, ".pt2") as tmp:
+        torch.export.save(program, tmp)
+    return path
+
+
+def export_onnx(model: GyroCorrection, path: str | Path, opset: int = OPSET) -> Path:
+    """Write a self-contained ONNX file (weights inside) with dynamic batch and length."""
+    for mod in ("onnx", "onnxscript"):
+        try:
+            __import__(mod)
+        except ImportError:
+            raise ImportError(
+                f"ONNX export needs the '{mod}' package: pip install 'gyrodenoise[export]'"
+            ) from None
+    path = Path(path)
+    wrapper = ExportWrapper(model)
+    with torch.no_grad():
+        program = torch.onnx.export(
+            wrapper,
+            (_example(model),),
+            dynamo=True,
+            input_names=[INPUT_NAME],
+            output_names=[OUTPUT_NAME],
+            dynamic_shapes=_dynamic_shapes(),
+            opset_version=opset,
+            external_data=False,
+            verbose=False,
+        )
+    with _atomic(path, ".onnx") as tmp:
+        program.save(str(tmp), external_data=False)
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(
+        prog="python -m gyrodenoise.export",
+        description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export.",
+    )
+    ap.add_argument("model", help="shipped model name (e.g. euroc) or path of a .pt model / .ckpt checkpoint")
+    ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length)")
+    ap.add_argument("--pt2", type=Path, help="output torch.export program (.pt2)")
+    ap.add_argument("--opset", type=int, default=OPSET)
+    ap.add_argument("--no-check", action="store_true", help="skip the onnxruntime parity check")
+    args = ap.parse_args(argv)
+    if not (args.onnx or args.pt2):
+        ap.error("give at least one of --onnx PATH, --pt2 PATH")
+    model, _ = load_model(args.model)
+    if args.pt2:
+        print(f"wrote {export_pt2(model, args.pt2)}")
+    if args.onnx:
+        export_onnx(model, args.onnx, args.opset)
+        msg = f"wrote {args.onnx}"
+        if not args.no_check:
+            err = onnx_parity(model, args.onnx)
+            msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s)"
+        print(msg)
+
+
+def onnx_parity(model: GyroCorrection, path: str | Path, n: int = 1500) -> float:
+    """Max |onnxruntime - PyTorch| on random input of a length the export did not see."""
+    import numpy as np
+
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        raise ImportError("the parity check needs onnxruntime: pip install 'gyrodenoise[export]'") from None
+    x = _example(model, n)[:1]
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    (y,) = sess.run([OUTPUT_NAME], {INPUT_NAME: x.numpy()})
+    with torch.no_grad():
+        ref = ExportWrapper(model)(x).numpy()
+    return float(np.abs(y - ref).max())
+
+
+if __name__ == "__main__":
+    main()

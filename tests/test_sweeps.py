@@ -1,0 +1,248 @@
+"""Sweep configs: every experiment / hparams_search / launcher config composes, a two-point multirun
+runs end to end on tiny synthetic data, and the ablation collector turns it into a table and a plot."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from scipy.spatial.transform import Rotation
+
+import gyrodenoise
+from gyrodenoise import ablation
+
+CONF = Path(gyrodenoise.__file__).parent / "conf"
+EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
+SEARCHES = sorted(p.stem for p in (CONF / "hparams_search").glob("*.yaml"))
+LAUNCHERS = sorted(p.stem for p in (CONF / "hydra" / "launcher").glob("*.yaml"))
+
+
+def require_plugin(module: str) -> None:
+    """Skip when an optional Hydra plugin is missing (pip install -e .[sweep,slurm]); fail under CI."""
+    try:
+        __import__(module)
+    except ImportError:
+        msg = f"{module} is not installed (pip install -e '.[sweep,slurm]')"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+
+
+def compose_train(overrides: list[str]):
+    with initialize_config_dir(str(CONF), version_base="1.3"):
+        return compose("train", overrides=overrides, return_hydra_config=True)
+
+
+def test_configs_exist():
+    assert {"ablation_activation", "ablation_batchnorm", "ablation_regularization", "ablation_shape",
+            "ablation_scheduler", "ablation_increments", "ablation_augmentation",
+            "ablation_train_duration"} <= set(EXPERIMENTS)
+    assert "euroc_optuna" in SEARCHES
+    assert {"local", "slurm"} <= set(LAUNCHERS)
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_experiment_composes(name):
+    cfg = compose_train([f"experiment={name}"])
+    params = OmegaConf.to_container(cfg.hydra.sweeper.params)
+    assert params["seed"] == "0,1,2", "every ablation runs 3 seeds per setting"
+    assert cfg.task_name == name
+    # every swept value composes into a config the model and data module accept
+    for key, values in params.items():
+        if key == "seed":
+            continue
+        for value in _split_sweep(values):
+            point = compose_train([f"experiment={name}", f"{key}={value}"])
+            assert point.model.name == "denoiser"
+            window, block = point.dataset.window, max(point.loss.increments)
+            assert window % block == 0, f"{name}: window {window} is not a multiple of j={block}"
+            _build(point)
+
+
+def _split_sweep(values: str) -> list[str]:
+    """'a,b' -> [a, b]; '[4,8],[8,16]' -> ['[4,8]', '[8,16]'] (commas inside brackets kept)."""
+    out, depth, cur = [], 0, ""
+    for ch in values:
+        depth += ch == "["
+        depth -= ch == "]"
+        if ch == "," and depth == 0:
+            out.append(cur.strip())
+            cur = ""
+        else:
+            cur += ch
+    return [*out, cur.strip()]
+
+
+def _build(cfg) -> None:
+    from gyrodenoise.losses import IncrementLoss
+    from gyrodenoise.models.denoiser import build_model
+
+    build_model(**OmegaConf.to_container(cfg.model, resolve=True))
+    IncrementLoss(**OmegaConf.to_container(cfg.loss, resolve=True))
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    ds = OmegaConf.to_container(cfg.dataset, resolve=True)
+    ds.pop("_target_"), ds.pop("_convert_")
+    ImuDataModule(**ds)
+
+
+@pytest.mark.parametrize("name", SEARCHES)
+def test_hparams_search_composes(name):
+    require_plugin("hydra_plugins.hydra_optuna_sweeper")
+    cfg = compose_train([f"hparams_search={name}"])
+    assert cfg.hydra.sweeper._target_.endswith("OptunaSweeper")
+    assert cfg.hydra.sweeper.direction == "minimize"
+    assert cfg.hydra.sweeper.params
+
+
+@pytest.mark.parametrize("name", LAUNCHERS)
+def test_launcher_composes(name):
+    require_plugin("hydra_plugins.hydra_joblib_launcher")
+    require_plugin("hydra_plugins.hydra_submitit_launcher")
+    cfg = compose_train(["experiment=ablation_activation", f"hydra/launcher={name}"])
+    assert cfg.hydra.launcher._target_.startswith("hydra_plugins.")
+
+
+def test_ddp_trainer_composes():
+    cfg = compose_train(["trainer=ddp"])
+    assert cfg.trainer.strategy == "ddp" and cfg.trainer.sync_batchnorm
+
+
+# --- tiny synthetic ASL data ------------------------------------------------------------------------
+
+
+def write_asl_sequence(folder: Path, seconds: float, seed: int, rate_hz: float = 200.0) -> None:
+    """A few seconds of smooth rotation: ground truth and a biased, noisy IMU in the ASL layout."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * rate_hz) + 1
+    t = np.arange(n) / rate_hz
+    f = rng.uniform(0.2, 0.8, 3)
+    w = np.stack([0.6 * np.sin(2 * np.pi * f[0] * t), 0.4 * np.cos(2 * np.pi * f[1] * t),
+                  0.3 * np.sin(2 * np.pi * f[2] * t + 1.0)], axis=1)
+    rots = [Rotation.identity()]
+    for k in range(1, n):
+        rots.append(rots[-1] * Rotation.from_rotvec(w[k] / rate_hz))
+    R = Rotation.concatenate(rots)
+    gravity = np.array([0.0, 0.0, 9.81])
+    acc = R.inv().apply(gravity) + 0.02 * rng.standard_normal((n, 3))
+    gyro = w + np.array([0.01, -0.02, 0.005]) + 1e-3 * rng.standard_normal((n, 3))
+    t_ns = (1_403_636_579_758_555_392 + np.round(t * 1e9)).astype(np.int64)
+    q = R.as_quat()  # x y z w
+    pos = np.stack([np.sin(t), np.cos(t), 0.1 * t], axis=1)
+
+    imu_dir, gt_dir = folder / "mav0" / "imu0", folder / "mav0" / "state_groundtruth_estimate0"
+    imu_dir.mkdir(parents=True)
+    gt_dir.mkdir(parents=True)
+    with open(imu_dir / "data.csv", "w") as fh:
+        fh.write("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                 "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n")
+        for k in range(n):
+            fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in (*gyro[k], *acc[k])) + "\n")
+    with open(gt_dir / "data.csv", "w") as fh:
+        fh.write("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], "
+                 "q_RS_z []\n")
+        for k in range(n):
+            vals = (*pos[k], q[k, 3], q[k, 0], q[k, 1], q[k, 2])
+            fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in vals) + "\n")
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("asl")
+    for i, name in enumerate(["seq_a", "seq_b", "seq_c"]):
+        write_asl_sequence(root / name, seconds=8.0, seed=i)
+    return root
+
+
+def tiny_overrides(root: Path) -> list[str]:
+    return [
+        f"dataset.root={root}",
+        "dataset.train_seqs=[seq_a,seq_b]",
+        "dataset.test_seqs=[seq_c]",
+        "dataset.train_duration_s=5",
+        "dataset.window=256",
+        "dataset.gt_files={}",
+        "dataset.eval_gt_variants={}",
+        "model.channels=[4,8]",
+        "model.dilations=[1,2]",
+        "trainer.max_epochs=2",
+        "trainer.check_val_every_n_epoch=1",
+        "trainer.accelerator=cpu",
+        "optim.scheduler.T_0=1",
+    ]
+
+
+def run_train(args: list[str], cwd: Path, timeout: int = 240) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-m", "gyrodenoise.train", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, f"train failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    return proc
+
+
+def test_two_point_multirun_end_to_end(tiny_root, tmp_path):
+    """`-m experiment=ablation_activation` restricted to 2 settings x 1 seed, then collected."""
+    sweep_dir = tmp_path / "multirun"
+    proc = run_train(["-m", "experiment=ablation_activation", "model.act=gelu,relu", "seed=0",
+                      *tiny_overrides(tiny_root), f"hydra.sweep.dir={sweep_dir}"], cwd=tmp_path)
+    log = proc.stdout + proc.stderr
+    assert "#0 : " in log and "#1 : " in log  # Hydra's launch lines: two jobs
+    for box in "━╭╰│":  # Rich's progress bar / tables: the log stays plain text
+        assert box not in log, f"rich output in the log ({box!r})"
+
+    runs, unfinished = ablation.find_runs([sweep_dir])
+    assert len(runs) == 2 and not unfinished
+    for r in runs:
+        assert np.isfinite(r.metric("val")) and np.isfinite(r.metric("test"))
+        assert (r.path / "tensorboard").is_dir()  # hparams view next to final val/test AOE
+    assert ablation.ablated_keys(runs) == ["model.act"]
+
+    out = tmp_path / "report" / "act"
+    assert ablation.main([str(sweep_dir), "--out", str(out)]) == 0
+    md = (out.parent / "act.md").read_text()
+    assert "| model.act | seeds |" in md and "| gelu | 1 |" in md and "| relu | 1 |" in md
+    rows = list(csv.DictReader(open(out.parent / "act.csv")))
+    assert [r["model.act"] for r in rows] == ["gelu", "relu"]
+    assert (out.parent / "act.png").read_bytes()[:4] == b"\x89PNG"
+    # hparams of every run logged with the final metrics in TensorBoard
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    ev = EventAccumulator(str(runs[0].path / "tensorboard"))
+    ev.Reload()
+    assert "_hparams_/session_start_info" in ev.summary_metadata
+
+
+def test_collect_filters_and_errors(tmp_path):
+    def fake_run(d: Path, overrides: list[str], cfg: str, val: float, test: float) -> None:
+        (d / ".hydra").mkdir(parents=True)
+        (d / ".hydra" / "overrides.yaml").write_text("".join(f"- {o}\n" for o in overrides))
+        (d / ".hydra" / "config.yaml").write_text(cfg)
+        (d / "summary.json").write_text(
+            f'{{"val": {{"val/aoe_deg": {val}}}, "test": {{"test/aoe_deg": {test}}}, "train_wall_time_s": 1}}')
+
+    cfg = "model:\n  act: {act}\n  batch_norm: {bn}\nseed: {seed}\n"
+    for i, (act, bn) in enumerate([("gelu", "true"), ("relu", "true"), ("gelu", "false")]):
+        for seed in range(3):
+            overrides = [f"model.act={act}", f"seed={seed}"] if bn == "true" else [
+                f"model.batch_norm={bn}", f"seed={seed}"]
+            fake_run(tmp_path / "m" / f"{i}_{seed}", overrides, cfg.format(act=act, bn=bn, seed=seed),
+                     1.0 + i + 0.1 * seed, 2.0 + i)
+    (tmp_path / "m" / "crashed" / ".hydra").mkdir(parents=True)
+    (tmp_path / "m" / "crashed" / ".hydra" / "overrides.yaml").write_text("- seed=9\n")
+
+    settings = ablation.collect([tmp_path / "m"], tmp_path / "bn", keys=["model.batch_norm"],
+                                where=[("model.act", "gelu")])
+    assert [s.values for s in settings] == [("true",), ("false",)]
+    mean, sd, n = settings[0].stats("val")
+    assert n == 3 and mean == pytest.approx(1.1) and sd == pytest.approx(0.1)
+    assert "Unfinished runs left out: 1" in (tmp_path / "bn.md").read_text()
+
+    assert ablation.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
+    assert ablation.main([str(tmp_path / "m"), "--out", str(tmp_path / "x"), "--where", "model.act=tanh"]) == 2
