@@ -41,9 +41,16 @@ def compose_train(overrides: list[str]):
 
 
 def test_configs_exist():
-    assert {"ablation_activation", "ablation_batchnorm", "ablation_regularization", "ablation_shape",
-            "ablation_scheduler", "ablation_increments", "ablation_augmentation",
-            "ablation_train_duration"} <= set(EXPERIMENTS)
+    assert {
+        "ablation_activation",
+        "ablation_batchnorm",
+        "ablation_regularization",
+        "ablation_shape",
+        "ablation_scheduler",
+        "ablation_increments",
+        "ablation_augmentation",
+        "ablation_train_duration",
+    } <= set(EXPERIMENTS)
     assert "euroc_optuna" in SEARCHES
     assert {"local", "slurm"} <= set(LAUNCHERS)
 
@@ -124,8 +131,14 @@ def write_asl_sequence(folder: Path, seconds: float, seed: int, rate_hz: float =
     n = int(seconds * rate_hz) + 1
     t = np.arange(n) / rate_hz
     f = rng.uniform(0.2, 0.8, 3)
-    w = np.stack([0.6 * np.sin(2 * np.pi * f[0] * t), 0.4 * np.cos(2 * np.pi * f[1] * t),
-                  0.3 * np.sin(2 * np.pi * f[2] * t + 1.0)], axis=1)
+    w = np.stack(
+        [
+            0.6 * np.sin(2 * np.pi * f[0] * t),
+            0.4 * np.cos(2 * np.pi * f[1] * t),
+            0.3 * np.sin(2 * np.pi * f[2] * t + 1.0),
+        ],
+        axis=1,
+    )
     rots = [Rotation.identity()]
     for k in range(1, n):
         rots.append(rots[-1] * Rotation.from_rotvec(w[k] / rate_hz))
@@ -141,13 +154,14 @@ def write_asl_sequence(folder: Path, seconds: float, seed: int, rate_hz: float =
     imu_dir.mkdir(parents=True)
     gt_dir.mkdir(parents=True)
     with open(imu_dir / "data.csv", "w") as fh:
-        fh.write("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-                 "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n")
+        fh.write(
+            "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+            "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n"
+        )
         for k in range(n):
             fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in (*gyro[k], *acc[k])) + "\n")
     with open(gt_dir / "data.csv", "w") as fh:
-        fh.write("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], "
-                 "q_RS_z []\n")
+        fh.write("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n")
         for k in range(n):
             vals = (*pos[k], q[k, 3], q[k, 0], q[k, 1], q[k, 2])
             fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in vals) + "\n")
@@ -181,8 +195,14 @@ def tiny_overrides(root: Path) -> list[str]:
 
 def run_train(args: list[str], cwd: Path, timeout: int = 240) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run([sys.executable, "-m", "gyrodenoise.train", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     assert proc.returncode == 0, f"train failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
     return proc
 
@@ -190,8 +210,17 @@ def run_train(args: list[str], cwd: Path, timeout: int = 240) -> subprocess.Comp
 def test_two_point_multirun_end_to_end(tiny_root, tmp_path):
     """`-m experiment=ablation_activation` restricted to 2 settings x 1 seed, then collected."""
     sweep_dir = tmp_path / "multirun"
-    proc = run_train(["-m", "experiment=ablation_activation", "model.act=gelu,relu", "seed=0",
-                      *tiny_overrides(tiny_root), f"hydra.sweep.dir={sweep_dir}"], cwd=tmp_path)
+    proc = run_train(
+        [
+            "-m",
+            "experiment=ablation_activation",
+            "model.act=gelu,relu",
+            "seed=0",
+            *tiny_overrides(tiny_root),
+            f"hydra.sweep.dir={sweep_dir}",
+        ],
+        cwd=tmp_path,
+    )
     log = proc.stdout + proc.stderr
     assert "#0 : " in log and "#1 : " in log  # Hydra's launch lines: two jobs
     for box in "━╭╰│":  # Rich's progress bar / tables: the log stays plain text
@@ -225,20 +254,28 @@ def test_collect_filters_and_errors(tmp_path):
         (d / ".hydra" / "overrides.yaml").write_text("".join(f"- {o}\n" for o in overrides))
         (d / ".hydra" / "config.yaml").write_text(cfg)
         (d / "summary.json").write_text(
-            f'{{"val": {{"val/aoe_deg": {val}}}, "test": {{"test/aoe_deg": {test}}}, "train_wall_time_s": 1}}')
+            f'{{"val": {{"val/aoe_deg": {val}}}, "test": {{"test/aoe_deg": {test}}}, "train_wall_time_s": 1}}'
+        )
 
     cfg = "model:\n  act: {act}\n  batch_norm: {bn}\nseed: {seed}\n"
     for i, (act, bn) in enumerate([("gelu", "true"), ("relu", "true"), ("gelu", "false")]):
         for seed in range(3):
-            overrides = [f"model.act={act}", f"seed={seed}"] if bn == "true" else [
-                f"model.batch_norm={bn}", f"seed={seed}"]
-            fake_run(tmp_path / "m" / f"{i}_{seed}", overrides, cfg.format(act=act, bn=bn, seed=seed),
-                     1.0 + i + 0.1 * seed, 2.0 + i)
+            overrides = (
+                [f"model.act={act}", f"seed={seed}"] if bn == "true" else [f"model.batch_norm={bn}", f"seed={seed}"]
+            )
+            fake_run(
+                tmp_path / "m" / f"{i}_{seed}",
+                overrides,
+                cfg.format(act=act, bn=bn, seed=seed),
+                1.0 + i + 0.1 * seed,
+                2.0 + i,
+            )
     (tmp_path / "m" / "crashed" / ".hydra").mkdir(parents=True)
     (tmp_path / "m" / "crashed" / ".hydra" / "overrides.yaml").write_text("- seed=9\n")
 
-    settings = ablation.collect([tmp_path / "m"], tmp_path / "bn", keys=["model.batch_norm"],
-                                where=[("model.act", "gelu")])
+    settings = ablation.collect(
+        [tmp_path / "m"], tmp_path / "bn", keys=["model.batch_norm"], where=[("model.act", "gelu")]
+    )
     assert [s.values for s in settings] == [("true",), ("false",)]
     mean, sd, n = settings[0].stats("val")
     assert n == 3 and mean == pytest.approx(1.1) and sd == pytest.approx(0.1)

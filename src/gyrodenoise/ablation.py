@@ -180,16 +180,38 @@ def markdown_table(settings: Sequence[Setting], keys: Sequence[str]) -> str:
 def csv_text(settings: Sequence[Setting], keys: Sequence[str]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow([*keys, "n_seeds", "val_aoe_mean_deg", "val_aoe_std_deg", "test_aoe_mean_deg", "test_aoe_std_deg",
-                "seeds", "val_aoe_per_seed_deg", "test_aoe_per_seed_deg", "train_wall_time_s_mean"])
+    w.writerow(
+        [
+            *keys,
+            "n_seeds",
+            "val_aoe_mean_deg",
+            "val_aoe_std_deg",
+            "test_aoe_mean_deg",
+            "test_aoe_std_deg",
+            "seeds",
+            "val_aoe_per_seed_deg",
+            "test_aoe_per_seed_deg",
+            "train_wall_time_s_mean",
+        ]
+    )
     for s in settings:
         vm, vs, n = s.stats("val")
         tm, ts, _ = s.stats("test")
         runs = sorted(s.runs, key=lambda r: str(r.seed))
-        w.writerow([*s.values, n, f"{vm:.4f}", f"{vs:.4f}", f"{tm:.4f}", f"{ts:.4f}",
-                    " ".join(str(r.seed) for r in runs),
-                    " ".join(f"{r.metric('val'):.4f}" for r in runs),
-                    " ".join(f"{r.metric('test'):.4f}" for r in runs), f"{s.wall_s():.1f}"])
+        w.writerow(
+            [
+                *s.values,
+                n,
+                f"{vm:.4f}",
+                f"{vs:.4f}",
+                f"{tm:.4f}",
+                f"{ts:.4f}",
+                " ".join(str(r.seed) for r in runs),
+                " ".join(f"{r.metric('val'):.4f}" for r in runs),
+                " ".join(f"{r.metric('test'):.4f}" for r in runs),
+                f"{s.wall_s():.1f}",
+            ]
+        )
     return buf.getvalue()
 
 
@@ -215,16 +237,19 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = ["\n".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
-              for s in settings]
+    labels = [
+        "\n".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
+        for s in settings
+    ]
     fig, axes = plt.subplots(1, 2, figsize=(max(6.0, 1.1 * len(settings) + 3), 3.8), sharex=True)
     for ax, split in zip(axes, ("val", "test"), strict=True):
         for i, s in enumerate(settings):
             ys = [r.metric(split) for r in s.runs]
             ax.plot([i] * len(ys), ys, "o", color="0.6", ms=4, zorder=1)
             m, sd, _ = s.stats(split)
-            ax.errorbar([i], [m], yerr=[0.0 if not math.isfinite(sd) else sd], fmt="s", color="C0",
-                        capsize=4, ms=6, zorder=2)
+            ax.errorbar(
+                [i], [m], yerr=[0.0 if not math.isfinite(sd) else sd], fmt="s", color="C0", capsize=4, ms=6, zorder=2
+            )
         ax.set_title(f"{split} AOE (deg): seeds (grey), mean ± std (blue)", fontsize=9)
         ax.set_xticks(range(len(settings)))
         ax.set_xticklabels(labels, fontsize=7)
