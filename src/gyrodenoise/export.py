@@ -14,15 +14,12 @@ from __future__ import annotations
 
 import argparse
 import copy
-import os
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import torch
 from torch import nn
 
+from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.pretrained import load_model
 
@@ -59,27 +56,11 @@ def export_program(model: GyroCorrection) -> torch.export.ExportedProgram:
         return torch.export.export(wrapper, (_example(model),), dynamic_shapes=_dynamic_shapes())
 
 
-@contextmanager
-def _atomic(path: Path, suffix: str) -> Iterator[Path]:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def export_pt2(model: GyroCorrection, path: str | Path) -> Path:
     """Save the torch.export program (load with torch.export.load(path).module())."""
     path = Path(path)
     program = export_program(model)
-    with _atomic(path, ".pt2") as tmp:
+    with atomic_path(path, ".pt2") as tmp:
         torch.export.save(program, tmp)
     return path
 
@@ -90,9 +71,7 @@ def export_onnx(model: GyroCorrection, path: str | Path, opset: int = OPSET) -> 
         try:
             __import__(mod)
         except ImportError:
-            raise ImportError(
-                f"ONNX export needs the '{mod}' package: pip install 'gyrodenoise[export]'"
-            ) from None
+            raise ImportError(f"ONNX export needs the '{mod}' package: pip install 'gyrodenoise[export]'") from None
     path = Path(path)
     wrapper = ExportWrapper(model)
     with torch.no_grad():
@@ -107,7 +86,7 @@ def export_onnx(model: GyroCorrection, path: str | Path, opset: int = OPSET) -> 
             external_data=False,
             verbose=False,
         )
-    with _atomic(path, ".onnx") as tmp:
+    with atomic_path(path, ".onnx") as tmp:
         program.save(str(tmp), external_data=False)
     return path
 

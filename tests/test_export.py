@@ -1,0 +1,79 @@
+"""ONNX / torch.export: the exported graph (normalisation and C_hat inside) equals the PyTorch model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from _models import random_imu, random_model
+
+from gyrodenoise.export import INPUT_NAME, export_onnx, export_pt2, main
+from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.pretrained import save_model
+
+TINY = {"channels": (8, 16), "kernel_size": 5, "dilations": (1, 4), "act": "gelu", "dropout": 0.1}
+ATOL = 1e-5
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    m = random_model(seed=2, **TINY)
+    imu = random_imu(400)
+    m.set_normalization(imu.mean(0), imu.std(0))  # non-trivial normalisation that must travel along
+    return m
+
+
+def torch_out(model, x: np.ndarray) -> np.ndarray:
+    with torch.no_grad():
+        return model(torch.as_tensor(x, dtype=torch.float32)).numpy()
+
+
+def test_onnx_parity_dynamic_length(tiny, tmp_path):
+    pytest.importorskip("onnxscript")
+    ort = pytest.importorskip("onnxruntime")
+    path = export_onnx(tiny, tmp_path / "m.onnx")
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    for batch, n in [(1, 1), (1, 7), (2, 333), (1, 2500)]:
+        x = np.stack([random_imu(n, seed=batch + n + k) for k in range(batch)]).astype(np.float32)
+        (y,) = sess.run(None, {INPUT_NAME: x})
+        assert y.shape == (batch, n, 3)
+        assert np.abs(y - torch_out(tiny, x)).max() < ATOL
+
+
+def test_onnx_calibrated_model(tmp_path):
+    pytest.importorskip("onnxscript")
+    ort = pytest.importorskip("onnxruntime")
+    m = build_model("calibrated")
+    m.bias.data[:] = torch.tensor([0.01, 0.02, -0.03])
+    m.C_delta.data.normal_(std=0.01)
+    sess = ort.InferenceSession(str(export_onnx(m, tmp_path / "c.onnx")))
+    x = random_imu(50)[None].astype(np.float32)
+    assert np.abs(sess.run(None, {INPUT_NAME: x})[0] - torch_out(m, x)).max() < 1e-6
+
+
+def test_torch_export_roundtrip(tiny, tmp_path):
+    program = torch.export.load(export_pt2(tiny, tmp_path / "m.pt2")).module()
+    for n in (3, 900):
+        x = random_imu(n, seed=n)[None].astype(np.float32)
+        with torch.no_grad():
+            y = program(torch.from_numpy(x)).numpy()
+        assert np.abs(y - torch_out(tiny, x)).max() < ATOL
+
+
+def test_export_leaves_model_untouched(tiny, tmp_path):
+    before = {k: v.clone() for k, v in tiny.state_dict().items()}
+    tiny.train()
+    export_pt2(tiny, tmp_path / "m.pt2")
+    assert tiny.training
+    tiny.eval()
+    assert all(torch.equal(before[k], v) for k, v in tiny.state_dict().items())
+
+
+def test_cli(tiny, tmp_path, capsys):
+    pytest.importorskip("onnxscript")
+    pytest.importorskip("onnxruntime")
+    model_file = save_model(tiny, {"name": "denoiser", **TINY}, tmp_path / "tiny.pt")
+    main([str(model_file), "--onnx", str(tmp_path / "out.onnx"), "--pt2", str(tmp_path / "out.pt2")])
+    out = capsys.readouterr().out
+    assert (tmp_path / "out.onnx").is_file() and (tmp_path / "out.pt2").is_file()
+    assert "onnxruntime vs PyTorch" in out
