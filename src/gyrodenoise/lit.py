@@ -72,9 +72,10 @@ class DenoiserModule(L.LightningModule):
         outs, self._val_outputs = self._val_outputs, []
         if not outs:
             return
-        self.log("val/loss", float(np.mean([o["loss"] for o in outs])))
-        self.log("val/aoe_deg", math.degrees(np.mean([o["aoe"] for o in outs])), prog_bar=True)
-        self.log("val/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in outs])))
+        # sync_dist: under DDP each process validates a share of the sequences; average the shares
+        self.log("val/loss", float(np.mean([o["loss"] for o in outs])), sync_dist=True)
+        self.log("val/aoe_deg", math.degrees(np.mean([o["aoe"] for o in outs])), prog_bar=True, sync_dist=True)
+        self.log("val/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in outs])), sync_dist=True)
         if not self.trainer.sanity_checking:
             self._val_count += 1
             if self._val_count % self.figure_every_n_val == 1 or self.figure_every_n_val == 1:
