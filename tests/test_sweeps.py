@@ -283,3 +283,33 @@ def test_collect_filters_and_errors(tmp_path):
 
     assert ablation.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
     assert ablation.main([str(tmp_path / "m"), "--out", str(tmp_path / "x"), "--where", "model.act=tanh"]) == 2
+
+
+def test_optuna_search_end_to_end(tiny_root, tmp_path):
+    """`hparams_search=euroc_optuna` (no -m needed) minimises the returned val/aoe_deg."""
+    require_plugin("hydra_plugins.hydra_optuna_sweeper")
+    sweep_dir = tmp_path / "optuna"
+    run_train(
+        [
+            "hparams_search=euroc_optuna",
+            "hydra.sweeper.n_trials=2",
+            "hydra.sweeper.sampler.n_startup_trials=1",
+            *tiny_overrides(tiny_root),
+            "logger=none",
+            f"hydra.sweep.dir={sweep_dir}",
+        ],
+        cwd=tmp_path,
+    )
+    import yaml
+
+    result = yaml.safe_load((sweep_dir / "optimization_results.yaml").read_text())
+    runs, _ = ablation.find_runs([sweep_dir])
+    assert len(runs) == 2
+    assert result["best_value"] == pytest.approx(min(r.metric("val") for r in runs), rel=1e-5)
+    assert set(result["best_params"]) == {
+        "optim.lr",
+        "optim.weight_decay",
+        "model.dropout",
+        "model.act",
+        "loss.huber_delta",
+    }
