@@ -57,7 +57,26 @@ class Run:
             node = node[part]
         return _fmt_value(node)
 
+    def curve(self) -> list[tuple[int, float]]:
+        """(epoch, val AOE) of the validations during fitting, from the CSV log when there is one.
+
+        The last val row of the log is the post-fit validation of the best checkpoint: left out.
+        """
+        path = self.path / "csv" / "metrics.csv"
+        if not path.is_file():
+            return []
+        with open(path, newline="") as fh:
+            rows = [r for r in csv.DictReader(fh) if r.get(METRICS["val"])]
+        return [(int(float(r["epoch"])) + 1, float(r[METRICS["val"]])) for r in rows[:-1]]
+
     def metric(self, split: str) -> float:
+        """'val' / 'test': AOE (deg) of the best checkpoint; 'val_last': the last validation AOE of the
+        fit (overfitting shows as val_last > val); 'best_epoch': the epoch of the best validation."""
+        if split in ("val_last", "best_epoch"):
+            curve = self.curve()
+            if not curve:
+                return math.nan
+            return curve[-1][1] if split == "val_last" else float(min(curve, key=lambda p: p[1])[0])
         table = self.summary.get(split) or {}
         v = table.get(METRICS[split])
         return float(v) if v is not None else math.nan
@@ -94,7 +113,20 @@ def _parse_override(line: str) -> tuple[str, str] | None:
     if not line or line.startswith("~") or "=" not in line:
         return None
     key, value = line.split("=", 1)
-    return key.lstrip("+"), value
+    return key.lstrip("+"), _norm(value)
+
+
+def _norm(value: str) -> str:
+    """Hydra writes swept booleans as True/False, configs as true/false: one spelling."""
+    value = value.strip().strip("'\"")
+    return value.lower() if value.lower() in ("true", "false") else value
+
+
+def same_value(a: str, b: str) -> bool:
+    try:
+        return float(a) == float(b)
+    except ValueError:
+        return _norm(a) == _norm(b)
 
 
 def load_run(run_dir: Path) -> Run:
@@ -163,49 +195,41 @@ def _pm(mean: float, sd: float, digits: int = 2) -> str:
     return f"{mean:.{digits}f}" if not math.isfinite(sd) else f"{mean:.{digits}f} ± {sd:.{digits}f}"
 
 
+COLUMNS = [  # (split, header, csv name, digits)
+    ("val", "val AOE (deg)", "val_aoe", 2),
+    ("test", "test AOE (deg)", "test_aoe", 2),
+    ("val_last", "last val AOE (deg)", "val_aoe_last", 2),
+    ("best_epoch", "best epoch", "best_epoch", 0),
+]
+
+
 def markdown_table(settings: Sequence[Setting], keys: Sequence[str]) -> str:
-    head = [*keys, "seeds", "val AOE (deg)", "test AOE (deg)", "val per seed", "test per seed", "train s/run"]
+    head = [*keys, "seeds", *(c[1] for c in COLUMNS), "val / test per seed", "train s/run"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for s in settings:
-        vm, vs, n = s.stats("val")
-        tm, ts, _ = s.stats("test")
+        n = s.stats("val")[2]
+        cells = [_pm(*s.stats(split)[:2], digits) for split, _, _, digits in COLUMNS]
         runs = sorted(s.runs, key=lambda r: str(r.seed))
-        per_val = ", ".join(f"{r.metric('val'):.2f}" for r in runs)
-        per_test = ", ".join(f"{r.metric('test'):.2f}" for r in runs)
-        row = [*s.values, str(n), _pm(vm, vs), _pm(tm, ts), per_val, per_test, f"{s.wall_s():.0f}"]
-        lines.append("| " + " | ".join(row) + " |")
+        per_seed = ", ".join(f"{r.metric('val'):.2f} / {r.metric('test'):.2f}" for r in runs)
+        lines.append("| " + " | ".join([*s.values, str(n), *cells, per_seed, f"{s.wall_s():.0f}"]) + " |")
     return "\n".join(lines) + "\n"
 
 
 def csv_text(settings: Sequence[Setting], keys: Sequence[str]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
+    stat_cols = [f"{name}_{x}" for _, _, name, _ in COLUMNS for x in ("mean", "std")]
     w.writerow(
-        [
-            *keys,
-            "n_seeds",
-            "val_aoe_mean_deg",
-            "val_aoe_std_deg",
-            "test_aoe_mean_deg",
-            "test_aoe_std_deg",
-            "seeds",
-            "val_aoe_per_seed_deg",
-            "test_aoe_per_seed_deg",
-            "train_wall_time_s_mean",
-        ]
+        [*keys, "n_seeds", *stat_cols, "seeds", "val_aoe_per_seed", "test_aoe_per_seed", "train_wall_time_s_mean"]
     )
     for s in settings:
-        vm, vs, n = s.stats("val")
-        tm, ts, _ = s.stats("test")
+        stats = [f"{v:.4f}" for split, *_ in COLUMNS for v in s.stats(split)[:2]]
         runs = sorted(s.runs, key=lambda r: str(r.seed))
         w.writerow(
             [
                 *s.values,
-                n,
-                f"{vm:.4f}",
-                f"{vs:.4f}",
-                f"{tm:.4f}",
-                f"{ts:.4f}",
+                s.stats("val")[2],
+                *stats,
                 " ".join(str(r.seed) for r in runs),
                 " ".join(f"{r.metric('val'):.4f}" for r in runs),
                 " ".join(f"{r.metric('test'):.4f}" for r in runs),
@@ -231,6 +255,16 @@ def atomic_write(path: Path, data: str | bytes) -> None:
         raise
 
 
+def mean_curve(setting: Setting) -> tuple[list[int], list[float]]:
+    """Validation AOE vs epoch, averaged over the seeds that validated at each epoch."""
+    by_epoch: dict[int, list[float]] = {}
+    for r in setting.runs:
+        for epoch, v in r.curve():
+            by_epoch.setdefault(epoch, []).append(v)
+    epochs = sorted(by_epoch)
+    return epochs, [statistics.fmean(by_epoch[e]) for e in epochs]
+
+
 def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> bytes:
     import matplotlib
 
@@ -238,22 +272,33 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     import matplotlib.pyplot as plt
 
     labels = [
-        "\n".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
+        ", ".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
         for s in settings
     ]
-    fig, axes = plt.subplots(1, 2, figsize=(max(6.0, 1.1 * len(settings) + 3), 3.8), sharex=True)
-    for ax, split in zip(axes, ("val", "test"), strict=True):
+    fig, axes = plt.subplots(1, 3, figsize=(max(11.0, 1.2 * len(settings) + 7), 4.2))
+    for ax, split in zip(axes[:2], ("val", "test"), strict=True):
         for i, s in enumerate(settings):
             ys = [r.metric(split) for r in s.runs]
             ax.plot([i] * len(ys), ys, "o", color="0.6", ms=4, zorder=1)
             m, sd, _ = s.stats(split)
-            ax.errorbar(
-                [i], [m], yerr=[0.0 if not math.isfinite(sd) else sd], fmt="s", color="C0", capsize=4, ms=6, zorder=2
-            )
-        ax.set_title(f"{split} AOE (deg): seeds (grey), mean ± std (blue)", fontsize=9)
+            err = [0.0 if not math.isfinite(sd) else sd]
+            ax.errorbar([i], [m], yerr=err, fmt="s", color="C0", capsize=4, ms=6, zorder=2)
+        ax.set_title(f"{split} AOE (deg), best checkpoint:\nseeds (grey), mean ± std (blue)", fontsize=9)
         ax.set_xticks(range(len(settings)))
-        ax.set_xticklabels(labels, fontsize=7)
+        ax.set_xticklabels(["\n".join(lb.split(", ")) for lb in labels], fontsize=7)
         ax.grid(axis="y", alpha=0.3)
+    ax = axes[2]
+    for i, (s, label) in enumerate(zip(settings, labels, strict=True)):
+        epochs, ys = mean_curve(s)
+        if epochs:
+            ax.plot(epochs, ys, "-o", ms=2, color=f"C{i % 10}", label=label)
+    ax.set_title("validation AOE during training (mean over seeds)", fontsize=9)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("deg")
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3, which="both")
+    if ax.lines:
+        ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     buf = io.BytesIO()
@@ -270,7 +315,7 @@ def collect(
     title: str | None = None,
 ) -> list[Setting]:
     runs, unfinished = find_runs(dirs)
-    runs = [r for r in runs if all(r.value(k) == v for k, v in where)]
+    runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
     if not runs:
         raise ValueError(f"no finished run (summary.json) under {[str(d) for d in dirs]} matches {list(where)}")
     keys = list(keys) if keys else ablated_keys(runs)
