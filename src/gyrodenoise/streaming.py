@@ -98,8 +98,10 @@ def _fold(model: DilatedCNNDenoiser) -> tuple[list[_Layer], np.ndarray, np.ndarr
         if i < len(mods) and isinstance(mods[i], nn.Dropout):
             i += 1
         layers.append(_Layer(w.numpy(), b.numpy(), conv.dilation[0], act))
-    hw = head.weight.detach().double()[:, :, 0].numpy() * model.output_scale
-    hb = head.bias.detach().double().numpy() * model.output_scale
+    # output_scale: a float or a per-axis (3,) buffer, depending on the model version
+    scale = torch.as_tensor(model.output_scale, dtype=torch.float64).detach().cpu().expand(3)
+    hw = (head.weight.detach().double()[:, :, 0] * scale[:, None]).numpy()
+    hb = (head.bias.detach().double() * scale).numpy()
     return layers, hw, hb
 
 

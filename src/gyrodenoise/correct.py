@@ -1,0 +1,218 @@
+"""Correct the gyro of your own IMU recording with a trained model; no ground truth needed.
+
+    python -m gyrodenoise.correct mav0/imu0/data.csv --model euroc -o out/
+    gyrodenoise-correct imu.csv --model my_model.pt --columns time,gx,gy,gz,ax,ay,az \\
+        --time-unit us --gyro-unit deg/s --acc-unit g --resample -o out/
+
+Input: an ASL IMU file (`t[ns], w[rad/s] x3, a[m/s^2] x3`, the default), an ASL sequence folder, or
+any CSV with --columns (7 header names or 1-based numbers, in the order t,wx,wy,wz,ax,ay,az) and
+the units of the file. Sanity checks run first (gyrodenoise.data.checks): units, time unit, rate
+against the model's training rate, |acc| = g at rest, gaps and duplicated stamps.
+
+Output (in --out-dir): `imu_corrected.csv`, the corrected gyro with the accelerometer, in the ASL
+format (ns, rad/s, m/s^2) that the loaders read; `orientation.txt`, the open-loop orientation
+R_n = R_{n-1} exp(w_n dt_n) in TUM format (`t[s] tx ty tz qx qy qz qw`, translation zero), starting
+at identity unless --initial-orientation says otherwise; `correct_summary.json` (beside the CSV), what was done.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.data.checks import CheckReport, SanityWarning, run_checks
+from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
+from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.models.denoiser import GyroCorrection, predict_gyro
+from gyrodenoise.pretrained import load_model
+from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.streaming import StreamingCorrector
+
+ENGINES = ("batch", "streaming")
+STREAM_CHUNK = 4096  # samples per push_chunk: bounded memory on long recordings
+
+
+@dataclass
+class Correction:
+    rec: ImuRecording  # the samples corrected (after deduplication / resampling)
+    gyro: np.ndarray  # (N, 3) corrected, rad/s
+    R: np.ndarray  # (N, 3, 3) open-loop orientation
+    report: CheckReport
+    resampled_to_hz: float | None
+
+
+def model_rate(meta: dict) -> float | None:
+    """Training rate of a model, from its metadata (None when unknown)."""
+    rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
+    return float(rate) if rate else None
+
+
+def find_imu_file(path: str | Path) -> Path:
+    """A file as is; a folder: its mav0/imu0/data.csv or imu0/data.csv (ASL layout)."""
+    p = Path(path)
+    if p.is_dir():
+        for sub in ("mav0/imu0/data.csv", "imu0/data.csv", "data.csv"):
+            if (p / sub).is_file():
+                return p / sub
+        raise FileNotFoundError(f"{p}: folder without mav0/imu0/data.csv, imu0/data.csv or data.csv.")
+    return p
+
+
+def correct_gyro(model: GyroCorrection, imu: np.ndarray, engine: str = "batch") -> np.ndarray:
+    """(N, 6) raw IMU -> (N, 3) corrected gyro, by the batch model or the streaming corrector."""
+    if engine == "batch":
+        return predict_gyro(model, imu).numpy()
+    if engine == "streaming":
+        sc = StreamingCorrector(model)
+        return np.concatenate([sc.push_chunk(imu[i : i + STREAM_CHUNK]) for i in range(0, len(imu), STREAM_CHUNK)])
+    raise ValueError(f"engine={engine!r}; choose one of {ENGINES}")
+
+
+def initial_rotation(spec: str, rec: ImuRecording) -> np.ndarray:
+    """identity | gravity (roll/pitch from the mean acc of the first 0.5 s, yaw 0) | qx,qy,qz,qw."""
+    if spec == "identity":
+        return np.eye(3)
+    if spec == "gravity":
+        first = rec.t_ns <= rec.t_ns[0] + 500_000_000
+        f = rec.acc[first].mean(0)  # specific force at rest points up in the world (z up)
+        R, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [f / np.linalg.norm(f)])
+        return R.as_matrix()
+    try:
+        q = np.array([float(v) for v in spec.split(",")])
+    except ValueError:
+        q = np.zeros(0)
+    if q.shape != (4,) or not np.isclose(np.linalg.norm(q), 1.0, atol=1e-3):
+        raise ValueError(
+            f"--initial-orientation {spec!r}: give identity, gravity, or a unit quaternion qx,qy,qz,qw (scalar last)"
+        )
+    return Rotation.from_quat(q).as_matrix()
+
+
+def tum_text(t_ns: np.ndarray, R: np.ndarray) -> str:
+    """TUM lines `t tx ty tz qx qy qz qw`, t in seconds printed exactly from the int ns stamps."""
+    q = Rotation.from_matrix(R).as_quat()
+    lines = ["# t[s] tx ty tz qx qy qz qw (open-loop orientation from the corrected gyro; translation zero)"]
+    for t, (x, y, z, w) in zip(t_ns.tolist(), q.tolist(), strict=True):
+        lines.append(f"{t // 1_000_000_000}.{t % 1_000_000_000:09d} 0 0 0 {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
+    return "\n".join(lines) + "\n"
+
+
+def correct_recording(
+    rec: ImuRecording,
+    model: GyroCorrection,
+    meta: dict,
+    resample_to_model: bool = False,
+    drop_duplicates: bool = False,
+    force: bool = False,
+    engine: str = "batch",
+    initial: str = "identity",
+) -> Correction:
+    rate = model_rate(meta)
+    rec, report, need_resample = run_checks(rec, rate, resample_to_model, drop_duplicates, force)
+    if need_resample:
+        rec = resample(rec, rate)
+    gyro = correct_gyro(model, rec.imu, engine)
+    t = (rec.t_ns - rec.t_ns[0]) * 1e-9
+    dt = np.diff(t, prepend=t[0])
+    R = integrate_gyro(initial_rotation(initial, rec), gyro, dt)
+    return Correction(rec, gyro, R, report, rate if need_resample else None)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="gyrodenoise-correct",
+        description="Correct the gyro of an IMU recording with a trained model (no ground truth needed).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 1)[1],
+    )
+    ap.add_argument("input", help="IMU CSV file, or an ASL sequence folder (with mav0/imu0/data.csv)")
+    ap.add_argument("-m", "--model", default="euroc", help="shipped model name or .pt/.ckpt path (default: euroc)")
+    ap.add_argument("-o", "--out-dir", type=Path, default=Path("corrected"), help="output folder (default: corrected)")
+    ap.add_argument("--out-csv", type=Path, help="corrected IMU CSV (default: OUT_DIR/imu_corrected.csv)")
+    ap.add_argument("--out-tum", type=Path, help="orientation, TUM format (default: OUT_DIR/orientation.txt)")
+    ap.add_argument(
+        "--columns",
+        default="1,2,3,4,5,6,7",
+        help="t,wx,wy,wz,ax,ay,az as header names or 1-based numbers (default: 1,2,3,4,5,6,7, the ASL order)",
+    )
+    ap.add_argument("--delimiter", help="field separator (default: guessed among , ; tab whitespace)")
+    ap.add_argument("--time-unit", choices=list(TIME_UNITS), default="ns")
+    ap.add_argument("--gyro-unit", choices=list(GYRO_UNITS), default="rad/s")
+    ap.add_argument("--acc-unit", choices=list(ACC_UNITS), default="m/s^2")
+    ap.add_argument("--resample", action="store_true", help="resample to the model's training rate when it differs")
+    ap.add_argument("--drop-duplicates", action="store_true", help="keep the first sample of duplicated stamps")
+    ap.add_argument("--force", action="store_true", help="unit checks warn instead of stopping")
+    ap.add_argument("--engine", choices=ENGINES, default="batch", help="batch model or streaming corrector")
+    ap.add_argument(
+        "--initial-orientation",
+        default="identity",
+        help="identity (default), gravity (roll/pitch from the accelerometer), or qx,qy,qz,qw",
+    )
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        path = find_imu_file(args.input)
+        try:
+            model, meta = load_model(args.model)
+        except RuntimeError as e:  # a state dict that does not fit the model's config
+            raise ValueError(f"model {args.model!r} cannot be loaded by this version of gyrodenoise: {e}") from None
+        rec = read_imu_csv(path, args.columns, args.time_unit, args.gyro_unit, args.acc_unit, args.delimiter)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SanityWarning)  # printed below from the report
+            res = correct_recording(
+                rec,
+                model,
+                meta,
+                args.resample,
+                args.drop_duplicates,
+                args.force,
+                args.engine,
+                args.initial_orientation,
+            )
+    except (DataFormatError, FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for w in res.report.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    out_csv = args.out_csv or args.out_dir / "imu_corrected.csv"
+    out_tum = args.out_tum or args.out_dir / "orientation.txt"
+    write_text(out_csv, asl_text(res.rec.t_ns, res.gyro, res.rec.acc))
+    write_text(out_tum, tum_text(res.rec.t_ns, res.R))
+    delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)
+    summary = {
+        "command": " ".join(["gyrodenoise-correct", *(argv if argv is not None else sys.argv[1:])]),
+        "input": str(path),
+        "model": meta.get("path"),
+        "model_rate_hz": model_rate(meta),
+        "engine": args.engine,
+        "samples": len(res.rec),
+        "duration_s": float((res.rec.t_ns[-1] - res.rec.t_ns[0]) * 1e-9),
+        "input_rate_hz": res.report.rate_hz,
+        "resampled_to_hz": res.resampled_to_hz,
+        "g_measured_m_s2": res.report.g_measured,
+        "rest_fraction": res.report.rest_fraction,
+        "mean_correction_deg_s": float(np.degrees(delta.mean())),
+        "warnings": res.report.warnings,
+        "outputs": {"imu_csv": str(out_csv), "orientation_tum": str(out_tum)},
+    }
+    write_json(out_csv.parent / "correct_summary.json", summary)
+    print(
+        f"corrected {len(res.rec)} samples ({summary['duration_s']:.1f} s at {res.report.rate_hz:.4g} Hz"
+        f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta.get('path')}; "
+        f"mean correction {summary['mean_correction_deg_s']:.3f} deg/s\n  {out_csv}\n  {out_tum}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,234 @@
+"""Sanity checks of an IMU recording before a model corrects it: the usual mistakes, caught early.
+
+Each check names the file, the column or line, what looks wrong and what to do. Mistakes that
+would feed the network garbage (wrong units, wrong time unit, duplicated or unsorted stamps) raise
+`SanityCheckError`; `force=True` turns the unit checks into warnings for the rare recording that
+really is like that. Things that degrade the result but may be intended (a rate other than the
+model's, gaps) warn with `SanityWarning`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording
+from gyrodenoise.data.readers import DataFormatError
+
+GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well below at the 99th percentile
+RATE_RANGE_HZ = (5.0, 20_000.0)  # outside this, the time unit is wrong
+GAP_FACTOR = 3.0  # a step longer than this x the median period is a gap
+RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
+G_TOL_REST, G_TOL_MOVING = 0.10, 0.30  # relative |acc| - g tolerance with / without a rest period
+
+
+class SanityCheckError(DataFormatError):
+    """The recording is not what the model expects; the message says what to do."""
+
+
+class SanityWarning(UserWarning):
+    """The recording is usable but may give a worse correction; the message says why."""
+
+
+@dataclass
+class CheckReport:
+    rate_hz: float = float("nan")
+    g_measured: float = float("nan")
+    rest_fraction: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+
+    def warn(self, msg: str) -> None:
+        self.warnings.append(msg)
+        warnings.warn(msg, SanityWarning, stacklevel=3)
+
+
+def _where(rec: ImuRecording, k: int) -> str:
+    line = int(rec.lines[k])
+    return f"{rec.path}:{line}" if line > 0 else f"{rec.path} (sample {k})"
+
+
+def check_time_order(rec: ImuRecording, drop_duplicates: bool = False, report: CheckReport | None = None):
+    """Stamps strictly increasing. Duplicates: error, or keep the first when asked."""
+    d = np.diff(rec.t_ns)
+    back = np.flatnonzero(d < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise SanityCheckError(
+            f"{_where(rec, k)}: timestamp ({rec.describe('t')}) goes back in time from line "
+            f"{rec.lines[k - 1]} ({back.size} such places). Sort the file by time "
+            "(e.g. `sort -t, -k1,1n`) or check that --columns maps the time column."
+        )
+    dup = np.flatnonzero(d == 0) + 1
+    if dup.size:
+        if not drop_duplicates:
+            k = int(dup[0])
+            raise SanityCheckError(
+                f"{_where(rec, k)}: duplicated timestamp {rec.t_ns[k]} ns (same as line {rec.lines[k - 1]}; "
+                f"{dup.size} duplicated samples in all). Remove the duplicated lines, or pass "
+                "--drop-duplicates to keep the first sample of each stamp."
+            )
+        keep = np.ones(len(rec), dtype=bool)
+        keep[dup] = False
+        if report is not None:
+            report.warn(f"{rec.path}: dropped {dup.size} samples with duplicated timestamps (first kept).")
+        rec = _subset(rec, keep)
+    return rec
+
+
+def check_time_unit(rec: ImuRecording, report: CheckReport) -> None:
+    if len(rec) < 2:
+        raise SanityCheckError(f"{rec.path}: only {len(rec)} sample; an IMU recording needs many.")
+    period_ns = float(np.median(np.diff(rec.t_ns)))
+    rate = 1e9 / period_ns
+    report.rate_hz = rate
+    lo, hi = RATE_RANGE_HZ
+    if lo <= rate <= hi:
+        return
+    given = TIME_UNITS[rec.units["time"]]
+    fits = [u for u, ns in TIME_UNITS.items() if lo <= 1e9 / (period_ns / given * ns) <= hi]
+    hint = f"pass --time-unit {fits[0]}" if fits else "check --time-unit and the time column (--columns)"
+    raise SanityCheckError(
+        f"{rec.path}: {rec.describe('t')} read as {rec.units['time']} gives a median sample period of "
+        f"{period_ns / given:g} {rec.units['time']}, i.e. {rate:.4g} Hz; an IMU samples at "
+        f"{lo:g} Hz - {hi / 1000:g} kHz. The time unit is probably wrong: {hint}."
+    )
+
+
+def check_gaps(rec: ImuRecording, report: CheckReport, factor: float = GAP_FACTOR) -> None:
+    d = np.diff(rec.t_ns)
+    period = float(np.median(d))
+    gaps = np.flatnonzero(d > factor * period)
+    if not gaps.size:
+        return
+    k = int(gaps[np.argmax(d[gaps])])
+    missing = float((d[gaps] - period).sum()) * 1e-9
+    report.warn(
+        f"{_where(rec, k + 1)}: {gaps.size} gap(s) in the timestamps (steps > {factor:g}x the median "
+        f"period of {period * 1e-6:.3g} ms); the longest is {d[k] * 1e-9:.3f} s after line {rec.lines[k]}, "
+        f"{missing:.3f} s missing in all. The network treats samples as consecutive and the integration "
+        "crosses a gap in one step: split the recording at the gaps, or pass --resample to interpolate "
+        "onto a uniform grid (only sensible for short gaps)."
+    )
+
+
+def check_gyro_units(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
+    norm = np.linalg.norm(rec.gyro, axis=1)
+    p99 = float(np.percentile(norm, 99))
+    cols = rec.describe("wx", "wy", "wz")
+    if p99 > GYRO_P99_MAX:
+        _fail_or_warn(
+            report,
+            force,
+            f"{rec.path}: gyro ({cols}, read as {rec.units['gyro']}) has a 99th-percentile norm of "
+            f"{p99:.3g} rad/s ({np.degrees(p99):.0f} deg/s); real motion stays below ~{GYRO_P99_MAX:g} rad/s. "
+            + (
+                "The file is probably in deg/s: pass --gyro-unit deg/s."
+                if rec.units["gyro"] == "rad/s"
+                else "Check the gyro unit and that --columns maps the gyro columns."
+            ),
+        )
+    acc_std = float(np.linalg.norm(rec.acc, axis=1).std())
+    if p99 < 0.03 and acc_std > 1.0:  # < 1.7 deg/s while the body clearly moves
+        report.warn(
+            f"{rec.path}: gyro ({cols}) is almost zero (99th percentile {p99:.2g} rad/s) while the "
+            f"accelerometer shows motion (|acc| std {acc_std:.2g} m/s^2). Was a rad/s file read with "
+            "--gyro-unit deg/s, or are the gyro columns mapped right?"
+        )
+
+
+def check_acc_at_rest(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
+    """|acc| at rest must be g (the model needs specific force, gravity included, in m/s^2)."""
+    acc_norm = np.linalg.norm(rec.acc, axis=1)
+    w_norm = np.linalg.norm(rec.gyro, axis=1)
+    n = max(5, int(round(0.5 * report.rate_hz))) if np.isfinite(report.rate_hz) else 50
+    m = len(rec) // n
+    rest = np.zeros(0, dtype=bool)
+    if m:
+        a = acc_norm[: m * n].reshape(m, n)
+        w = w_norm[: m * n].reshape(m, n)
+        med = np.median(a, axis=1)
+        rest = (a.std(axis=1) < 0.03 * np.abs(med) + 1e-9) & (w.mean(axis=1) < 0.2)
+    report.rest_fraction = float(rest.mean()) if rest.size else 0.0
+    if rest.any():
+        g, tol, where = float(np.median(a[rest])), G_TOL_REST, f"at rest ({int(rest.sum())} half-second windows)"
+    else:
+        g, tol, where = float(np.median(acc_norm)), G_TOL_MOVING, "(median over the whole recording: no rest found)"
+    report.g_measured = g
+    if abs(g / G0 - 1.0) <= tol:
+        return
+    r = g / G0
+    if r < 0.05:
+        todo = (
+            "Near zero: these columns may not be the accelerometer, or hold gravity-free linear "
+            "acceleration; the model needs the raw specific force, gravity included. Check --columns."
+        )
+    elif 0.07 < r < 0.15:
+        todo = "That is about 1: the file is probably in g: pass --acc-unit g."
+    elif 7.0 < r < 13.0:
+        todo = f"The file is probably in m/s^2 but was read as {rec.units['acc']}: pass --acc-unit m/s^2."
+    elif 70.0 < r < 130.0:
+        todo = "That is about 1000: the file is probably in milli-g: pass --acc-unit mg."
+    else:
+        todo = "Check the accelerometer unit (--acc-unit) and that --columns maps the accelerometer axes."
+    _fail_or_warn(
+        report,
+        force,
+        f"{rec.path}: accelerometer ({rec.describe('ax', 'ay', 'az')}, read as {rec.units['acc']}) has "
+        f"norm {g:.4g} m/s^2 {where}, expected g = {G0} m/s^2. {todo}",
+    )
+
+
+def check_rate(rec: ImuRecording, model_rate_hz: float | None, report: CheckReport, resample: bool) -> bool:
+    """True when the recording should be resampled to the model's rate."""
+    if not model_rate_hz:
+        report.warn(f"the model does not record its training rate; cannot compare with {report.rate_hz:.4g} Hz.")
+        return False
+    if abs(report.rate_hz / model_rate_hz - 1.0) <= RATE_TOL:
+        return False
+    if resample:
+        return True
+    report.warn(
+        f"{rec.path}: sampled at {report.rate_hz:.4g} Hz but the model was trained at {model_rate_hz:.4g} Hz. "
+        "Its dilated convolutions span a fixed number of samples, so at another rate it sees another "
+        f"time window and noise level: pass --resample to resample to {model_rate_hz:.4g} Hz, or train a "
+        "model on data at this rate."
+    )
+    return False
+
+
+def run_checks(
+    rec: ImuRecording,
+    model_rate_hz: float | None,
+    resample: bool = False,
+    drop_duplicates: bool = False,
+    force: bool = False,
+) -> tuple[ImuRecording, CheckReport, bool]:
+    """All checks in order. Returns (recording, possibly deduplicated; report; resample needed)."""
+    report = CheckReport()
+    rec = check_time_order(rec, drop_duplicates, report)
+    check_time_unit(rec, report)
+    check_gaps(rec, report)
+    check_gyro_units(rec, report, force)
+    check_acc_at_rest(rec, report, force)
+    return rec, report, check_rate(rec, model_rate_hz, report, resample)
+
+
+def _fail_or_warn(report: CheckReport, force: bool, msg: str) -> None:
+    if force:
+        report.warn(msg + " (continuing: --force)")
+    else:
+        raise SanityCheckError(msg + " If the data really are like this, pass --force.")
+
+
+def _subset(rec: ImuRecording, keep: np.ndarray) -> ImuRecording:
+    return ImuRecording(
+        t_ns=rec.t_ns[keep],
+        gyro=rec.gyro[keep],
+        acc=rec.acc[keep],
+        lines=rec.lines[keep],
+        path=rec.path,
+        columns=rec.columns,
+        units=rec.units,
+    )

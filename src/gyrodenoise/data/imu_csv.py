@@ -1,0 +1,211 @@
+"""Read an IMU recording from any CSV: ASL `imu0/data.csv` by default, or columns mapped by name or
+number with units given, converted at this edge to the conventions inside (int ns, rad/s, m/s^2).
+
+    rec = read_imu_csv("imu.csv", columns="time,gx,gy,gz,ax,ay,az", time_unit="us", gyro_unit="deg/s")
+
+Nothing is checked for plausibility here (units, rate, gaps): that is gyrodenoise.data.checks. This
+module only refuses what it cannot parse, naming the file, the line and the column.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gyrodenoise.data.readers import DataFormatError
+
+G0 = 9.80665  # standard gravity, m/s^2 per g
+TIME_UNITS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}  # ns per unit
+GYRO_UNITS = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+ACC_UNITS = {"m/s^2": 1.0, "g": G0, "mg": G0 / 1000.0}
+FIELDS = ("t", "wx", "wy", "wz", "ax", "ay", "az")
+ASL_HEADER = (
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
+
+
+@dataclass
+class ImuRecording:
+    t_ns: np.ndarray  # (N,) int64
+    gyro: np.ndarray  # (N, 3) rad/s
+    acc: np.ndarray  # (N, 3) m/s^2
+    lines: np.ndarray  # (N,) 1-based line numbers in the file (-1 for resampled samples)
+    path: Path
+    columns: dict[str, str]  # field (t, wx, ...) -> how the file names it, for messages
+    units: dict[str, str]
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    @property
+    def imu(self) -> np.ndarray:
+        return np.concatenate([self.gyro, self.acc], axis=1)
+
+    def describe(self, *fields: str) -> str:
+        """'column 2 (w_RS_S_x [rad s^-1]) ...' for messages."""
+        return ", ".join(self.columns[f] for f in fields)
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    return [f.strip() for f in (line.split(delimiter) if delimiter else line.split())]
+
+
+def _guess_delimiter(line: str) -> str | None:
+    for d in (",", ";", "\t"):
+        if d in line:
+            return d
+    return None  # whitespace
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def _resolve_columns(spec: str, header: list[str] | None, path: Path) -> list[int]:
+    """7 comma-separated names (from the header) or 1-based numbers -> 0-based indices."""
+    items = [s.strip() for s in spec.split(",")]
+    if len(items) != len(FIELDS):
+        raise ValueError(
+            f"--columns {spec!r}: give {len(FIELDS)} columns in the order {','.join(FIELDS)} "
+            "(header names or 1-based column numbers)"
+        )
+    names = [h.lstrip("#").strip().lower() for h in header] if header else []
+    short = [n.split("[")[0].strip() for n in names]  # 'w_rs_s_x [rad s^-1]' -> 'w_rs_s_x'
+    out = []
+    for field, item in zip(FIELDS, items, strict=True):
+        if item.isdigit():
+            out.append(int(item) - 1)
+            continue
+        key = item.lower()
+        if key in names:
+            out.append(names.index(key))
+        elif key in short:
+            out.append(short.index(key))
+        else:
+            raise DataFormatError(
+                f"{path}: column {item!r} (for {field}) is not in the header "
+                f"{header if header else '(the file has no header line)'}; give a header name or a "
+                "1-based column number in --columns."
+            )
+    return out
+
+
+def read_imu_csv(
+    path: str | Path,
+    columns: str = "1,2,3,4,5,6,7",
+    time_unit: str = "ns",
+    gyro_unit: str = "rad/s",
+    acc_unit: str = "m/s^2",
+    delimiter: str | None = None,
+) -> ImuRecording:
+    """Parse the file; values in SI, time in int ns. Comment lines start with '#'; a first line
+    with non-numeric fields (or a first comment line) is taken as the header."""
+    path = Path(path)
+    for name, val, table in (
+        ("time_unit", time_unit, TIME_UNITS),
+        ("gyro_unit", gyro_unit, GYRO_UNITS),
+        ("acc_unit", acc_unit, ACC_UNITS),
+    ):
+        if val not in table:
+            raise ValueError(f"{name}={val!r}; choose one of {', '.join(table)}")
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: IMU file not found.")
+    header: list[str] | None = None
+    idx: list[int] | None = None
+    stamps: list[int] = []
+    rows: list[list[float]] = []
+    line_numbers: list[int] = []
+    ns_per = TIME_UNITS[time_unit]
+    with open(path, encoding="utf-8") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            s = raw.strip()
+            if not s:
+                continue
+            if delimiter is None and header is None and idx is None:
+                delimiter = _guess_delimiter(s.lstrip("#"))
+            if s.startswith("#"):
+                if header is None and idx is None:
+                    header = _split(s.lstrip("#"), delimiter)
+                continue
+            fields = _split(s, delimiter)
+            if idx is None:
+                if header is None and not all(_is_number(f) for f in fields):
+                    header = fields
+                    continue
+                idx = _resolve_columns(columns, header, path)
+            if len(fields) <= max(idx):
+                raise DataFormatError(
+                    f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
+                    "remove the truncated line, or check --columns/--delimiter."
+                )
+            t_field = fields[idx[0]]
+            try:
+                try:
+                    stamps.append(int(t_field) * ns_per)  # integers stay exact
+                except ValueError:
+                    stamps.append(round(float(t_field) * ns_per))
+                rows.append([float(fields[i]) for i in idx[1:]])
+            except ValueError:
+                bad = next(i for i in idx if not _is_number(fields[i]))
+                raise DataFormatError(f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number.") from None
+            line_numbers.append(lineno)
+    if not rows:
+        raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")
+    values = np.array(rows, dtype=np.float64)
+    lines = np.array(line_numbers)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise DataFormatError(
+            f"{path}:{lines[r]}: column {idx[c + 1] + 1} is {values[r, c]} ({int(bad.any(1).sum())} lines "
+            "with NaN/inf). Remove or repair these samples; gyrodenoise does not fill them in silently."
+        )
+    names = header or []
+    desc = {
+        f: f"column {i + 1}" + (f" ({names[i]})" if i < len(names) else "") for f, i in zip(FIELDS, idx, strict=True)
+    }
+    return ImuRecording(
+        t_ns=np.array(stamps, dtype=np.int64),
+        gyro=values[:, 0:3] * GYRO_UNITS[gyro_unit],
+        acc=values[:, 3:6] * ACC_UNITS[acc_unit],
+        lines=lines,
+        path=path,
+        columns=desc,
+        units={"time": time_unit, "gyro": gyro_unit, "acc": acc_unit},
+    )
+
+
+def asl_text(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> str:
+    """ASL imu0/data.csv content (header line + one line per sample). The gyro gets 10 significant
+    digits (it comes from a float32 network); acc is written exactly (shortest round-trip repr)."""
+    out = [ASL_HEADER]
+    for t, w, a in zip(t_ns.tolist(), gyro.tolist(), acc.tolist(), strict=True):
+        out.append(f"{t},{w[0]:.10g},{w[1]:.10g},{w[2]:.10g},{a[0]!r},{a[1]!r},{a[2]!r}")
+    return "\n".join(out) + "\n"
+
+
+def resample(rec: ImuRecording, rate_hz: float) -> ImuRecording:
+    """Linear interpolation of gyro and acc onto a uniform grid at `rate_hz` over the recording's span."""
+    period_ns = 1e9 / rate_hz
+    n = int((rec.t_ns[-1] - rec.t_ns[0]) // period_ns) + 1
+    t_ns = rec.t_ns[0] + np.round(np.arange(n) * period_ns).astype(np.int64)
+    t_old = (rec.t_ns - rec.t_ns[0]) * 1e-9  # float64 seconds relative to the start (sub-ns exact)
+    t_new = (t_ns - rec.t_ns[0]) * 1e-9
+    interp = lambda x: np.stack([np.interp(t_new, t_old, x[:, k]) for k in range(3)], axis=1)  # noqa: E731
+    return ImuRecording(
+        t_ns=t_ns,
+        gyro=interp(rec.gyro),
+        acc=interp(rec.acc),
+        lines=np.full(n, -1),
+        path=rec.path,
+        columns=rec.columns,
+        units=rec.units,
+    )

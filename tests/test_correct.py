@@ -1,0 +1,242 @@
+"""gyrodenoise.correct: own-data correction CLI, and one bad file per sanity check."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from _models import random_model
+
+from gyrodenoise.correct import main
+from gyrodenoise.data.checks import SanityCheckError, SanityWarning, run_checks
+from gyrodenoise.data.imu_csv import G0, read_imu_csv
+from gyrodenoise.pretrained import save_model
+
+TINY = {"name": "denoiser", "channels": (8, 16), "kernel_size": 5, "dilations": (1, 4)}
+T0 = 1_600_000_000_000_000_000  # ns
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    cfg = {k: v for k, v in TINY.items() if k != "name"}
+    m = random_model(seed=4, **cfg)
+    return save_model(m, TINY, tmp_path_factory.mktemp("model") / "tiny.pt", meta={"rate_hz": 200.0})
+
+
+def synth(n: int = 3000, rate: float = 200.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t_ns, gyro rad/s, acc m/s^2): 2 s at rest, then smooth rotation with gravity in the acc."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate
+    moving = (t > 2.0)[:, None]
+    gyro = moving * 0.6 * np.sin(2 * np.pi * np.array([0.3, 0.5, 0.7]) * t[:, None]) + rng.normal(0, 2e-3, (n, 3))
+    acc = np.array([0.0, 0.0, G0]) + moving * 0.5 * np.sin(2 * np.pi * 0.4 * t)[:, None] + rng.normal(0, 0.02, (n, 3))
+    return T0 + np.round(t * 1e9).astype(np.int64), gyro, acc
+
+
+def write_asl(path, t_ns, gyro, acc):
+    with open(path, "w") as fh:
+        fh.write("#timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z\n")
+        for t, w, a in zip(t_ns.tolist(), gyro.tolist(), acc.tolist(), strict=True):
+            fh.write(f"{t},{w[0]!r},{w[1]!r},{w[2]!r},{a[0]!r},{a[1]!r},{a[2]!r}\n")
+    return path
+
+
+def run(args, capsys) -> tuple[int, str, str]:
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def read_out(folder):
+    d = np.loadtxt(folder / "imu_corrected.csv", delimiter=",", comments="#", dtype=np.float64)
+    q = np.loadtxt(folder / "orientation.txt", comments="#")
+    return d, q
+
+
+# ------------------------------------------------------------------ working inputs
+
+
+def test_asl_file_batch_equals_streaming(tmp_path, model_file, capsys):
+    f = write_asl(tmp_path / "data.csv", *synth())
+    code, out, err = run([f, "-m", model_file, "-o", tmp_path / "b"], capsys)
+    assert code == 0, err
+    assert err == ""  # a clean recording gives no warning
+    run([f, "-m", model_file, "-o", tmp_path / "s", "--engine", "streaming"], capsys)
+    (db, qb), (ds, qs) = read_out(tmp_path / "b"), read_out(tmp_path / "s")
+    assert db.shape == (3000, 7) and qb.shape == (3000, 8)
+    assert np.abs(db[:, 1:4] - ds[:, 1:4]).max() < 1e-5
+    assert np.abs(qb - qs).max() < 1e-5
+    np.testing.assert_array_equal(qb[0, 1:], [0, 0, 0, 0, 0, 0, 1])  # identity start, TUM order
+    t_in = np.loadtxt(f, delimiter=",", comments="#", dtype=np.int64, usecols=0)
+    assert (np.loadtxt(tmp_path / "b" / "imu_corrected.csv", delimiter=",", dtype=np.int64, usecols=0) == t_in).all()
+    assert abs(qb[1, 0] - t_in[1] * 1e-9) < 1e-6
+
+
+def test_custom_csv_with_units_gives_the_same_correction(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    ref = write_asl(tmp_path / "ref.csv", t_ns, gyro, acc)
+    custom = tmp_path / "phone.csv"
+    with open(custom, "w") as fh:
+        fh.write("ax;ay;az;time_us;gx;gy;gz\n")
+        for t, w, a in zip(t_ns.tolist(), np.degrees(gyro).tolist(), (acc / G0).tolist(), strict=True):
+            fh.write(f"{a[0]!r};{a[1]!r};{a[2]!r};{t / 1000:.3f};{w[0]!r};{w[1]!r};{w[2]!r}\n")
+    args = ["--columns", "time_us,gx,gy,gz,ax,ay,az", "--time-unit", "us", "--gyro-unit", "deg/s", "--acc-unit", "g"]
+    assert run([custom, "-m", model_file, "-o", tmp_path / "c", *args], capsys)[0] == 0
+    assert run([ref, "-m", model_file, "-o", tmp_path / "r"], capsys)[0] == 0
+    (dc, _), (dr, _) = read_out(tmp_path / "c"), read_out(tmp_path / "r")
+    assert np.abs(dc[:, 1:] - dr[:, 1:]).max() < 1e-5
+
+
+def test_initial_orientation_from_gravity(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    tilt = np.array([0.0, np.sin(0.3), np.cos(0.3)]) * G0  # tilted by 0.3 rad about x
+    acc = acc - [0, 0, G0] + tilt
+    f = write_asl(tmp_path / "data.csv", t_ns, gyro, acc)
+    assert run([f, "-m", model_file, "-o", tmp_path / "o", "--initial-orientation", "gravity"], capsys)[0] == 0
+    _, q = read_out(tmp_path / "o")
+    from scipy.spatial.transform import Rotation
+
+    up = Rotation.from_quat(q[0, 4:]).apply(tilt / G0)
+    np.testing.assert_allclose(up, [0, 0, 1], atol=1e-2)
+
+
+def test_real_euroc_slice_batch_equals_streaming(euroc_root, tmp_path, model_file, capsys):
+    lines = (euroc_root / "MH_02_easy" / "mav0" / "imu0" / "data.csv").read_text().splitlines()[:2001]
+    f = tmp_path / "data.csv"
+    f.write_text("\n".join(lines) + "\n")
+    for engine in ("batch", "streaming"):
+        code, _, err = run([f, "-m", model_file, "-o", tmp_path / engine, "--engine", engine], capsys)
+        assert code == 0, err
+    (db, qb), (ds, qs) = read_out(tmp_path / "batch"), read_out(tmp_path / "streaming")
+    assert np.abs(db[:, 1:4] - ds[:, 1:4]).max() < 1e-5
+    assert np.abs(qb[:, 4:] - qs[:, 4:]).max() < 1e-5
+
+
+# ------------------------------------------------------------------ one bad file per check
+
+
+def bad_file(tmp_path, name="bad.csv", **changes):
+    t_ns, gyro, acc = synth()
+    t_ns = changes.get("t_ns", t_ns)
+    gyro = changes.get("gyro", gyro)
+    acc = changes.get("acc", acc)
+    return write_asl(tmp_path / name, t_ns, gyro, acc)
+
+
+def expect_error(capsys, args, *needles):
+    code, _, err = run(args, capsys)
+    assert code == 2
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+def test_gyro_in_deg_s(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path, gyro=np.degrees(synth()[1]))
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], str(f), "column 2", "--gyro-unit deg/s")
+    assert run([f, "-m", model_file, "-o", tmp_path, "--gyro-unit", "deg/s"], capsys)[0] == 0
+
+
+def test_gyro_rad_s_read_as_deg_s_warns(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    acc = acc + np.random.default_rng(1).normal(0, 2.0, acc.shape) * (np.arange(len(acc)) > 400)[:, None]
+    f = write_asl(tmp_path / "g.csv", t_ns, gyro, acc)
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path, "--gyro-unit", "deg/s", "--force"], capsys)
+    assert code == 0 and "--gyro-unit deg/s" in err
+
+
+@pytest.mark.parametrize(
+    ("scale", "hint"),
+    [(1 / G0, "--acc-unit g"), (1000 / G0, "--acc-unit mg"), (0.0, "--columns"), (3.0, "--acc-unit")],
+)
+def test_acc_norm_not_g_at_rest(tmp_path, model_file, capsys, scale, hint):
+    t_ns, gyro, acc = synth()
+    f = write_asl(tmp_path / "acc.csv", t_ns, gyro, acc * scale if scale else acc - acc.mean(0))
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], str(f), "column 5", hint)
+    assert "at rest" in err or "no rest" in err
+
+
+def test_acc_m_s2_read_as_g(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path, "--acc-unit", "g"], "--acc-unit m/s^2")
+
+
+def test_force_turns_unit_errors_into_warnings(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path, acc=synth()[2] / G0)
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path, "--force"], capsys)
+    assert code == 0 and "warning:" in err and "--acc-unit g" in err
+
+
+def test_wrong_time_unit(tmp_path, model_file, capsys):
+    t_ns = synth()[0]
+    f = bad_file(tmp_path, t_ns=(t_ns - T0) // 1000 + T0 // 1000)  # stamps in us, read as ns
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], str(f), "column 1", "--time-unit us")
+    assert run([f, "-m", model_file, "-o", tmp_path, "--time-unit", "us"], capsys)[0] == 0
+
+
+def test_rate_differs_from_model_warns_then_resamples(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth(n=1500, rate=100.0)
+    f = write_asl(tmp_path / "r100.csv", t_ns, gyro, acc)
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "a"], capsys)
+    assert code == 0 and "100 Hz" in err and "200 Hz" in err and "--resample" in err
+    code, out, err = run([f, "-m", model_file, "-o", tmp_path / "b", "--resample"], capsys)
+    assert code == 0 and "resampled to 200 Hz" in out and err == ""
+    d, _ = read_out(tmp_path / "b")
+    t = np.loadtxt(tmp_path / "b" / "imu_corrected.csv", delimiter=",", dtype=np.int64, usecols=0)
+    assert len(d) == 2999 and (np.diff(t) == 5_000_000).all()
+
+
+def test_gap_warns_with_line(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    keep = np.ones(len(t_ns), bool)
+    keep[1000:1100] = False  # 0.5 s missing
+    f = write_asl(tmp_path / "gap.csv", t_ns[keep], gyro[keep], acc[keep])
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path], capsys)
+    assert code == 0
+    assert f"{f}:1002" in err and "1 gap(s)" in err and "--resample" in err  # line 1002: after header + 1000
+
+
+def test_duplicated_stamps(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    t_ns = t_ns.copy()
+    t_ns[501] = t_ns[500]
+    f = write_asl(tmp_path / "dup.csv", t_ns, gyro, acc)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:503", "line 502", "--drop-duplicates")
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path, "--drop-duplicates"], capsys)
+    assert code == 0 and "dropped 1" in err
+    assert len(read_out(tmp_path)[0]) == 2999
+
+
+def test_time_going_back(tmp_path, model_file, capsys):
+    t_ns = synth()[0].copy()
+    t_ns[[10, 11]] = t_ns[[11, 10]]
+    f = bad_file(tmp_path, t_ns=t_ns)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:13", "Sort the file")
+
+
+def test_nan_and_unknown_column(tmp_path, model_file, capsys):
+    gyro = synth()[1].copy()
+    gyro[7, 1] = np.nan
+    f = bad_file(tmp_path, gyro=gyro)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:9", "column 3", "NaN")
+    expect_error(capsys, [bad_file(tmp_path, "ok.csv"), "-m", model_file, "--columns", "timestamp,a,b,c,d,e,f"], "'a'")
+
+
+def test_missing_model_lists_choices(tmp_path, capsys):
+    expect_error(capsys, [bad_file(tmp_path), "-m", "no_such_model"], "neither a file nor a shipped model")
+
+
+def test_checks_api_warns_with_warning_class(tmp_path):
+    t_ns, gyro, acc = synth(n=1500, rate=100.0)
+    rec = read_imu_csv(write_asl(tmp_path / "x.csv", t_ns, gyro, acc))
+    with pytest.warns(SanityWarning, match="--resample"):
+        run_checks(rec, 200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, report, resample = run_checks(rec, 200.0, resample=True)
+    assert resample and math.isclose(report.rate_hz, 100.0, rel_tol=1e-6)
+    rec.gyro[:] *= 100
+    with pytest.raises(SanityCheckError, match="deg/s"):
+        run_checks(rec, 200.0)
