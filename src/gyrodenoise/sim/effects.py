@@ -246,17 +246,32 @@ class TimeOffset(Effect):
     DATASHEET = {"delta": ("ms", 1e3)}
     PRIOR = (2e-4, 0.05)
     DEFAULTS = {"delta": 0.0}
+    delta_ref: float = 0.0  # detector: shift at which the secant regressor is taken
 
     def apply(self, sig, y, rng):
         d = float(self.params["delta"])
         if d == 0.0:
             return y
+        if sig.kinematics_at is None:  # no trajectory at hand: first-order shift
+            return y - d * sig.alpha
         kin = sig.kinematics_at(sig.t - d)
         sig.omega, sig.alpha, sig.f = kin.omega, kin.alpha, kin.specific_force
         return kin.omega.copy()
 
+    def prepare(self, fcs, residuals):
+        # first-order estimate; the regressor is then the secant through w(t - delta_ref), exact at
+        # delta = delta_ref, which removes the second-order term a tangent regressor leaves behind
+        num = sum(float((-fc.alpha * (r - r.mean(0))).sum()) for fc, r in zip(fcs, residuals, strict=True))
+        den = sum(float((fc.alpha**2).sum()) for fc in fcs)
+        d = num / den if den > 0 else 0.0
+        self.delta_ref = float(np.clip(d, -self.PRIOR[1], self.PRIOR[1]))
+
     def columns(self, fc):
-        return -fc.alpha[:, :, None]  # w(t - d) = w(t) - d alpha(t) + O(d^2)
+        kin_at = fc.extra.get("kinematics_at")
+        d = self.delta_ref
+        if kin_at is None or abs(d) < 1e-6:
+            return -fc.alpha[:, :, None]  # w(t - d) = w(t) - d alpha(t) + O(d^2)
+        return ((kin_at(fc.t - d).omega - fc.omega) / d)[:, :, None]
 
     def params_from_fit(self, coef, se):
         return {"delta": np.asarray(coef[0])}, {"delta": np.asarray(se[0])}
@@ -378,31 +393,35 @@ class Vibration(Effect):
 
 @register
 class Saturation(Effect):
-    """Measurement range: y = clip(y, -limit, limit) (front end, before the output filter)."""
+    """Measurement range: y = clip(y, -limit, limit) (front end, before the output filter).
+
+    Detector: a plateau, i.e. several samples exactly at the largest reported magnitude while the
+    true rate goes beyond it. Saturated samples carry no other information and leave the fits."""
 
     name = "saturation"
     stage = 3
+    stochastic = True  # no regressor: detected by its plateau
     DATASHEET = {"limit": ("deg/s", 1 / DEG)}
     PRIOR = (0.5, 40.0)
     DEFAULTS = {"limit": 1e9}
+    MIN_PLATEAU = 10
 
     def apply(self, sig, y, rng):
         lim = float(self.params["limit"])
         return np.clip(y, -lim, lim)
 
-    def prepare(self, fcs, residuals):
-        # the largest magnitude the sensor ever reported is the candidate range
-        self.params["limit"] = np.asarray(max(float(np.abs(fc.gyro).max()) for fc in fcs))
-
-    def columns(self, fc):
-        lim = float(self.params["limit"])
-        return (np.clip(fc.omega, -lim, lim) - fc.omega)[:, :, None]
-
-    def params_from_fit(self, coef, se):
-        return {"limit": self.params["limit"]}, {"limit": np.asarray(0.0)}
-
     def magnitude(self) -> float:
         return float(self.params["limit"])
+
+    @classmethod
+    def detect(cls, fcs: list[FitContext], sigma: np.ndarray) -> dict:
+        """{'limit', 'plateau_samples', 'beyond_samples'}: samples at the largest reported
+        magnitude, and samples whose true rate exceeds it by 5 noise stds."""
+        lim = max(float(np.abs(fc.gyro).max()) for fc in fcs)
+        tol = 1e-9 * max(lim, 1.0)
+        plateau = sum(int((np.abs(fc.gyro) >= lim - tol).sum()) for fc in fcs)
+        beyond = sum(int((np.abs(fc.omega) > lim + 5 * sigma).sum()) for fc in fcs)
+        return {"limit": lim, "plateau_samples": plateau, "beyond_samples": beyond}
 
 
 # ===================================================================== stochastic effects
@@ -446,6 +465,27 @@ class BiasRandomWalk(Effect):
         dt = 1.0 / sig.rate_hz
         steps = rng.standard_normal(y.shape) * self.params["density"] * np.sqrt(dt)
         return y + np.cumsum(steps, axis=0)
+
+    SPACINGS = (2.0, 5.0, 10.0, 20.0)
+
+    def prepare(self, fcs, residuals):
+        # knot spacing with the best BIC on the current residual: a fast walk needs dense knots
+        best, best_h = np.inf, self.knot_spacing_s
+        n = sum(r.size for r in residuals)
+        for h in self.SPACINGS:
+            self.knot_spacing_s = h
+            rss, k = 0.0, 0
+            for fc, r in zip(fcs, residuals, strict=True):
+                c = self.columns(fc)
+                c = c[:, 0, : c.shape[2] // 3]  # axis-0 hats; the same for every axis
+                A = np.concatenate([np.ones((len(c), 1)), c], 1)
+                coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+                rss += float(((r - A @ coef) ** 2).sum())
+                k += 3 * c.shape[1]
+            bic = n * np.log(rss / n) + k * np.log(n)
+            if bic < best:
+                best, best_h = bic, h
+        self.knot_spacing_s = best_h
 
     def columns(self, fc):
         # hat functions on knots every knot_spacing_s (the first knot left to the bias)

@@ -1,0 +1,1 @@
+"""Discrepancy workflow: compare simulated and measured gyros, name the missing effects."""

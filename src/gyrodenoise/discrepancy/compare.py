@@ -1,0 +1,178 @@
+"""Load measured sequences as the detector sees them, and the statistics that compare measured and
+simulated gyros: residuals, Allan deviation, Welch spectra, cross-correlations, orientation drift."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_imu
+from gyrodenoise.data.sequence import sequence_folder
+from gyrodenoise.sim.effects import FitContext
+from gyrodenoise.sim.trajectory import SmoothTrajectory
+from gyrodenoise.so3 import integrate_gyro
+
+
+def load_fit_context(
+    root: str | Path,
+    name: str,
+    gt_file: str | None = None,
+    knot_spacing: float = 0.05,
+    margin_s: float = 0.5,
+) -> FitContext:
+    """IMU samples inside the ground-truth span (minus `margin_s` at each end, where the spline is
+    less reliable), with the true rate, angular acceleration and specific force from a smooth fit
+    of the ground truth evaluated at the IMU stamps. Time 0 is the sequence's first IMU sample."""
+    mav0 = sequence_folder(root, name)
+    gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
+    imu = read_imu(mav0 / "imu0" / "data.csv")
+    traj = SmoothTrajectory.from_asl(gt_path, knot_spacing=knot_spacing)
+    t_imu = (imu.t_ns - traj.t0_ns) * 1e-9
+    keep = (t_imu >= traj.t_start + margin_s) & (t_imu <= traj.t_end - margin_s)
+    if keep.sum() < 100:
+        raise DataFormatError(
+            f"{gt_path}: fewer than 100 IMU samples of {mav0 / 'imu0' / 'data.csv'} fall inside the "
+            "ground-truth span. Both files must share one clock (ns)."
+        )
+    t = t_imu[keep]
+    kin = traj.evaluate(t)
+    rate = float(1.0 / np.median(np.diff(t)))
+    return FitContext(
+        name=name,
+        t=t - t_imu[0],  # since the first IMU sample (power-on for warm-up effects)
+        gyro=imu.gyro[keep],
+        omega=kin.omega,
+        alpha=kin.alpha,
+        f=kin.specific_force,
+        rate_hz=rate,
+        extra={
+            "rot": kin.rot,
+            "t_ns": imu.t_ns[keep],
+            "acc": imu.acc[keep],
+            "gt_file": str(gt_path),
+            # truth at other times (sequence time), for the time-offset regressor
+            "kinematics_at": lambda tt, off=float(t_imu[0]): traj.evaluate(tt + off),
+        },
+    )
+
+
+# ----------------------------------------------------------------------------- Allan deviation
+
+
+def allan_taus(n: int, rate_hz: float, per_octave: int = 4) -> np.ndarray:
+    m = np.unique(np.round(np.logspace(0, np.log10(max(n // 9, 2)), 1 + per_octave * 12)).astype(int))
+    return m / rate_hz
+
+
+def allan_variance(x: np.ndarray, rate_hz: float, taus: np.ndarray) -> np.ndarray:
+    """Overlapping Allan variance of rate samples x (N, ...) at the cluster times `taus` (s)."""
+    x = np.asarray(x, dtype=np.float64)
+    theta = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)]) / rate_hz
+    out = np.full((len(taus), *x.shape[1:]), np.nan)
+    n = len(x)
+    for i, tau in enumerate(taus):
+        m = int(round(tau * rate_hz))
+        if m < 1 or 2 * m >= n:
+            continue
+        d = theta[2 * m :] - 2 * theta[m:-m] + theta[: -2 * m]
+        out[i] = (d**2).mean(0) / (2 * tau**2)
+    return out
+
+
+def allan_deviation(x: np.ndarray, rate_hz: float, taus: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    taus = allan_taus(len(x), rate_hz) if taus is None else np.asarray(taus)
+    return taus, np.sqrt(allan_variance(x, rate_hz, taus))
+
+
+def pooled_allan(residuals: list[np.ndarray], rate_hz: float, taus: np.ndarray) -> np.ndarray:
+    """Allan deviation pooled over sequences (variances averaged with the sequence lengths)."""
+    avs, ws = [], []
+    for r in residuals:
+        av = allan_variance(r, rate_hz, taus)
+        avs.append(np.nan_to_num(av))
+        ws.append(np.where(np.isnan(av), 0.0, len(r)))
+    w = np.sum(ws, 0)
+    return np.sqrt(np.where(w > 0, np.sum([a * b for a, b in zip(avs, ws, strict=True)], 0) / np.maximum(w, 1), np.nan))
+
+
+def fit_allan_noise(residuals: list[np.ndarray], rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fit AVAR(tau) = N^2 / tau + K^2 tau / 3 per axis (white noise + rate random walk).
+
+    Weighted least squares, each tau weighted by the inverse of its variance's uncertainty
+    (relative std ~ sqrt(2 tau / T) for T s of data). Returns (N^2, K^2, std of K^2), each (3,).
+    """
+    n_total = sum(len(r) for r in residuals)
+    taus = allan_taus(min(len(r) for r in residuals), rate_hz, per_octave=2)
+    av = pooled_allan(residuals, rate_hz, taus) ** 2
+    T = n_total / rate_hz
+    rel = np.sqrt(2 * taus / T + 1.0 / (n_total / 2))
+    A = np.stack([1 / taus, taus / 3], 1)
+    n2, k2, k2_se = np.zeros(3), np.zeros(3), np.zeros(3)
+    for i in range(3):
+        ok = np.isfinite(av[:, i])
+        w = 1.0 / (rel[ok] * av[ok, i])
+        Aw = A[ok] * w[:, None]
+        coef, *_ = np.linalg.lstsq(Aw, av[ok, i] * w, rcond=None)
+        cov = np.linalg.pinv(Aw.T @ Aw)
+        n2[i], k2[i], k2_se[i] = coef[0], coef[1], np.sqrt(cov[1, 1])
+    return n2, k2, k2_se
+
+
+# ----------------------------------------------------------------------------- spectra, correlation
+
+
+def spectrum(x: np.ndarray, rate_hz: float, nperseg: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+    """Welch power spectral density ((rad/s)^2/Hz) per axis."""
+    nper = min(nperseg, len(x))
+    f, p = signal.welch(x - x.mean(0), fs=rate_hz, nperseg=nper, axis=0)
+    return f, p
+
+
+def cross_correlations(fcs: list[FitContext], residuals: list[np.ndarray]) -> dict[str, list[float]]:
+    """Pearson correlation of each residual axis with candidate regressors (same axis / magnitude)."""
+    r = np.concatenate([x - x.mean(0) for x in residuals])
+    regs = {
+        "angular_rate": np.concatenate([fc.omega for fc in fcs]),
+        "angular_acceleration": np.concatenate([fc.alpha for fc in fcs]),
+        "specific_force": np.concatenate([fc.f - fc.f.mean(0) for fc in fcs]),
+        "rate_abs_rate": np.concatenate([fc.omega * np.abs(fc.omega) for fc in fcs]),
+        "time": np.concatenate([np.repeat(fc.t[:, None], 3, 1) for fc in fcs]),
+    }
+    out = {}
+    for k, v in regs.items():
+        v = v - v.mean(0)
+        den = np.sqrt((v * v).sum(0) * (r * r).sum(0))
+        out[k] = np.where(den > 0, (v * r).sum(0) / np.maximum(den, 1e-300), 0.0).tolist()
+    return out
+
+
+# ----------------------------------------------------------------------------- orientation drift
+
+
+def window_drift_deg(gyro_a: np.ndarray, gyro_b: np.ndarray, dt: float, window_s: float) -> np.ndarray:
+    """Angle (deg) between the attitudes integrated from gyro_a and gyro_b over consecutive windows."""
+    m = int(round(window_s / dt))
+    n = (len(gyro_a) - 1) // m
+    out = []
+    for k in range(n):
+        sl = slice(k * m, k * m + m + 1)
+        dts = np.full(m + 1, dt)
+        Ra = integrate_gyro(np.eye(3), gyro_a[sl], dts)[-1]
+        Rb = integrate_gyro(np.eye(3), gyro_b[sl], dts)[-1]
+        out.append(np.degrees(np.linalg.norm(Rotation.from_matrix(Ra.T @ Rb).as_rotvec())))
+    return np.asarray(out)
+
+
+def drift_vs_truth_deg(gyro: np.ndarray, rot: np.ndarray, dt: float, window_s: float) -> np.ndarray:
+    """Angle (deg) of the open-loop attitude error after `window_s`, windows started on the truth."""
+    m = int(round(window_s / dt))
+    n = (len(gyro) - 1) // m
+    out = []
+    for k in range(n):
+        a = k * m
+        R = integrate_gyro(rot[a], gyro[a : a + m + 1], np.full(m + 1, dt))[-1]
+        out.append(np.degrees(np.linalg.norm(Rotation.from_matrix(rot[a + m].T @ R).as_rotvec())))
+    return np.asarray(out)
