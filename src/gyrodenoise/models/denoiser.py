@@ -54,7 +54,7 @@ class GyroCorrection(nn.Module):
 
 class DilatedCNNDenoiser(GyroCorrection):
     """Fig. 2: conv layers with the given channels / kernel / dilations, each followed by batch norm,
-    a smooth activation and dropout, then a 1x1 conv to 3 outputs scaled to `output_scale` rad/s.
+    a smooth activation and dropout, then a 1x1 conv to 3 outputs scaled by `output_scale_deg_s`.
 
     Causality: the input is padded on the left only (replicating the first sample) by the
     receptive field minus one, so output n depends on samples <= n.
@@ -68,7 +68,7 @@ class DilatedCNNDenoiser(GyroCorrection):
         act: str = "gelu",
         dropout: float = 0.1,
         batch_norm: bool = True,
-        output_scale_deg_s: float = 1.0,
+        output_scale_deg_s: float | tuple[float, float, float] = (1.0, 2.0, 5.0),
     ) -> None:
         super().__init__()
         if len(channels) != len(dilations):
@@ -89,7 +89,10 @@ class DilatedCNNDenoiser(GyroCorrection):
         layers.append(head)
         self.net = nn.Sequential(*layers)
         self.receptive_field = 1 + (kernel_size - 1) * sum(dilations)
-        self.output_scale = math.radians(output_scale_deg_s)
+        # per-axis unit of the network output: lets a bias of a few deg/s (the ADIS16448 z axis has
+        # ~4 deg/s) be reached with O(1) outputs, which weight decay would otherwise pull back
+        scale = torch.as_tensor(output_scale_deg_s, dtype=torch.float32).expand(3) * (math.pi / 180)
+        self.register_buffer("output_scale", scale.clone())
 
     def correction(self, imu: torch.Tensor) -> torch.Tensor:
         x = ((imu - self.mean) / self.std).transpose(1, 2)  # (B, 6, N)

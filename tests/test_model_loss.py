@@ -1,0 +1,90 @@
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.losses import IncrementLoss
+from gyrodenoise.models.denoiser import build_model, count_parameters, predict_gyro
+
+
+def test_default_network_has_paper_parameter_count():
+    assert count_parameters(build_model("denoiser")) == 77_052
+    assert count_parameters(build_model("calibrated")) == 12
+
+
+def test_untrained_model_reproduces_raw_imu():
+    model = build_model("denoiser").eval()
+    imu = torch.randn(2, 700, 6)
+    np.testing.assert_allclose(model(imu).detach().numpy(), imu[..., :3].numpy(), atol=1e-6)
+
+
+@pytest.mark.parametrize("act", ["gelu", "relu", "elu", "silu"])
+def test_outputs_do_not_depend_on_future_samples(act):
+    torch.manual_seed(0)
+    model = build_model("denoiser", act=act)
+    for p in model.parameters():  # break the zero-initialised head so the network matters
+        p.data.add_(0.1 * torch.randn_like(p))
+    model.eval()
+    imu = torch.randn(1, 1200, 6)
+    changed = imu.clone()
+    changed[:, 800:] = torch.randn(1, 400, 6) * 5
+    a, b = model(imu), model(changed)
+    torch.testing.assert_close(a[:, :800], b[:, :800])
+    assert not torch.allclose(a[:, 800:], b[:, 800:])
+
+
+def test_unknown_activation_is_a_clear_error():
+    with pytest.raises(ValueError, match="model.act='swish2'"):
+        build_model("denoiser", act="swish2")
+
+
+def _loss_reference(w, dt, R_gt, j, delta, weight):
+    """Per-increment loss with scipy, sequential products (independent of the tree code)."""
+    terms = []
+    for i in range(0, len(w) - 1 - j + 1, j):
+        dR_hat = Rotation.identity()
+        for k in range(i + 1, i + j + 1):
+            dR_hat = dR_hat * Rotation.from_rotvec(w[k] * dt[k])
+        dR = Rotation.from_matrix(R_gt[i].T @ R_gt[i + j])
+        r = (dR * dR_hat.inv()).as_rotvec()
+        a = np.abs(r)
+        terms.append(np.where(a < delta, 0.5 * a**2, delta * (a - 0.5 * delta)))
+    return weight * np.mean(terms)
+
+
+def test_increment_loss_matches_scipy_reference():
+    rng = np.random.default_rng(0)
+    n = 1 + 64
+    dt = np.full(n, 0.005)
+    w_true = rng.normal(scale=1.0, size=(n, 3))
+    R = np.stack([np.eye(3)] * n)
+    for k in range(1, n):
+        R[k] = R[k - 1] @ Rotation.from_rotvec(w_true[k] * dt[k]).as_matrix()
+    w_hat = w_true + rng.normal(scale=0.3, size=(n, 3))  # errors on both sides of the Huber threshold
+    dR16 = np.stack([R[16 * k].T @ R[16 * k + 16] for k in range(4)])
+    loss = IncrementLoss((16, 32), huber_delta=0.005, weight=1.0)
+    got = loss(
+        torch.from_numpy(w_hat)[None],
+        torch.from_numpy(dt)[None],
+        torch.from_numpy(dR16)[None],
+        torch.ones(1, 4, dtype=torch.bool),
+    )
+    ref = sum(_loss_reference(w_hat, dt, R, j, 0.005, 1.0) for j in (16, 32))
+    np.testing.assert_allclose(got.item(), ref, rtol=1e-9)
+
+
+def test_loss_ignores_increments_without_ground_truth():
+    loss = IncrementLoss((16, 32), weight=1.0)
+    w = torch.zeros(1, 65, 3, dtype=torch.float64)
+    dt = torch.full((1, 65), 0.005, dtype=torch.float64)
+    dR = torch.eye(3, dtype=torch.float64).repeat(1, 4, 1, 1)
+    dR[0, 3] = torch.from_numpy(Rotation.from_rotvec([0, 0, 1.0]).as_matrix())
+    mask = torch.tensor([[True, True, True, False]])
+    assert loss(w, dt, dR, mask).item() == 0.0  # the bad increment is masked, and its 32-sample parent too
+    assert loss(w, dt, dR, torch.ones(1, 4, dtype=torch.bool)).item() > 0
+
+
+def test_predict_gyro_is_float64_and_restores_mode():
+    model = build_model("denoiser")
+    out = predict_gyro(model, np.zeros((600, 6)))
+    assert out.dtype == torch.float64 and out.shape == (600, 3) and model.training

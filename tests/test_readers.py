@@ -1,0 +1,119 @@
+"""Reader validation: every bad input names the file, the line or column, and what is wrong."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.readers import DataFormatError, read_groundtruth, read_imu
+from gyrodenoise.data.sequence import build_sequence
+
+IMU_HEADER = "#timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z\n"
+GT_HEADER = "#timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z\n"
+
+
+def write(path: Path, header: str, rows: list[str]) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(header + "".join(r + "\n" for r in rows))
+    return path
+
+
+def imu_rows(n=50, t0=1_000_000_000, dt=5_000_000):
+    return [f"{t0 + k * dt},0.01,0.02,0.03,0.1,0.2,9.8" for k in range(n)]
+
+
+def gt_rows(n=50, t0=1_000_000_000, dt=5_000_000, extra=""):
+    return [f"{t0 + k * dt},1,2,3,1,0,0,0{extra}" for k in range(n)]
+
+
+def test_reads_valid_files_and_extra_gt_columns(tmp_path):
+    imu = read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows()))
+    gt = read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, gt_rows(extra=",0,0,0,0,0,0,0,0,0")))
+    assert imu.t_ns.dtype == np.int64 and imu.gyro.shape == (50, 3)
+    np.testing.assert_allclose(gt.quat_xyzw[0], [0, 0, 0, 1])  # w,x,y,z on disk -> x,y,z,w inside
+
+
+def test_missing_file_says_where(tmp_path):
+    with pytest.raises(FileNotFoundError, match="imu0/data.csv"):
+        read_imu(tmp_path / "mav0" / "imu0" / "data.csv")
+
+
+def test_wrong_column_count(tmp_path):
+    rows = imu_rows()
+    rows[3] = "1015000000,0.01,0.02,0.03,0.1,0.2"
+    with pytest.raises(DataFormatError, match=r"imu.csv:5: IMU line has 6 columns, expected at least 7"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_not_a_number_names_line_and_column(tmp_path):
+    rows = imu_rows()
+    rows[10] = rows[10].replace("0.02", "abc")
+    with pytest.raises(DataFormatError, match=r"imu.csv:12: column 3 is 'abc'"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_nan_is_reported_not_dropped(tmp_path):
+    rows = imu_rows()
+    rows[7] = rows[7].replace("9.8", "nan")
+    with pytest.raises(DataFormatError, match=r"imu.csv:9: column 7 .*NaN"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_duplicate_timestamp(tmp_path):
+    rows = imu_rows()
+    rows[5] = rows[4]
+    with pytest.raises(DataFormatError, match=r"imu.csv:7: duplicate timestamp .* line 6"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_non_monotonic_timestamp(tmp_path):
+    rows = imu_rows()
+    rows[5], rows[6] = rows[6], rows[5]
+    with pytest.raises(DataFormatError, match=r"imu.csv:8: timestamp .* goes back in time"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_non_unit_quaternion(tmp_path):
+    rows = gt_rows()
+    rows[2] = rows[2][: rows[2].rfind(",1,0,0,0")] + ",0.9,0,0,0"
+    with pytest.raises(DataFormatError, match=r"gt.csv:4: quaternion .* norm 0.900000"):
+        read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, rows))
+
+
+def test_ground_truth_not_overlapping(tmp_path):
+    imu = read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows()))
+    gt = read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, gt_rows(t0=9_000_000_000)))
+    with pytest.raises(DataFormatError, match="does not overlap the IMU"):
+        build_sequence("x", imu, gt)
+
+
+def test_gap_in_ground_truth_is_masked(tmp_path):
+    rows = gt_rows(n=200)
+    del rows[100:160]  # 0.3 s occlusion
+    imu = read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(n=200)))
+    seq = build_sequence("x", imu, read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, rows)))
+    assert not seq.gt_mask[101:159].any()
+    assert seq.gt_mask[:100].all() and seq.gt_mask[160:].all()
+
+
+def test_cache_rebuilds_when_a_file_changes(tmp_path):
+    mav0 = tmp_path / "root" / "seq" / "mav0"
+    write(mav0 / "imu0" / "data.csv", IMU_HEADER, imu_rows())
+    gt = write(mav0 / "state_groundtruth_estimate0" / "data.csv", GT_HEADER, gt_rows())
+    cache = tmp_path / "cache"
+    a = load_sequence(tmp_path / "root", "seq", cache_dir=cache)
+    assert len(list(cache.glob("*.npz"))) == 1
+    b = load_sequence(tmp_path / "root", "seq", cache_dir=cache)
+    np.testing.assert_array_equal(a.rot, b.rot)
+    write(gt, GT_HEADER, [r.replace(",1,2,3,", ",5,2,3,") for r in gt_rows()])
+    c = load_sequence(tmp_path / "root", "seq", cache_dir=cache)
+    assert len(list(cache.glob("*.npz"))) == 2 and c.pos[0, 0] == 5
+
+
+def test_real_euroc_and_tumvi_sequences(euroc_root, tumvi_root):
+    seq = load_sequence(euroc_root, "V1_01_easy", "state_groundtruth_estimate0/data_recomputed_openvins.csv")
+    assert abs(seq.rate_hz - 200.0) < 0.1 and seq.gt_mask.all()
+    room = load_sequence(tumvi_root, "dataset-room1_512_16")
+    assert abs(room.rate_hz - 199.4) < 0.5  # read from the data, not assumed
+    assert 0.8 < room.gt_mask.mean() < 1.0  # mocap occlusions masked, not bridged
