@@ -16,6 +16,7 @@ Batch norm (eval mode) is folded into its convolution; dropout is the identity a
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -118,7 +119,7 @@ class StreamingCorrector:
         self.backend = backend
         self.np_dtype = np.dtype(dtype)
         self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
-        model = model.cpu()
+        model = copy.deepcopy(model).cpu()  # read the weights without moving the caller's model
         self.C_hat = model.C_hat.detach().double().numpy()
         self.mean = model.mean.detach().double().numpy()
         self.std = model.std.detach().double().numpy()
