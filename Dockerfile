@@ -32,7 +32,7 @@ RUN pip install "torch==${TORCH_VERSION}" --index-url "${TORCH_INDEX}"
 
 WORKDIR /app
 COPY . /app
-RUN pip install ".[dev,export]" \
+RUN pip install ".[dev,export,sweep]" \
     && useradd --create-home --uid 1000 gyro \
     && chown -R gyro /app
 USER gyro
