@@ -184,6 +184,10 @@ def residuals_after(design: Design, res: FitResult, names: list[str], fcs: list[
 def _identifiable(design: Design, given: list[str], name: str, s2: float) -> tuple[bool, float]:
     e = design.effects[name]
     se = design.conditional_se(given, name, s2)
+    if e.per_sequence:
+        # many nuisance columns (knots, phases): identifiable when some direction is new
+        best = float(np.min(se)) if len(se) else np.inf
+        return bool(np.isfinite(best)), best
     scale = COEF_SCALE.get(name, e.PRIOR[1])
     worst = float(np.max(se)) if len(se) else np.inf
     return bool(worst < IDENTIFIABLE_SE_FRACTION * scale), worst
@@ -289,7 +293,7 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     # stochastic effects: white noise always (base or named); random walk if selected; quantisation
     wn = EFFECTS["white_noise"]()
     sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
-    if "white_noise" not in sel.base:
+    if "white_noise" not in sel.base and "white_noise" in sel.effects:
         sel.named.append("white_noise")
     if "bias_random_walk" in sel.selected:
         p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
@@ -315,6 +319,8 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         if name == "quantization":
             q, _ = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
             sel.params[name], sel.se[name] = {"step": np.asarray(q)}, {"step": np.asarray(0.0)}
+    if "white_noise" not in sel.base and "white_noise" not in sel.named:
+        del sel.params["white_noise"], sel.se["white_noise"]  # not part of this model
     for name, p in sel.params.items():
         kw = {k: v for k, v in p.items() if k in EFFECTS[name].DEFAULTS}
         sel.fitted[name] = EFFECTS[name](**kw)

@@ -203,7 +203,7 @@ def yaw_only_trajectory(duration_s: float, seed: int) -> SmoothTrajectory:
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration_s + 1e-9, 0.01)
     yaw = 3.0 * _random_smooth(rng, t, 6, 0.02, 0.5)
-    quat = Rotation.from_euler("z", yaw).as_quat()
+    quat = Rotation.from_euler("z", yaw[:, None]).as_quat()
     return SmoothTrajectory.fit(t, quat, np.zeros((len(t), 3)), knot_spacing=0.05)
 
 
