@@ -1,7 +1,7 @@
 """Hydra entry point: compare attitude methods on the test sequences (Table 1, Figs. 5-8 of the paper).
 
     python -m gyrodenoise.evaluate dataset=euroc                     # shipped models
-    python -m gyrodenoise.evaluate dataset=euroc model=outputs/.../model.pt calibrated_model=...
+    python -m gyrodenoise.evaluate dataset=euroc weights.proposed=outputs/.../model.pt weights.calibrated=...
 
 Methods: raw IMU (integrated gyro), zero motion (initial orientation held), calibrated IMU (the
 12-parameter baseline), proposed (the denoiser). Every estimate is aligned on ground truth at the
@@ -103,25 +103,24 @@ def evaluate(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.setup("test")
-    proposed, proposed_meta = load_model(cfg.model)
-    calibrated, calibrated_meta = load_model(cfg.calibrated_model)
+    proposed, proposed_meta = load_model(cfg.weights.proposed)
+    calibrated, calibrated_meta = load_model(cfg.weights.calibrated)
     methods = {
         "raw IMU": gyro_method(None),
         "zero motion": lambda seq: None,
         "calibrated IMU": gyro_method(calibrated),
         "proposed": gyro_method(proposed),
     }
-    sequences = {s.name: s for s in dm.test_part}
-    averaged = list(sequences)
-    for name, variants in dm.eval_gt_variants.items():
-        if name not in sequences:
-            continue
-        ref = dm.gt_files.get(name, "default")
-        sequences[f"{name} ({ref})"] = sequences.pop(name)
-        averaged[averaged.index(name)] = f"{name} ({ref})"
-        for label, gt_file in variants.items():
-            sequences[f"{name} ({label}: {gt_file})"] = load_sequence(
-                dm.root, name, gt_file, dm.max_gap_factor, dm.cache_dir
+    sequences: dict[str, Sequence] = {}
+    averaged: list[str] = []  # one row per test sequence, with the dataset's configured ground truth
+    for seq in dm.test_part:
+        gt_file = dm.gt_files.get(seq.name)
+        label = f"{seq.name} ({Path(gt_file).stem})" if gt_file else seq.name
+        sequences[label] = seq
+        averaged.append(label)
+        for variant, variant_file in dm.eval_gt_variants.get(seq.name, {}).items():
+            sequences[f"{seq.name} ({variant})"] = load_sequence(
+                dm.root, seq.name, variant_file, dm.max_gap_factor, dm.cache_dir
             )
 
     distances = [float(d) for d in cfg.roe_distances]
