@@ -286,6 +286,8 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
         ax.set_title(f"{split} AOE (deg), best checkpoint:\nseeds (grey), mean ± std (blue)", fontsize=9)
         ax.set_xticks(range(len(settings)))
         ax.set_xticklabels(["\n".join(lb.split(", ")) for lb in labels], fontsize=7)
+        if max(len(lb) for lb in labels) > 12 * len(keys) or len(settings) > 5:  # long labels: slant them
+            plt.setp(ax.get_xticklabels(), rotation=30, ha="right", rotation_mode="anchor")
         ax.grid(axis="y", alpha=0.3)
     ax = axes[2]
     for i, (s, label) in enumerate(zip(settings, labels, strict=True)):
