@@ -27,3 +27,13 @@ python -m gyrodenoise.train -m experiment=ablation_regularization model.dropout=
 # activation: the other smooth ones, elu and silu x seeds 0,1,2 (6 runs)
 python -m gyrodenoise.train -m experiment=ablation_activation model.act=elu,silu $SCHED \
     hydra.sweep.dir=$OUT/activation_smooth
+# learning-rate schedule: constant lr x seeds 0,1,2 (3 runs; cosine warm restarts is the gelu setting above)
+python -m gyrodenoise.train -m experiment=ablation_scheduler optim.scheduler.name=constant $SCHED \
+    hydra.sweep.dir=$OUT/scheduler
+
+# direction check at a 2.5x longer schedule (300 epochs, T_0=100: cycles end at 100 and 300), seed 0 only:
+# the paper's setting, relu, batch norm off, no dropout and no weight decay (4 runs)
+LONG="trainer.max_epochs=300 optim.scheduler.T_0=100 trainer.check_val_every_n_epoch=20 seed=0"
+python -m gyrodenoise.train -m model.act=gelu,relu $LONG hydra.sweep.dir=$OUT/long/activation
+python -m gyrodenoise.train -m model.batch_norm=false $LONG hydra.sweep.dir=$OUT/long/batchnorm
+python -m gyrodenoise.train -m model.dropout=0.0 optim.weight_decay=0.0 $LONG hydra.sweep.dir=$OUT/long/no_regularization

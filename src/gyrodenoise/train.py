@@ -50,6 +50,14 @@ def flat_hparams(cfg: DictConfig) -> dict:
                     out[key] = v if isinstance(v, int | float | str | bool) else str(v)
     out["dataset"] = cfg.dataset.name
     out["seed"] = cfg.seed
+    # what the data-side ablations sweep (amount of data, crops, augmentation) and the schedule length
+    for key in ("train_duration_s", "window", "crops_per_epoch"):
+        if cfg.dataset.get(key) is not None:
+            out[f"dataset.{key}"] = cfg.dataset[key]
+    for k, v in (cfg.dataset.get("augment") or {}).items():
+        if isinstance(v, int | float | str | bool):
+            out[f"dataset.augment.{k}"] = v
+    out["trainer.max_epochs"] = cfg.trainer.get("max_epochs")
     return out
 
 
