@@ -1,7 +1,10 @@
-"""Tiny synthetic sequences in the ASL folder layout, for tests that train or read whole folders."""
+"""Tiny synthetic sequences in the ASL folder layout, and a subprocess training run, for tests that train."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -48,3 +51,17 @@ def write_asl_sequence(folder: Path, seconds: float, seed: int, rate_hz: float =
         for k in range(n):
             vals = (*pos[k], q[k, 3], q[k, 0], q[k, 1], q[k, 2])
             fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in vals) + "\n")
+
+
+def run_train(args: list[str], cwd: Path, timeout: int = 240) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+    assert proc.returncode == 0, f"train failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    return proc

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _asl import run_train
 from hydra import compose, initialize_config_dir
 from omegaconf.errors import MissingMandatoryValue
 from scipy.spatial.transform import Rotation
@@ -79,16 +77,7 @@ def test_train_two_epochs(asl_root, tmp_path):
         "logger=none",
         f"hydra.run.dir={run_dir}",
     ]
-    env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(
-        [sys.executable, "-m", "gyrodenoise.train", *args],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-4000:]
+    run_train(args, cwd=tmp_path, timeout=300)
     model, meta = load_model(run_dir / "model.pt")
     assert meta["dataset"] == "my_imu" and meta["train_seqs"] == ["walk_1", "walk_2"]
     assert abs(meta["rate_hz"] - RATE) < 1e-6
