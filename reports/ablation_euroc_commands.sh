@@ -34,6 +34,6 @@ python -m gyrodenoise.train -m experiment=ablation_scheduler optim.scheduler.nam
 # direction check at a 2.5x longer schedule (300 epochs, T_0=100: cycles end at 100 and 300), seed 0 only:
 # the paper's setting, relu, batch norm off, no dropout and no weight decay (4 runs)
 LONG="trainer.max_epochs=300 optim.scheduler.T_0=100 trainer.check_val_every_n_epoch=20 seed=0"
-python -m gyrodenoise.train -m model.act=gelu,relu $LONG hydra.sweep.dir=$OUT/long/activation
-python -m gyrodenoise.train -m model.batch_norm=false $LONG hydra.sweep.dir=$OUT/long/batchnorm
-python -m gyrodenoise.train -m model.dropout=0.0 optim.weight_decay=0.0 $LONG hydra.sweep.dir=$OUT/long/no_regularization
+python -m gyrodenoise.train -m dataset=euroc model.act=gelu,relu $LONG hydra.sweep.dir=$OUT/long/activation
+python -m gyrodenoise.train -m dataset=euroc model.batch_norm=false $LONG hydra.sweep.dir=$OUT/long/batchnorm
+python -m gyrodenoise.train -m dataset=euroc model.dropout=0.0 optim.weight_decay=0.0 $LONG hydra.sweep.dir=$OUT/long/no_regularization

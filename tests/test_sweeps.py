@@ -71,6 +71,7 @@ def test_experiment_composes(name):
     if name.startswith("ablation_"):
         assert params["seed"] == "0,1,2", "every ablation runs 3 seeds per setting"
         assert cfg.task_name == name
+        assert cfg.dataset.name == "euroc", "the paper's claims are about EuRoC, not the sim default"
     for key, values in params.items():
         if key == "seed":
             continue
@@ -110,6 +111,7 @@ def test_hparams_search_composes(name):
     require_plugin("hydra_plugins.hydra_optuna_sweeper")
     cfg = compose_train([f"hparams_search={name}"])
     assert cfg.hydra.sweeper._target_.endswith("OptunaSweeper")
+    assert cfg.dataset.name == name.split("_")[0]
     assert cfg.hydra.sweeper.direction == "minimize"
     assert cfg.hydra.sweeper.params
 
@@ -120,6 +122,14 @@ def test_launcher_composes(name):
     require_plugin(f"hydra_plugins.{plugin}")
     cfg = compose_train(["experiment=ablation_activation", f"hydra/launcher={name}"])
     assert cfg.hydra.launcher._target_.startswith("hydra_plugins.")
+
+
+def test_default_dataset_is_simulated():
+    """`python -m gyrodenoise.train` out of the box needs no download; a command-line dataset wins over
+    an experiment's choice."""
+    assert compose_train([]).dataset.name == "sim"
+    assert compose_train(["experiment=sim_quick"]).dataset.name == "sim"
+    assert compose_train(["experiment=ablation_activation", "dataset=tumvi"]).dataset.name == "tumvi"
 
 
 def test_ddp_trainer_composes():

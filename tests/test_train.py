@@ -23,6 +23,7 @@ def root(tmp_path_factory) -> Path:
 
 def config(root: Path, out: Path, *extra: str):
     overrides = [
+        "dataset=euroc",
         f"dataset.root={root}",
         "dataset.train_seqs=[a,b]",
         "dataset.test_seqs=[c]",
@@ -56,8 +57,11 @@ def test_seeded_runs_are_reproducible(root, tmp_path):
 
 
 def test_ckpt_path_resumes(root, tmp_path):
-    train(config(root, tmp_path / "first", "trainer.max_epochs=2"))
+    # validation only after epoch 1: the best checkpoint stays at epoch 1, last.ckpt must still follow
+    # every epoch (Lightning >= 2.6 would otherwise leave it at the last best one)
+    train(config(root, tmp_path / "first", "trainer.max_epochs=3", "trainer.check_val_every_n_epoch=2"))
     last = tmp_path / "first" / "checkpoints" / "last.ckpt"
-    assert last.is_file()
+    assert torch.load(last, weights_only=False)["epoch"] == 2
+    assert [p.name for p in (tmp_path / "first" / "checkpoints").glob("best-*")] == ["best-epoch0001.ckpt"]
     resumed = train(config(root, tmp_path / "second", "trainer.max_epochs=4", f"ckpt_path={last}"))
     assert resumed["epochs"] == 4
