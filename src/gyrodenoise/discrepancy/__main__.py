@@ -22,6 +22,8 @@ Options:
 from __future__ import annotations
 
 import argparse
+import os
+import platform
 import sys
 import time
 from pathlib import Path
@@ -84,13 +86,16 @@ def main(argv: list[str] | None = None) -> int:
 
         report["network"] = network_effects(args.network, fit + holdout, args.bic_threshold)
     report["wall_time_s"] = time.time() - t0
+    report["machine"] = f"{platform.node()}, {os.cpu_count()} CPU threads"
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)
     print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
     gb, ga = report["gap_before"], report["gap_after"]
     print(
         f"held-out residual RMS {gb['residual_rms_rad_s']:.4g} -> {ga['residual_rms_rad_s']:.4g} rad/s, "
-        f"median 10-s drift {gb['drift_10s_median_deg']:.3g} -> {ga['drift_10s_median_deg']:.3g} deg"
+        f"median 10-s drift {gb['drift_10s_median_deg']:.3g} -> {ga['drift_10s_median_deg']:.3g} deg, "
+        f"Allan gap {gb['allan_gap_log10']:.3f} -> {ga['allan_gap_log10']:.3f}, "
+        f"spectral gap {gb['psd_gap_log10']:.3f} -> {ga['psd_gap_log10']:.3f}"
     )
     print(f"report: {out / 'report.md'}")
     return 0

@@ -5,6 +5,14 @@ All regression effects are linear in their coefficients once their nonlinear par
 frequency, a time constant, a range) is set by `Effect.prepare`. The weighted normal equations
 (Gram matrix) of all columns are built once per selection step; any subset is then a small solve.
 Rows are the three axes of every sample, weighted by 1/sigma_axis (white-noise level per axis).
+
+Vibration has two variants. The sinusoid is a regression effect like the others. The band-limited
+one is stochastic: it is scored by the Whittle likelihood of the residual's spectrum with and
+without a band term (`gyrodenoise.discrepancy.spectral`), which is on the scale of the regression's
+Gaussian likelihood, so both variants compete in the same step under the same BIC threshold; the
+better one is the vibration candidate's score. Once the band-limited variant is named it has no
+columns; it is refitted on the final residual, and the white-noise level then comes from the same
+spectral fit (first differences would count the band's power as white noise).
 """
 
 from __future__ import annotations
@@ -13,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gyrodenoise.discrepancy.spectral import BAND_PARAMS, BandFit, fit_band
 from gyrodenoise.sim.effects import EFFECTS, Effect, FitContext, Quantization, Saturation
 
 # nonlinear parameters searched by `prepare` (counted in the BIC penalty)
@@ -37,6 +46,10 @@ def set_saturation_mask(fcs: list[FitContext], limit: float, sigma: np.ndarray, 
         fc.extra["row_mask"] = ~near
 
 
+def row_masks(fcs: list[FitContext]) -> list[np.ndarray | None]:
+    return [fc.extra.get("row_mask") for fc in fcs]
+
+
 def noise_weights(residuals: list[np.ndarray]) -> np.ndarray:
     """Per-axis white-noise std from first differences (insensitive to slow effects)."""
     d = np.concatenate([np.diff(r, axis=0) for r in residuals])
@@ -53,7 +66,7 @@ class Design:
         self.k = {name: e.columns(fcs[0]).shape[2] if not e.stochastic else 0 for name, e in effects.items()}
         for name, e in effects.items():
             k = self.k[name]
-            if e.per_sequence:
+            if e.per_sequence and not e.stochastic:
                 # column counts may differ per sequence (random-walk knots): take the largest
                 k = max(e.columns(fc).shape[2] for fc in fcs)
                 self.k[name] = k
@@ -169,6 +182,12 @@ class Selection:
     saturation: dict | None = None
     design: Design | None = None
     result: FitResult | None = None
+    band: BandFit | None = None  # band-limited vibration (spectral fit on the final residual)
+
+    @property
+    def band_vibration(self) -> bool:
+        """Whether the named vibration is the band-limited (stochastic) variant."""
+        return "vibration" in self.selected and self.effects["vibration"].stochastic
 
 
 def residuals_after(design: Design, res: FitResult, names: list[str], fcs: list[FitContext] | None = None):
@@ -201,10 +220,16 @@ def select_effects(
     min_gain: float = 0.0,
     max_added: int = 6,
     rw_knot_spacing_s: float = 10.0,
+    band_vibration: bool | None = None,
 ) -> Selection:
     """Greedy forward selection: add the candidate with the largest BIC gain, refit, repeat, until no
     candidate gains more than `bic_threshold` and explains at least `min_gain` of the remaining
-    weighted residual sum of squares."""
+    weighted residual sum of squares.
+
+    `band_vibration`: also try the band-limited variant of `vibration` (a stochastic term of the
+    noise spectrum). Default: when white noise is part of the model (base or candidates), i.e. when
+    the residual is modelled as noise at all; a fit of a deterministic signal (a network's
+    correction, `network.py`) leaves it out."""
     base = list(base)
     for n in base + list(candidates or []):
         if n not in EFFECTS:
@@ -217,6 +242,9 @@ def select_effects(
         effects["bias_random_walk"].knot_spacing_s = rw_knot_spacing_s
     regress = [c for c in candidates if not effects[c].stochastic]
     selected = [b for b in base if not effects[b].stochastic]
+    if band_vibration is None:
+        band_vibration = "white_noise" in effects
+    band_vibration = band_vibration and "vibration" in regress
 
     # the white-noise level per axis weights the rows
     sigma = noise_weights([fc.residual for fc in fcs])
@@ -249,7 +277,32 @@ def select_effects(
             res = design.fit(selected + [c])
             dk = res.k - cur.k + NONLINEAR_PARAMS.get(c, 0)
             dbic = cur.n * np.log(cur.rss / res.rss) - dk * np.log(cur.n)
-            scores.append({"effect": c, "delta_bic": float(dbic), "gain": float(1 - res.rss / cur.rss), "k": dk})
+            score = {"effect": c, "delta_bic": float(dbic), "gain": float(1 - res.rss / cur.rss), "k": dk}
+            if c == "vibration":
+                score["variant"] = "sinusoid"
+            scores.append(score)
+        band = None
+        if band_vibration and "vibration" in remaining:
+            band = fit_band(resid, fcs[0].rate_hz, row_masks(fcs))
+            if band is not None:
+                scores.append(
+                    {
+                        "effect": "vibration",
+                        "variant": "band-limited",
+                        "delta_bic": band.delta_bic(cur.n),
+                        "gain": band.explained(sigma, fcs[0].rate_hz),
+                        "k": BAND_PARAMS,
+                    }
+                )
+        # one score per effect: the better variant (the other one is kept for the report)
+        best_of: dict[str, dict] = {}
+        for sc in scores:
+            if sc["effect"] not in best_of or sc["delta_bic"] > best_of[sc["effect"]]["delta_bic"]:
+                best_of[sc["effect"]] = sc
+        for sc in scores:
+            if sc is not best_of[sc["effect"]]:
+                best_of[sc["effect"]]["other_variant"] = {"variant": sc["variant"], "delta_bic": sc["delta_bic"]}
+        scores = list(best_of.values())
         scores.sort(key=lambda d: -d["delta_bic"])
         step = {"model": list(selected), "rss_weighted": cur.rss, "n": cur.n, "candidates": scores}
         steps.append(step)
@@ -260,8 +313,33 @@ def select_effects(
         if best["delta_bic"] < bic_threshold or best["gain"] < min_gain:
             break
         step["added"] = best["effect"]
+        if best.get("variant") == "band-limited":
+            step["added_variant"] = "band-limited"
+            # from now on a stochastic term of the noise model: no columns (refitted at the end)
+            effects["vibration"].params.update(
+                frequency_hz=np.asarray(band.frequency_hz),
+                bandwidth_hz=np.asarray(band.bandwidth_hz),
+                amplitude=band.amplitude,
+            )
         selected.append(best["effect"])
     final = design.fit(selected)
+    if band_vibration and "vibration" in selected and effects["vibration"].stochastic:
+        # backward check: the band was scored on the residual of its step; once the effects added
+        # after it are fitted, it must still clear the threshold (colour that a deterministic
+        # effect explains is not vibration)
+        v = effects["vibration"].params
+        resid = residuals_after(design, final, selected)
+        band = fit_band(
+            resid, fcs[0].rate_hz, row_masks(fcs), starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))]
+        )
+        dbic = band.delta_bic(final.n) if band is not None else -np.inf
+        gain = band.explained(sigma, fcs[0].rate_hz) if band is not None else 0.0
+        if dbic < bic_threshold or gain < min_gain:
+            selected.remove("vibration")
+            v["bandwidth_hz"] = np.asarray(0.0)
+            steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
+            design = Design(fcs, {n: effects[n] for n in selected}, sigma)
+            final = design.fit(selected)
     sel = Selection(
         base=base,
         selected=selected,
@@ -284,6 +362,8 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     se_all = res.se()
     for name in sel.selected:
         e = sel.effects[name]
+        if e.stochastic:
+            continue
         idx = design.cols[name]
         p, s = e.params_from_fit(res.coef[idx], se_all[idx])
         sel.params[name], sel.se[name] = p, s
@@ -293,6 +373,22 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     # stochastic effects: white noise always (base or named); random walk if selected; quantisation
     wn = EFFECTS["white_noise"]()
     sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
+    if sel.band_vibration:
+        # the band refitted on the final residual, with standard errors; the white-noise level is
+        # its floor (the first-difference estimate above would include the band's power)
+        v = sel.effects["vibration"].params  # the selection step's fit: the start
+        start = [(float(v["frequency_hz"]), float(v["bandwidth_hz"]))]
+        band = fit_band(resid_all, fcs[0].rate_hz, row_masks(fcs), with_errors=True, starts=start)
+        if band is not None:  # None: no excess left to start from; keep the selection step's fit
+            sel.band = band
+            sel.params["vibration"], sel.se["vibration"] = band.params()
+            sel.effects["vibration"].params.update(sel.params["vibration"])
+            sel.params["white_noise"] = {"density": band.white_noise_density}
+            dens_se = band.floor_se / (2 * np.sqrt(2 * np.maximum(band.floor, 1e-300)))
+            sel.se["white_noise"] = {"density": dens_se}
+        else:
+            sel.params["vibration"] = {k: v.copy() for k, v in sel.effects["vibration"].params.items()}
+            sel.se["vibration"] = {}
     if "white_noise" not in sel.base and "white_noise" in sel.effects:
         sel.named.append("white_noise")
     if "bias_random_walk" in sel.selected:
@@ -335,7 +431,7 @@ def per_sequence_refit(
     names = sel.selected if names is None else names
     design, res = sel.design, sel.result
     glob = [n for n in names if not sel.effects[n].per_sequence and not sel.effects[n].stochastic]
-    local = [n for n in names if sel.effects[n].per_sequence]
+    local = [n for n in names if sel.effects[n].per_sequence and not sel.effects[n].stochastic]
     pred = np.zeros((len(fc.t), 3))
     for n in glob:
         c = sel.effects[n].columns(fc)

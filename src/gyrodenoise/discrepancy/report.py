@@ -66,6 +66,95 @@ def _fmt(v) -> str:
     return "[" + ", ".join(_fmt(x) for x in a) + "]"
 
 
+def _fmt_fixed(v, decimals: int) -> str:
+    """Values rounded to `decimals` places, printed in full (no exponent)."""
+    a = np.round(np.asarray(v, dtype=float), decimals)
+    if a.ndim == 0:
+        return f"{float(a):.{decimals}f}" if decimals > 0 else f"{float(a):.0f}"
+    return "[" + ", ".join(_fmt_fixed(x, decimals) for x in a) + "]"
+
+
+def _label(c: dict) -> str:
+    """Effect name with its variant where it has two (vibration: sinusoid / band-limited)."""
+    return f"{c['name' if 'name' in c else 'effect']}" + (f" ({c['variant']})" if c.get("variant") else "")
+
+
+def _band_vibration(report: dict) -> dict | None:
+    for e in report["named_effects"]:
+        if e["name"] == "vibration" and float(np.max(e["params"].get("bandwidth_hz", 0.0))) > 0:
+            return e
+    return None
+
+
+def _band_words(report: dict) -> list[str]:
+    """What a band-limited vibration does to the gap, in words (it is noise: no prediction)."""
+    e = _band_vibration(report)
+    if e is None:
+        return []
+    gb, ga = report["gap_before"], report["gap_after"]
+    p = e["params"]
+
+    def change(k, fmt):
+        b, a = gb.get(k), ga.get(k)
+        if b is None or a is None:
+            return "n/a"
+        word = "shrinks" if a < b else "does not shrink"
+        return f"{word} ({fmt.format(b)} -> {fmt.format(a)})"
+
+    return [
+        f"The named vibration is band-limited: noise in a {float(p['bandwidth_hz']):.3g} Hz wide band around "
+        f"{float(p['frequency_hz']):.4g} Hz, not a line. No regressor can predict noise, so it cannot lower the "
+        "held-out residual RMS or the 10-s drift of the model gyro (those change only through the other named "
+        "effects); it enters the re-simulation instead, together with the white-noise floor fitted beside it. "
+        f"With it the spectral gap {change('psd_gap_log10', '{:.3f}')} and the Allan-deviation gap "
+        f"{change('allan_gap_log10', '{:.3f}')}: this is the test of whether the re-simulated data now "
+        "reproduce the measured spectrum and Allan deviation (plots `spectrum.png`, `allan.png`).",
+        "",
+    ]
+
+
+def _network_md(net: dict) -> list[str]:
+    """The network relation (`--network`): what the trained denoiser's correction regresses on."""
+    lines = [f"## What the trained denoiser learned (`--network`, {net.get('model_dataset') or 'model'})", ""]
+    lines += [
+        f"Model: `{net['model']}`, run on the fit and held-out sequences. Its correction w_tilde = w_hat - C_hat "
+        f"w_imu (RMS {net['w_tilde_rms_rad_s']:.3g} rad/s) is regressed on the effect library (greedy BIC selection, "
+        "base model: per-sequence bias, deterministic effects only). Parameters are those of the *correction*, "
+        "i.e. the opposite sign of the sensor's error.",
+        "",
+        "| effect (order of selection) | share of w_tilde variance explained | delta BIC | parameters of the "
+        "correction |",
+        "|---|---|---|---|",
+    ]
+    learned = {e["name"]: e for e in net["learned_effects"]}
+    left = 1.0
+    for step in net["selection"]:
+        share = left * step["explained_fraction"]
+        left -= share
+        e = learned.get(step["effect"], {"datasheet": {}})
+        par = "; ".join(
+            f"{k} {_fmt_fixed(d['value'], 3)} {d['unit']}"
+            for k, d in e["datasheet"].items()
+            if not k.endswith("per_sequence")
+        )
+        lines.append(f"| {step['effect']} | {100 * share:.1f}% | {step['delta_bic']:.0f} | {par} |")
+    lines += [
+        "",
+        f"Together the named effects explain {100 * (1 - left):.0f}% of w_tilde's variance (after the per-sequence "
+        "bias; shares of that variance, in the order of selection); the rest is not a library effect.",
+        "",
+    ]
+    c = net.get("C_hat_as_effects")
+    if c:
+        lines += [
+            "C_hat itself (the linear part outside w_tilde) reads as scale factor "
+            f"{_fmt_fixed(c['scale_factor_ppm'], 0)} ppm and misalignment "
+            f"{_fmt_fixed(c['misalignment_mrad'], 2)} mrad (xy, xz, yx, yz, zx, zy).",
+            "",
+        ]
+    return lines
+
+
 def markdown(report: dict) -> str:
     lines = ["# Discrepancy report: simulation vs measurement", ""]
     lines += [
@@ -89,7 +178,7 @@ def markdown(report: dict) -> str:
                     val += " +- " + _fmt(d["standard_error"])
                 dbic = f"{e['delta_bic']:.1f}" if first and e.get("delta_bic") is not None else ""
                 gain = f"{100 * e['explained_fraction']:.2f}%" if first and e.get("explained_fraction") else ""
-                lines.append(f"| {e['name'] if first else ''} | {k} | {val} | {d['unit']} | {dbic} | {gain} |")
+                lines.append(f"| {_label(e) if first else ''} | {k} | {val} | {d['unit']} | {dbic} | {gain} |")
                 first = False
         lines.append("")
     else:
@@ -110,16 +199,38 @@ def markdown(report: dict) -> str:
         f"| median 10-s drift, measured vs model gyro (deg) | {gb['drift_10s_median_deg']:.4g} | "
         f"{ga['drift_10s_median_deg']:.4g} |",
         f"| Allan-deviation gap, mean abs log10 ratio | {gb['allan_gap_log10']:.3f} | {ga['allan_gap_log10']:.3f} |",
+    ]
+    if "psd_gap_log10" in gb and "psd_gap_log10" in ga:
+        lines.append(
+            f"| spectral gap (1/3-octave PSD, >= 1 Hz), mean abs log10 ratio | {gb['psd_gap_log10']:.3f} | "
+            f"{ga['psd_gap_log10']:.3f} |"
+        )
+    lines += [
         "",
         "Sensor constants come from the fit sequences; per-sequence nuisances (bias, random-walk knots, "
-        "vibration phase) are refitted on each held-out sequence.",
+        "vibration phase) are refitted on each held-out sequence. Residual RMS and drift compare the measured "
+        "gyro with the model's prediction; the Allan and spectral gaps compare measured with re-simulated "
+        "residuals (the spectral gap after removing the deterministic prediction from both).",
         "",
+        *_band_words(report),
         "## Selection steps (greedy forward selection, BIC)",
         "",
     ]
     for s in report["selection_steps"]:
-        top = ", ".join(f"{c['effect']} {c['delta_bic']:+.0f}" for c in s["candidates"][:5])
-        lines.append(f"- model [{', '.join(s['model'])}] -> {s.get('added', 'stop')}; best delta BIC: {top}")
+        if "removed" in s:
+            lines.append(
+                f"- backward check: {s['removed']} removed (delta BIC {s['delta_bic_on_final_residual']:+.0f} on the "
+                "final residual)"
+            )
+            continue
+        parts = []
+        for c in s["candidates"][:5]:
+            txt = f"{_label(c)} {c['delta_bic']:+.0f}"
+            if c.get("other_variant"):
+                txt += f" ({c['other_variant']['variant']} {c['other_variant']['delta_bic']:+.0f})"
+            parts.append(txt)
+        added = s.get("added", "stop") + (f" ({s['added_variant']})" if s.get("added_variant") else "")
+        lines.append(f"- model [{', '.join(s['model'])}] -> {added}; best delta BIC: {', '.join(parts)}")
     lines += [
         "",
         "## Plots",
@@ -128,6 +239,12 @@ def markdown(report: dict) -> str:
         "![residual](residual.png) ![drift](drift.png) ![gap](gap.png)",
         "",
     ]
+    if report.get("network"):
+        lines += _network_md(report["network"])
+    if report.get("command"):
+        lines += ["## Command", "", "    " + report["command"], ""]
+        if report.get("wall_time_s") is not None:
+            lines += [f"Wall time {report['wall_time_s']:.0f} s ({report.get('machine', 'this machine')}).", ""]
     return "\n".join(lines)
 
 
@@ -139,7 +256,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ax.loglog(al["tau_s"], al["measured"][:, i], "k-", label="measured")
         ax.loglog(al["tau_s"], al["sim_before"][:, i], "C0--", label="simulated, base model")
         ax.loglog(al["tau_s"], al["sim_after"][:, i], "C3:", label="simulated, with named effects")
-        ax.set_title(f"gyro {AXES[i]}: Allan deviation of (gyro - true rate)")
+        ax.set_title(f"gyro {AXES[i]}: Allan deviation of (gyro - true rate)", fontsize=9)
         ax.set_xlabel("tau (s)")
         ax.grid(True, which="both", alpha=0.3)
     axs[0].set_ylabel("rad/s")
@@ -189,16 +306,15 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         files.append("drift.png")
 
     gb, ga = report["gap_before"], report["gap_after"]
-    fig, axs = plt.subplots(1, 3, figsize=(11, 3.2))
-    for ax, (k, lab) in zip(
-        axs,
-        [
-            ("residual_rms_rad_s", "residual RMS (rad/s)"),
-            ("drift_10s_median_deg", "median 10-s drift (deg)"),
-            ("allan_gap_log10", "Allan gap (log10)"),
-        ],
-        strict=True,
-    ):
+    metrics = [
+        ("residual_rms_rad_s", "residual RMS (rad/s)"),
+        ("drift_10s_median_deg", "median 10-s drift (deg)"),
+        ("allan_gap_log10", "Allan gap (log10)"),
+        ("psd_gap_log10", "spectral gap (log10)"),
+    ]
+    metrics = [(k, lab) for k, lab in metrics if k in gb and k in ga]
+    fig, axs = plt.subplots(1, len(metrics), figsize=(3.7 * len(metrics), 3.2))
+    for ax, (k, lab) in zip(axs, metrics, strict=True):
         ax.bar(["base", "final"], [gb[k], ga[k]], color=["C0", "C3"])
         ax.set_title(lab, fontsize=9)
     fig.suptitle("held-out gap before / after adding the named effects", fontsize=10)

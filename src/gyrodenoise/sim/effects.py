@@ -334,26 +334,61 @@ class WarmupBias(Effect):
 @register
 class Vibration(Effect):
     """Vibration pick-up at `frequency_hz`: a sinusoid of amplitude A_i (random phase per sequence),
-    or, with bandwidth_hz > 0, band-limited noise of RMS A_i / sqrt(2) around the frequency."""
+    or, with bandwidth_hz > 0, band-limited noise of RMS A_i / sqrt(2) around the frequency
+    (Gaussian noise through a 4th-order Butterworth band-pass [f - bw/2, f + bw/2], forward and
+    backward).
+
+    Detector: the sinusoid is a regression effect (sin/cos columns at the strongest spectral line,
+    phase per sequence). The band-limited variant is stochastic: no regressor can predict it, so it
+    is detected and fitted in the frequency domain (`gyrodenoise.discrepancy.spectral`), with the
+    power spectral density shape of `band_psd`. An instance with bandwidth_hz > 0 is `stochastic`."""
 
     name = "vibration"
     per_sequence = True
     DATASHEET = {"frequency_hz": ("Hz", 1.0), "amplitude": ("deg/s", 1 / DEG), "bandwidth_hz": ("Hz", 1.0)}
     PRIOR = (1e-4, 0.5)
     DEFAULTS = {"frequency_hz": 30.0, "amplitude": np.zeros(3), "bandwidth_hz": 0.0}
+    BUTTER_ORDER = 4
+
+    @property
+    def stochastic(self) -> bool:  # type: ignore[override]
+        return float(self.params["bandwidth_hz"]) > 0
 
     def magnitude(self) -> float:
         return float(np.max(np.abs(self.params["amplitude"])))
+
+    @staticmethod
+    def band_edges(frequency_hz: float, bandwidth_hz: float, rate_hz: float) -> tuple[float, float]:
+        return max(frequency_hz - bandwidth_hz / 2, 1e-3), min(frequency_hz + bandwidth_hz / 2, 0.49 * rate_hz)
 
     def apply(self, sig, y, rng):
         f, a, bw = float(self.params["frequency_hz"]), self.params["amplitude"], float(self.params["bandwidth_hz"])
         if bw <= 0:
             phase = rng.uniform(0, 2 * np.pi, 3)
             return y + a * np.sin(2 * np.pi * f * sig.t[:, None] + phase)
-        lo, hi = max(f - bw / 2, 1e-3), min(f + bw / 2, 0.49 * sig.rate_hz)
-        sos = signal.butter(4, [lo, hi], btype="bandpass", fs=sig.rate_hz, output="sos")
+        lo, hi = self.band_edges(f, bw, sig.rate_hz)
+        sos = signal.butter(self.BUTTER_ORDER, [lo, hi], btype="bandpass", fs=sig.rate_hz, output="sos")
         x = signal.sosfiltfilt(sos, rng.standard_normal((len(sig.t), 3)), axis=0)
         return y + x / x.std(0) * a / np.sqrt(2)
+
+    @classmethod
+    def band_psd(cls, f: np.ndarray, frequency_hz: float, bandwidth_hz: float, rate_hz: float) -> np.ndarray:
+        """One-sided PSD shape (1/Hz, integral 1 over [0, rate/2]) of the band-limited variant:
+        |H(f)|^4 of the analog Butterworth band-pass prototype with the edges of `apply` (|H|^2 per
+        pass, two passes). Multiply by the band's variance A^2 / 2 for (rad/s)^2/Hz."""
+        lo, hi = cls.band_edges(frequency_hz, bandwidth_hz, rate_hz)
+        # normalise on a fine grid over the band's support (|x| < 8: gain < 1e-14), within [0, rate/2]
+        b, q = hi - lo, lo * hi
+        a, z = ((x * b + np.sqrt((x * b) ** 2 + 4 * q)) / 2 for x in (-8.0, 8.0))
+        fine = np.linspace(max(a, 0.0), min(z, rate_hz / 2), 4097)
+        norm = float(np.trapezoid(cls._band_gain(fine, lo, hi), fine))
+        return cls._band_gain(np.asarray(f, dtype=np.float64), lo, hi) / max(norm, 1e-300)
+
+    @classmethod
+    def _band_gain(cls, f: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        with np.errstate(divide="ignore", over="ignore"):
+            x = (f**2 - lo * hi) / (np.maximum(f, 1e-12) * (hi - lo))
+            return 1.0 / (1.0 + x ** (2 * cls.BUTTER_ORDER)) ** 2
 
     def prepare(self, fcs, residuals):
         # strongest spectral line of the residuals (summed periodograms), refined by zero padding

@@ -1,0 +1,359 @@
+"""Band-limited vibration: detection and fit in the frequency domain.
+
+A band-limited vibration (`Vibration` with bandwidth_hz > 0) is stochastic: it changes the residual's
+power spectral density, not its mean, so no regressor can fit it. It is compared with the current
+model through the Whittle likelihood of the residual's periodograms, which is what the time-domain
+Gaussian likelihood of the regression effects becomes for a stationary residual; the two are on
+the same scale, so the band-limited variant enters the same greedy BIC selection and threshold.
+
+PSD model, per axis a (one-sided, (rad/s)^2/Hz), shared by all sequences (sensor constants):
+
+    without the band:  S_a(f) = c_a                                  (white-noise floor)
+    with the band:     S_a(f) = c_a + P_a g(f; f0, bw)              (g: `Vibration.band_psd`)
+
+P_a is the band's variance (A_a^2 / 2 in the library's amplitude). For given (f0, bw) the levels
+(c_a, P_a >= 0) are found by Fisher scoring of the Whittle likelihood
+    log L = -sum_j [log S(f_j) + I(f_j) / S(f_j)]
+over the Fourier frequencies f_j of each sequence's (lightly tapered) periodogram I; (f0, bw) are
+then found by maximising this profile likelihood (Nelder-Mead), started from the band where the
+Welch PSD of the residual exceeds the floor by more than half of its peak excess.
+
+- Only frequencies in [F_MIN_HZ, rate/2) enter: below 1 Hz the residual holds the slow effects
+  (bias random walk, warm-up, errors of the ground-truth fit) that the regression effects model.
+- bw >= BW_MIN_WELCH_BINS Welch bins (the main lobe of the Hann window): narrower excess is a line,
+  which the sinusoidal variant (a regression) explains better.
+- Delta BIC = 2 (log L_band - log L_floor) - 5 log n (f0, bw and one amplitude per axis), n the
+  number of rows of the regression (3 per sample), as for the other candidates.
+- Standard errors: Fisher information of the Whittle likelihood (amplitudes, floor) and the
+  curvature of the profile likelihood (f0, bw); where the sequences disagree more than that (real
+  vibration changes with the flight), the spread of the per-sequence estimates is used instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, signal
+
+from gyrodenoise.sim.effects import Vibration
+
+F_MIN_HZ = 1.0
+WELCH_NPERSEG = 512
+BW_MIN_WELCH_BINS = 4.0  # Hann main lobe: a line is never wider than 4 Welch bins
+TAPER = 0.1  # Tukey taper of the periodograms (less leakage of strong low-frequency content)
+BAND_PARAMS = 5  # f0, bw, one amplitude per axis (the floor is the base model's white noise)
+X_SUPPORT = 6.0  # band-pass prototype variable beyond which the band's PSD is negligible
+
+
+@dataclass
+class Spectra:
+    """Periodograms of the residuals of several sequences, bins of [F_MIN_HZ, rate/2), all
+    sequences' bins together sorted by frequency."""
+
+    f: np.ndarray  # (M,) Hz, ascending
+    I: np.ndarray  # (M, 3) one-sided periodogram, (rad/s)^2/Hz
+    seq: np.ndarray  # (M,) sequence index of each bin
+    rate_hz: float
+    n_seq: int
+    cum: np.ndarray = field(init=False, repr=False)  # (M + 1, 3) cumulative sums of I
+
+    def __post_init__(self) -> None:
+        order = np.argsort(self.f, kind="stable")
+        self.f, self.I, self.seq = self.f[order], self.I[order], self.seq[order]
+        self.cum = np.concatenate([np.zeros((1, 3)), np.cumsum(self.I, 0)])
+
+    def subset(self, s: int) -> Spectra:
+        m = self.seq == s
+        return Spectra(self.f[m], self.I[m], np.zeros(int(m.sum()), dtype=int), self.rate_hz, 1)
+
+    def support(self, f0: float, bw: float) -> slice:
+        """Bins where the band's PSD shape is above ~1e-14 of its peak (|x| < X_SUPPORT of the
+        band-pass prototype); elsewhere the model is the floor alone."""
+        lo, hi = Vibration.band_edges(f0, bw, self.rate_hz)
+        b, q = hi - lo, lo * hi
+        edges = [(x * b + np.sqrt((x * b) ** 2 + 4 * q)) / 2 for x in (-X_SUPPORT, X_SUPPORT)]
+        ia, ib = np.searchsorted(self.f, edges)
+        return slice(int(ia), int(ib))
+
+
+@dataclass
+class BandFit:
+    """Band-limited vibration fitted to the residual spectra (SI units)."""
+
+    frequency_hz: float
+    bandwidth_hz: float
+    power: np.ndarray  # (3,) band variance per axis, (rad/s)^2
+    floor: np.ndarray  # (3,) one-sided white-noise PSD per axis, (rad/s)^2/Hz
+    loglik: float
+    loglik_floor: float  # flat floor only
+    n_bins: int
+    power_se: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    floor_se: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    frequency_se: float = float("nan")
+    bandwidth_se: float = float("nan")
+    amplitude_se: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    per_sequence: list[dict] = field(default_factory=list)
+
+    @property
+    def amplitude(self) -> np.ndarray:
+        """The library's amplitude A (band RMS = A / sqrt(2))."""
+        return np.sqrt(2 * np.clip(self.power, 0, None))
+
+    @property
+    def white_noise_density(self) -> np.ndarray:
+        """Floor as a white-noise density N (rad/s/sqrt(Hz)): one-sided PSD = 2 N^2."""
+        return np.sqrt(self.floor / 2)
+
+    def delta_bic(self, n: int) -> float:
+        return 2 * (self.loglik - self.loglik_floor) - BAND_PARAMS * np.log(n)
+
+    def explained(self, sigma: np.ndarray, rate_hz: float) -> float:
+        """Share of the (1/sigma^2-weighted) residual power that the band carries."""
+        w = 1 / sigma**2
+        return float((w * self.power).sum() / (w * (self.power + self.floor * rate_hz / 2)).sum())
+
+    def params(self) -> tuple[dict, dict]:
+        p = {
+            "frequency_hz": np.asarray(self.frequency_hz),
+            "amplitude": self.amplitude,
+            "bandwidth_hz": np.asarray(self.bandwidth_hz),
+        }
+        se = {
+            "frequency_hz": np.asarray(self.frequency_se),
+            "amplitude": self.amplitude_se,
+            "bandwidth_hz": np.asarray(self.bandwidth_se),
+        }
+        return p, se
+
+
+def spectra(residuals: list[np.ndarray], rate_hz: float, masks: list[np.ndarray] | None = None) -> Spectra:
+    """Tapered periodograms of each residual (N, 3). Masked samples (False in `masks`, e.g. near a
+    saturation limit) are set to zero and the power rescaled by the fraction kept."""
+    fs, Is, seqs = [], [], []
+    for s, r in enumerate(residuals):
+        m = np.ones(r.shape, dtype=bool) if masks is None or masks[s] is None else masks[s]
+        keep = np.maximum(m.sum(0), 1)
+        x = np.where(m, r - np.where(m, r, 0).sum(0) / keep, 0.0)
+        n = len(x)
+        w = signal.windows.tukey(n, TAPER)
+        X = np.fft.rfft(x * w[:, None], axis=0)
+        f = np.fft.rfftfreq(n, 1 / rate_hz)
+        I = 2 * np.abs(X) ** 2 / (rate_hz * np.sum(w**2)) * (n / keep)
+        ok = (f >= F_MIN_HZ) & (f < rate_hz / 2)
+        fs.append(f[ok])
+        Is.append(I[ok])
+        seqs.append(np.full(int(ok.sum()), s))
+    return Spectra(np.concatenate(fs), np.concatenate(Is), np.concatenate(seqs), rate_hz, len(residuals))
+
+
+def _fit_levels(
+    sp: Spectra, band: tuple[float, float] | None, theta: np.ndarray | None = None, iters: int = 50
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Whittle fit of (c_a, P_a >= 0) per axis for the PSD c + P g(f; band), band = (f0, bw) or None
+    for the floor alone. Returns (theta (2, 3), log L, Fisher information (3, 2, 2)). Bins outside
+    the band's support enter through their count and sum only."""
+    M = len(sp.f)
+    if band is None:  # flat floor: closed form
+        c = sp.I.mean(0)
+        info = np.zeros((3, 2, 2))
+        info[:, 0, 0] = M / c**2
+        return np.stack([c, np.zeros(3)]), float(-(M * (np.log(c) + 1)).sum()), info
+    sl = sp.support(*band)
+    I = sp.I[sl]
+    G = Vibration.band_psd(sp.f[sl], band[0], band[1], sp.rate_hz)[:, None]
+    n_out = M - len(I)
+    sum_out = sp.cum[-1] - (sp.cum[sl.stop] - sp.cum[sl.start])
+    if theta is None:
+        c = np.quantile(sp.I, 0.5, axis=0) / np.log(2)  # median of an exponential = ln 2 x mean
+        P = np.clip(((I - c) * G).sum(0) / max(float((G**2).sum()), 1e-300), 0, None)
+    else:
+        c, P = theta[0].copy(), theta[1].copy()
+    for _ in range(iters):
+        S = c + P * G
+        W = 1 / S**2
+        R = (I - S) * W
+        sc, sp_ = R.sum(0) + (sum_out - n_out * c) / c**2, (G * R).sum(0)
+        fcc, fcp, fpp = W.sum(0) + n_out / c**2, (G * W).sum(0), (G**2 * W).sum(0)
+        det = np.maximum(fcc * fpp - fcp**2, 1e-300)
+        dc, dP = (fpp * sc - fcp * sp_) / det, (fcc * sp_ - fcp * sc) / det
+        at0 = (P <= 0) & (dP < 0)  # on the boundary P = 0: the floor alone
+        dc = np.where(at0, sc / fcc, dc)
+        dP = np.where(at0, 0.0, dP)
+        c_new = np.maximum(c + dc, 0.2 * c)  # damped: the floor stays positive
+        P_new = np.maximum(P + dP, 0.0)
+        done = np.all(np.abs(c_new - c) <= 1e-8 * c) and np.all(np.abs(P_new - P) <= 1e-8 * (P + c))
+        c, P = c_new, P_new
+        if done:
+            break
+    S = c + P * G
+    W = 1 / S**2
+    fcc, fcp, fpp = W.sum(0) + n_out / c**2, (G * W).sum(0), (G**2 * W).sum(0)
+    info = np.stack([np.stack([fcc, fcp], -1), np.stack([fcp, fpp], -1)], 1)
+    ll = -(np.log(S) + I / S).sum() - (n_out * np.log(c) + sum_out / c).sum()
+    return np.stack([c, P]), float(ll), info
+
+
+def _bounds(rate_hz: float) -> tuple[float, float, float]:
+    """(lowest band edge, highest band edge, smallest bandwidth)."""
+    return F_MIN_HZ / 2, 0.49 * rate_hz, BW_MIN_WELCH_BINS * rate_hz / WELCH_NPERSEG
+
+
+def _clip_band(f0: float, bw: float, rate_hz: float) -> tuple[float, float]:
+    lo_min, hi_max, bw_min = _bounds(rate_hz)
+    bw = float(np.clip(bw, bw_min, hi_max - lo_min))
+    f0 = float(np.clip(f0, lo_min + bw / 2, hi_max - bw / 2))
+    return f0, bw
+
+
+def initial_guesses(residuals: list[np.ndarray], rate_hz: float, n_peaks: int = 2) -> list[tuple[float, float]]:
+    """(f0, bw) starts: the band around each of the largest peaks of the Welch excess over the floor
+    (summed over axes, relative to each axis's median level), where the excess is above half the
+    peak's; f0 its centre, bw its width."""
+    P = 0.0
+    n_tot = 0
+    for r in residuals:
+        f, p = signal.welch(r - r.mean(0), fs=rate_hz, nperseg=min(WELCH_NPERSEG, len(r)), axis=0)
+        P = P + p * len(r)
+        n_tot += len(r)
+    P = P / n_tot
+    ok = f >= F_MIN_HZ
+    floor = np.median(P[ok], axis=0)
+    e = np.where(ok, (P / np.maximum(floor, 1e-300) - 1).sum(1), -np.inf)
+    df = f[1] - f[0]
+    out = []
+    for _ in range(n_peaks):
+        k = int(np.argmax(e))
+        if not np.isfinite(e[k]) or e[k] <= 0:
+            break
+        half = e[k] / 2
+        a = k
+        while a > 0 and e[a - 1] > half:
+            a -= 1
+        b = k
+        while b < len(e) - 1 and e[b + 1] > half:
+            b += 1
+        out.append(_clip_band((f[a] + f[b]) / 2, f[b] - f[a] + df, rate_hz))
+        e[max(a - 2, 0) : b + 3] = -np.inf
+    return out
+
+
+class _Profile:
+    """Profile Whittle likelihood over (f0, log bw), levels refitted at each point."""
+
+    def __init__(self, sp: Spectra) -> None:
+        self.sp = sp
+        self.theta: np.ndarray | None = None
+        self.best = (-np.inf, 0.0, 0.0, None, None)
+
+    def __call__(self, u: np.ndarray) -> float:
+        f0, bw = _clip_band(float(u[0]), float(np.exp(u[1])), self.sp.rate_hz)
+        theta, ll, info = _fit_levels(self.sp, (f0, bw), self.theta)
+        if ll > self.best[0]:
+            self.best = (ll, f0, bw, theta, info)
+            self.theta = theta
+        return -ll
+
+
+def _maximise(sp: Spectra, starts: list[tuple[float, float]], maxfev: int = 150) -> _Profile:
+    prof = _Profile(sp)
+    for f0, bw in starts:
+        prof.theta = None
+        u0 = np.array([f0, np.log(bw)])
+        simplex = np.array([u0, u0 + [max(bw / 4, 0.2), 0.0], u0 + [0.0, 0.3]])
+        optimize.minimize(
+            prof,
+            u0,
+            method="Nelder-Mead",
+            options={"initial_simplex": simplex, "maxfev": maxfev, "xatol": 1e-2, "fatol": 0.05},
+        )
+    return prof
+
+
+def fit_band(
+    residuals: list[np.ndarray],
+    rate_hz: float,
+    masks: list[np.ndarray] | None = None,
+    with_errors: bool = False,
+    starts: list[tuple[float, float]] | None = None,
+) -> BandFit | None:
+    """Maximum-Whittle-likelihood band-limited vibration (see the module docstring); None when the
+    residuals show no excess to start from. `with_errors`: standard errors (a few more fits).
+    `starts`: (f0, bw) to start from (default: `initial_guesses`)."""
+    starts = initial_guesses(residuals, rate_hz) if starts is None else starts
+    if not starts:
+        return None
+    sp = spectra(residuals, rate_hz, masks)
+    _, ll0, _ = _fit_levels(sp, None)
+    prof = _maximise(sp, starts)
+    ll, f0, bw, theta, info = prof.best
+    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f))
+    if with_errors:
+        _errors(fit, sp, info, prof)
+    return fit
+
+
+def _errors(fit: BandFit, sp: Spectra, info: np.ndarray, prof: _Profile) -> None:
+    cov = np.linalg.pinv(info)  # (3, 2, 2): per axis (c, P)
+    fit.floor_se = np.sqrt(np.clip(cov[:, 0, 0], 0, None))
+    fit.power_se = np.sqrt(np.clip(cov[:, 1, 1], 0, None))
+    # curvature of the profile log-likelihood in (f0, bw)
+    x0 = np.array([fit.frequency_hz, fit.bandwidth_hz])
+    h = np.array([0.02, 0.02]) * fit.bandwidth_hz
+
+    def ll(x):
+        prof.theta = np.stack([fit.floor, fit.power])
+        return -prof(np.array([x[0], np.log(x[1])]))
+
+    H = np.zeros((2, 2))
+    for i in range(2):
+        for j in range(i, 2):
+            ei, ej = np.eye(2)[i] * h[i], np.eye(2)[j] * h[j]
+            H[i, j] = H[j, i] = (ll(x0 + ei + ej) - ll(x0 + ei - ej) - ll(x0 - ei + ej) + ll(x0 - ei - ej)) / (
+                4 * h[i] * h[j]
+            )
+    with np.errstate(invalid="ignore"):
+        c = np.linalg.inv(-H) if np.all(np.linalg.eigvalsh(-H) > 0) else np.full((2, 2), np.nan)
+    f_se, bw_se = np.sqrt(np.abs(np.diag(c)))
+    amp = fit.amplitude
+    a_se = np.where(amp > 0, fit.power_se / np.maximum(amp, 1e-300), np.sqrt(2 * fit.power_se))
+    # spread between sequences: per-sequence fits started from the pooled one
+    if sp.n_seq >= 2:
+        per = []
+        for s in range(sp.n_seq):
+            ps = _maximise(sp.subset(s), [(fit.frequency_hz, fit.bandwidth_hz)], maxfev=80).best
+            per.append({"frequency_hz": ps[1], "bandwidth_hz": ps[2], "amplitude": np.sqrt(2 * ps[3][1])})
+        fit.per_sequence = per
+        k = np.sqrt(sp.n_seq)
+        f_se = np.nanmax([f_se, np.std([p["frequency_hz"] for p in per], ddof=1) / k])
+        bw_se = np.nanmax([bw_se, np.std([p["bandwidth_hz"] for p in per], ddof=1) / k])
+        a_se = np.maximum(a_se, np.std([p["amplitude"] for p in per], axis=0, ddof=1) / k)
+    fit.frequency_se, fit.bandwidth_se, fit.amplitude_se = float(f_se), float(bw_se), a_se
+
+
+def psd_gap(measured: list[np.ndarray], simulated: list[np.ndarray], rate_hz: float, per_octave: int = 3) -> float:
+    """Mean |log10(PSD measured / PSD simulated)| over axes and 1/`per_octave`-octave bands of
+    [F_MIN_HZ, rate/2): Welch PSDs averaged over the sequences (weighted by their lengths), then
+    over the Welch bins of each band (log-spaced like the Allan deviation's cluster times, and
+    with little estimation noise left)."""
+
+    def welch(xs):
+        acc, n = 0.0, 0
+        for x in xs:
+            f, p = signal.welch(x - x.mean(0), fs=rate_hz, nperseg=min(WELCH_NPERSEG, len(x)), axis=0)
+            acc, n = acc + p * len(x), n + len(x)
+        return f, acc / n
+
+    f, a = welch(measured)
+    _, b = welch(simulated)
+    n_bands = max(int(np.ceil(per_octave * np.log2(rate_hz / 2 / F_MIN_HZ))), 1)
+    edges = np.geomspace(F_MIN_HZ, rate_hz / 2, n_bands + 1)
+    k = np.searchsorted(edges, f, side="right") - 1
+    ok = (k >= 0) & (k < n_bands) & (f < rate_hz / 2)
+    out = []
+    for j in np.unique(k[ok]):
+        m = ok & (k == j)
+        ra, rb = a[m].mean(0), b[m].mean(0)
+        good = (ra > 0) & (rb > 0)
+        out.extend(np.abs(np.log10(ra[good] / rb[good])))
+    return float(np.mean(out)) if out else float("nan")

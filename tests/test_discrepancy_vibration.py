@@ -1,0 +1,108 @@
+"""Band-limited vibration in the discrepancy workflow: the spectral (Whittle) fit on its own, the
+hidden-effect cases at two magnitudes, the sinusoidal variant unchanged, and the report's words.
+The null case (nothing hidden, also no vibration) is test_sim_discrepancy.test_null_case_names_nothing."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gyrodenoise.discrepancy.__main__ import main
+from gyrodenoise.discrepancy.hidden import (
+    BASE_NOISE,
+    CASES,
+    VIBRATION_BW_TOL_HZ,
+    VIBRATION_FREQ_TOL_HZ,
+    make_measured,
+    run_case,
+)
+from gyrodenoise.discrepancy.spectral import fit_band
+from gyrodenoise.sim.effects import SignalContext, Vibration, WhiteNoise
+
+DURATION = 30.0
+RATE = 200.0
+
+
+def _noise(effects, n_seq=3, n=6000, seed=0):
+    rng = np.random.default_rng(seed)
+    sig = SignalContext(t=np.arange(n) / RATE, omega=np.zeros((n, 3)), alpha=None, f=None, rate_hz=RATE)
+    out = []
+    for _ in range(n_seq):
+        y = np.zeros((n, 3))
+        for e in effects:
+            y = e.apply(sig, y, rng)
+        out.append(y)
+    return out
+
+
+def test_band_psd_is_the_simulated_spectrum():
+    v = Vibration(frequency_hz=20.0, bandwidth_hz=6.0, amplitude=[2e-3, 1e-3, 0.0])
+    (y,) = _noise([v], n_seq=1, n=100_000)
+    from scipy import signal
+
+    f, p = signal.welch(y, fs=RATE, nperseg=1024, axis=0)
+    model = Vibration.band_psd(f, 20.0, 6.0, RATE)[:, None] * np.array([2e-3, 1e-3, 0.0]) ** 2 / 2
+    band = (f > 17.5) & (f < 22.5)
+    assert np.allclose(p[band, :2], model[band, :2], rtol=0.2)
+    assert np.trapezoid(model[:, 0], f) == pytest.approx((2e-3) ** 2 / 2, rel=0.01)
+
+
+def test_whittle_fit_recovers_band_and_floor_and_rejects_white_noise():
+    wn = WhiteNoise(density=np.full(3, BASE_NOISE))
+    amp = np.array([2e-3, 1.2e-3, 1.6e-3])
+    fit = fit_band(_noise([wn, Vibration(frequency_hz=20.0, bandwidth_hz=6.0, amplitude=amp)]), RATE, with_errors=True)
+    n = 3 * 3 * 6000
+    assert fit.delta_bic(n) > 1000
+    assert fit.frequency_hz == pytest.approx(20.0, abs=0.2)
+    assert fit.bandwidth_hz == pytest.approx(6.0, abs=0.4)
+    assert np.allclose(fit.amplitude, amp, rtol=0.08)
+    assert np.allclose(fit.white_noise_density, BASE_NOISE, rtol=0.03)
+    assert np.all(fit.amplitude_se > 0) and fit.frequency_se > 0 and fit.bandwidth_se > 0
+    assert len(fit.per_sequence) == 3
+    # white noise alone: the band term does not pay for its 5 parameters
+    null = fit_band(_noise([wn], seed=1), RATE)
+    assert null is None or null.delta_bic(n) < 0
+
+
+@pytest.mark.parametrize("magnitude", [0, 1])
+def test_band_limited_vibration_named_fitted_and_allan_gap_shrinks(magnitude, tmp_path):
+    r = run_case(tmp_path, "vibration_band", magnitude, seed=11, duration_s=DURATION)
+    true = CASES["vibration_band"](magnitude).effect
+    assert r["named"] == ["vibration"], r
+    assert r["named_labels"] == ["vibration_band"], r
+    fp = r["fitted_params"]
+    assert fp["bandwidth_hz"] > 0
+    assert fp["frequency_hz"] == pytest.approx(float(true.params["frequency_hz"]), abs=VIBRATION_FREQ_TOL_HZ)
+    assert fp["bandwidth_hz"] == pytest.approx(float(true.params["bandwidth_hz"]), abs=VIBRATION_BW_TOL_HZ)
+    assert r["rel_error"] < r["tol"], r
+    gb, ga = r["gaps_before"], r["gaps_after"]
+    # noise: the held-out residual cannot shrink, but the re-simulated spectrum and Allan deviation match
+    assert ga["residual_rms_rad_s"] == pytest.approx(gb["residual_rms_rad_s"], rel=1e-6)
+    assert ga["allan_gap_log10"] < gb["allan_gap_log10"], r
+    assert ga["psd_gap_log10"] < gb["psd_gap_log10"], r
+
+
+def test_sinusoidal_vibration_still_named_with_zero_bandwidth(tmp_path):
+    r = run_case(tmp_path, "vibration", 0, seed=11, duration_s=DURATION)
+    assert r["named_labels"] == ["vibration"], r
+    assert r["fitted_params"]["bandwidth_hz"] == 0.0
+    assert r["fitted_params"]["frequency_hz"] == pytest.approx(37.0, abs=0.05)
+    assert r["rel_error"] < r["tol"], r
+
+
+def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
+    hidden = [Vibration(frequency_hz=30.0, bandwidth_hz=8.0, amplitude=[3e-3, 2e-3, 2e-3])]
+    make_measured(tmp_path / "data", hidden, 3, 20.0, seed=3)
+    out = tmp_path / "report"
+    assert main(["--root", str(tmp_path / "data"), "--fit", "s0", "s1", "--holdout", "s2", "--out", str(out)]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    (vib,) = [e for e in rep["named_effects"] if e["name"] == "vibration"]
+    assert vib["variant"] == "band-limited"
+    assert vib["params"]["bandwidth_hz"] > 0 and vib["datasheet"]["bandwidth_hz"]["unit"] == "Hz"
+    assert set(vib["standard_errors"]) == {"frequency_hz", "bandwidth_hz", "amplitude"}
+    md = (out / "report.md").read_text()
+    assert "vibration (band-limited)" in md and "spectral gap" in md
+    assert "cannot lower the held-out residual RMS" in md
+    assert "## Command" in md and "--holdout s2" in md
