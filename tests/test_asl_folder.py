@@ -82,3 +82,23 @@ def test_train_two_epochs(asl_root, tmp_path):
     assert meta["dataset"] == "my_imu" and meta["train_seqs"] == ["walk_1", "walk_2"]
     assert abs(meta["rate_hz"] - RATE) < 1e-6
     assert model.receptive_field == 1 + 6 * 3
+
+
+def test_validation_split(asl_root):
+    """A validation sequence that is also trained on validates after train_duration_s; one that is not
+    validates whole; train_duration_s None trains on whole sequences."""
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    def parts(**kw):
+        dm = ImuDataModule(name="my_imu", root=str(asl_root), test_seqs=[], window=256, **kw)
+        dm.setup("fit")
+        return [len(s.t) for s in dm.train_part], [(s.name, len(s.t)) for s in dm.val_part]
+
+    n = int(7.0 * RATE) + 1
+    train, val = parts(train_seqs=["walk_1"], val_seqs=["walk_1", "walk_2"], train_duration_s=5.0)
+    assert train == [int(5.0 * RATE) + 1]
+    assert val == [("walk_1[5s:]", n - int(5.0 * RATE)), ("walk_2", n)]
+    train, val = parts(train_seqs=["walk_1", "walk_2"], val_seqs=["walk_3"], train_duration_s=None)
+    assert train == [n, n] and val == [("walk_3", n)]
+    with pytest.raises(ValueError, match="nothing of it is left"):
+        parts(train_seqs=["walk_1"], val_seqs=None, train_duration_s=None)

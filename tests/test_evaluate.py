@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_shipped_models_load_by_name():
-    assert {"euroc", "euroc-calibrated"} <= set(available_models())
+    assert {"euroc", "euroc-calibrated", "tumvi", "tumvi-calibrated"} <= set(available_models())
     model, meta = load_model("euroc")
     assert meta["dataset"] == "euroc" and abs(meta["rate_hz"] - 200.0) < 0.1
     with pytest.raises(FileNotFoundError, match="Shipped models: .*euroc"):
@@ -52,6 +52,31 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     tum = np.loadtxt(tmp_path / "trajectories" / slug("V1_01_easy (data_recomputed_openvins)") / "proposed.txt")
     assert tum.shape[1] == 8 and np.allclose(np.linalg.norm(tum[:, 4:], axis=1), 1.0)
     assert tum[0, 0] > 1.4e9  # absolute seconds, as the ground truth
+
+
+def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):
+    """split=val: the shipped TUM-VI models on the validation parts (the test rooms are withheld), as in
+    reports/tumvi; the AOE equals the validation AOE recorded in each model's metadata at training."""
+    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
+        cfg = compose(
+            "evaluate",
+            overrides=[
+                "dataset=tumvi",
+                f"dataset.root={tumvi_root}",
+                "split=val",
+                "figures=false",
+                f"out_dir={tmp_path}",
+            ],
+        )
+    summary = evaluate(cfg)
+    assert summary["split"] == "val" and all(n.endswith("[50s:]") for n in summary["averaged_sequences"])
+    committed = json.loads((REPO / "reports" / "tumvi" / "results.json").read_text())["average_aoe_deg"]
+    for method, values in summary["average_aoe_deg"].items():
+        np.testing.assert_allclose(values, committed[method], rtol=1e-6, err_msg=method)
+    for name, method in (("tumvi", "proposed"), ("tumvi-calibrated", "calibrated IMU")):
+        _, meta = load_model(name)
+        assert abs(meta["rate_hz"] - 199.4) < 0.2
+        assert summary["average_aoe_deg"][method][0] == pytest.approx(meta["val_aoe_deg"], abs=0.01)
 
 
 def test_metrics_on_known_errors():

@@ -132,6 +132,13 @@ def test_default_dataset_is_simulated():
     assert compose_train(["experiment=ablation_activation", "dataset=tumvi"]).dataset.name == "tumvi"
 
 
+def test_ema_callbacks_compose():
+    """callbacks=ema keeps the default callbacks and adds Lightning's EMA weight averaging."""
+    cb = compose_train(["callbacks=ema"]).callbacks
+    assert {"model_checkpoint", "last_checkpoint", "ema"} <= set(cb)
+    assert hydra.utils.instantiate(cb.ema).__class__.__name__ == "EMAWeightAveraging"
+
+
 def test_ddp_trainer_composes():
     cfg = compose_train(["trainer=ddp"])
     assert cfg.trainer.strategy == "ddp" and cfg.trainer.sync_batchnorm

@@ -2,6 +2,7 @@
 
     python -m gyrodenoise.evaluate dataset=euroc                     # shipped models
     python -m gyrodenoise.evaluate dataset=euroc weights.proposed=outputs/.../model.pt weights.calibrated=...
+    python -m gyrodenoise.evaluate dataset=tumvi split=val   # validation parts (test rooms withheld)
 
 Methods: raw IMU (integrated gyro), zero motion (initial orientation held), calibrated IMU (the
 12-parameter baseline), proposed (the denoiser). Every estimate is aligned on ground truth at the
@@ -102,7 +103,10 @@ def csv_text(header: list[str], rows: list[list[str]]) -> str:
 def evaluate(cfg: DictConfig) -> dict:
     out = Path(cfg.out_dir)
     dm = hydra.utils.instantiate(cfg.dataset)
-    dm.setup("test")
+    split = cfg.get("split", "test")
+    if split not in ("test", "val"):
+        raise ValueError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
+    dm.setup("test" if split == "test" else "fit")
     proposed, proposed_meta = load_model(cfg.weights.proposed)
     calibrated, calibrated_meta = load_model(cfg.weights.calibrated)
     methods = {
@@ -113,7 +117,7 @@ def evaluate(cfg: DictConfig) -> dict:
     }
     sequences: dict[str, Sequence] = {}
     averaged: list[str] = []  # one row per test sequence, with the dataset's configured ground truth
-    for seq in dm.test_part:
+    for seq in dm.test_part if split == "test" else dm.val_part:
         gt_file = dm.gt_files.get(seq.name)
         label = f"{seq.name} ({Path(gt_file).stem})" if gt_file else seq.name
         sequences[label] = seq
@@ -164,10 +168,11 @@ def evaluate(cfg: DictConfig) -> dict:
     write_text(out / "roe.md", markdown_table(roe_header, roe_rows))
     write_text(out / "roe.csv", csv_text(roe_header, roe_rows))
     if cfg.figures:
-        plots.save(plots.roe_boxplot(roe_pooled, f"ROE on {dm.name} test sequences"), out / "figures" / "roe.png")
+        plots.save(plots.roe_boxplot(roe_pooled, f"ROE on {dm.name} {split} sequences"), out / "figures" / "roe.png")
 
     summary = {
         "dataset": dm.name,
+        "split": split,
         "models": {"proposed": proposed_meta.get("path"), "calibrated IMU": calibrated_meta.get("path")},
         "averaged_sequences": averaged,
         "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in METHODS} for n, r in results.items()},
@@ -176,7 +181,7 @@ def evaluate(cfg: DictConfig) -> dict:
         },
     }
     write_json(out / "results.json", summary)
-    print(f"\nAOE 3D/yaw (deg) on {dm.name} test sequences:\n")
+    print(f"\nAOE 3D/yaw (deg) on {dm.name} {'test sequences' if split == 'test' else 'validation parts'}:\n")
     print(markdown_table(header, rows))
     print(f"outputs in {out}")
     return summary

@@ -1,9 +1,10 @@
 """Datasets and the LightningDataModule with the paper's splits.
 
-Training: the first `train_duration_s` of each training sequence, served as random crops whose
-start is a multiple of the longest loss increment, so that the ground-truth increments over
+Training: the first `train_duration_s` (None: all) of each training sequence, served as random crops
+whose start is a multiple of the longest loss increment, so that the ground-truth increments over
 `base_increment` samples are computed once per sequence and only sliced afterwards.
-Validation: the rest of the training sequences, whole. Test: the test sequences, whole.
+Validation (`val_seqs`, default: the training sequences): the rest of a training sequence after
+`train_duration_s`, or a sequence that is not trained on, whole. Test: the test sequences, whole.
 """
 
 from __future__ import annotations
@@ -100,7 +101,7 @@ class ImuDataModule(L.LightningDataModule):
         train_seqs: list[str],
         test_seqs: list[str],
         val_seqs: list[str] | None = None,
-        train_duration_s: float = 50.0,
+        train_duration_s: float | None = 50.0,
         gt_files: Mapping[str, str] | None = None,
         eval_gt_variants: Mapping[str, Mapping[str, str]] | None = None,
         window: int = 9600,
@@ -147,10 +148,19 @@ class ImuDataModule(L.LightningDataModule):
         if stage in (None, "fit", "validate") and not self.train_part:
             for name in sorted(set(self.train_names) | set(self.val_names)):
                 seq = self.load(name)
-                cut = seq.index_at(self.train_duration_s)
+                whole = self.train_duration_s is None or name not in self.train_names
+                cut = len(seq) - 1 if whole else seq.index_at(self.train_duration_s)
                 if name in self.train_names:
                     self.train_part.append(seq.slice(0, cut + 1, name))
-                if name in self.val_names:
+                if name in self.val_names and name not in self.train_names:
+                    self.val_part.append(seq)
+                elif name in self.val_names:
+                    if len(seq) - cut <= self.block:
+                        raise ValueError(
+                            f"validation sequence {name!r} is also a training sequence and nothing of it is "
+                            f"left after train_duration_s={self.train_duration_s}: lower "
+                            "dataset.train_duration_s or name other sequences in dataset.val_seqs"
+                        )
                     self.val_part.append(seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]"))
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
