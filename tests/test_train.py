@@ -10,7 +10,7 @@ from _asl import write_asl_sequence
 from hydra import compose, initialize_config_dir
 
 import gyrodenoise
-from gyrodenoise.train import train
+from gyrodenoise.train import format_test_table, train
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +54,10 @@ def test_seeded_runs_are_reproducible(root, tmp_path):
         torch.testing.assert_close(sa[k], sb[k], rtol=0, atol=0)
     assert a["val"]["val/aoe_deg"] == b["val"]["val/aoe_deg"]
     assert "test/aoe_deg" in a["test"] and (tmp_path / "a" / "summary.json").is_file()
+    # the raw IMU as a reference: no correction model of any kind, so both runs agree and it is finite
+    assert a["test"]["test/raw_imu_aoe_deg/c"] == b["test"]["test/raw_imu_aoe_deg/c"] > 0
+    table = format_test_table(a["test"])
+    assert "| c |" in table and "| **average** |" in table and "nan" not in table
 
 
 def test_ckpt_path_resumes(root, tmp_path):

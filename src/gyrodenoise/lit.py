@@ -87,6 +87,11 @@ class DenoiserModule(L.LightningModule):
         self.log(f"test/aoe_yaw_deg/{o['name']}", math.degrees(o["aoe_yaw"]), batch_size=1)
         self.log("test/aoe_deg", math.degrees(o["aoe"]), batch_size=1)  # averaged over sequences
         self.log("test/aoe_yaw_deg", math.degrees(o["aoe_yaw"]), batch_size=1)
+        # reference: the raw IMU integrated the same way
+        raw = integrate_gyro(o["rot"][0], batch["imu"][0, :, :3].double().cpu().numpy(), batch["dt"][0].cpu().numpy())
+        raw_3d = math.degrees(aoe(o["rot"], raw, batch["gt_mask"][0].cpu().numpy())[0])
+        self.log(f"test/raw_imu_aoe_deg/{o['name']}", raw_3d, batch_size=1)
+        self.log("test/raw_imu_aoe_deg", raw_3d, batch_size=1)
 
     def _log_figures(self, o: dict, prefix: str) -> None:
         for logger in self.loggers:

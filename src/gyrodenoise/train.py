@@ -10,6 +10,7 @@ shipped-model format) and summary.json (wall time, best validation and test metr
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import sys
@@ -59,6 +60,17 @@ def flat_hparams(cfg: DictConfig) -> dict:
             out[f"dataset.augment.{k}"] = v
     out["trainer.max_epochs"] = cfg.trainer.get("max_epochs")
     return out
+
+
+def format_test_table(test: dict[str, float]) -> str:
+    """Per-sequence test AOE of the trained model next to the raw IMU, as a markdown table."""
+    names = sorted(k.split("/", 2)[2] for k in test if k.startswith("test/aoe_deg/"))
+    rows = ["| sequence | model AOE 3D/yaw (deg) | raw IMU AOE 3D (deg) |", "|---|---|---|"]
+    for n in [*names, None]:
+        suffix = f"/{n}" if n else ""
+        cells = [test.get(f"test/{k}{suffix}", math.nan) for k in ("aoe_deg", "aoe_yaw_deg", "raw_imu_aoe_deg")]
+        rows.append(f"| {n or '**average**'} | {cells[0]:.2f}/{cells[1]:.2f} | {cells[2]:.2f} |")
+    return "\n".join(rows)
 
 
 def train(cfg: DictConfig) -> dict:
@@ -120,6 +132,10 @@ def train(cfg: DictConfig) -> dict:
         },
     )
     write_json(out_dir / "summary.json", summary)
+    print(f"\nbest validation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({best_path or 'last weights'})")
+    if test:
+        print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{format_test_table(test)}")
+    print(f"outputs in {out_dir}")
     for lg in trainer.loggers:
         if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
             metrics = {k: v for k, v in {**val, **test}.items() if k.count("/") == 1}
