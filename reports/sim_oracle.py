@@ -38,8 +38,7 @@ def A(s, g):
     return aoe(R, integrate_gyro(R[0], g, dt))[0]
 
 
-train = ["drone_00", "drone_01", "drone_02", "hand_00", "hand_01", "hand_02"]
-test = ["drone_10", "drone_11", "hand_10", "hand_11"]
+train, test = list(cfg["train_seqs"]), list(cfg["test_seqs"])  # the training split of the yaml, its test set
 t0 = time.time()
 full = {n: sim(n, lambda e: True) for n in train + test}
 stoch = {n: sim(n, lambda e: e.name in STOCH) for n in test}
