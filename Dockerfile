@@ -32,7 +32,7 @@ RUN pip install "torch==${TORCH_VERSION}" --index-url "${TORCH_INDEX}"
 
 WORKDIR /app
 COPY . /app
-RUN pip install ".[dev,export,sweep]" \
+RUN pip install ".[dev,export,sweep,slurm]" \
     && useradd --create-home --uid 1000 gyro \
     && chown -R gyro /app
 USER gyro
