@@ -26,18 +26,15 @@ def test_shipped_models_load_by_name():
         load_model("no-such-model")
 
 
-def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
+def run_evaluate(*overrides: str) -> dict:
     with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose(
-            "evaluate",
-            overrides=[
-                "dataset=euroc",
-                f"dataset.root={euroc_root}",
-                "dataset.test_seqs=[V1_01_easy]",
-                f"out_dir={tmp_path}",
-            ],
-        )
-    summary = evaluate(cfg)
+        return evaluate(compose("evaluate", overrides=list(overrides)))
+
+
+def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
+    summary = run_evaluate(
+        "dataset=euroc", f"dataset.root={euroc_root}", "dataset.test_seqs=[V1_01_easy]", f"out_dir={tmp_path}"
+    )
     rows = summary["aoe_deg"]
     assert set(rows) == {"V1_01_easy (data_recomputed_openvins)", "V1_01_easy (original GT)"}
     committed = json.loads((REPO / "reports" / "euroc" / "results.json").read_text())["aoe_deg"]
@@ -57,18 +54,9 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
 def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):
     """split=val: the shipped TUM-VI models on the validation parts (the test rooms are withheld), as in
     reports/tumvi; the AOE equals the validation AOE recorded in each model's metadata at training."""
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose(
-            "evaluate",
-            overrides=[
-                "dataset=tumvi",
-                f"dataset.root={tumvi_root}",
-                "split=val",
-                "figures=false",
-                f"out_dir={tmp_path}",
-            ],
-        )
-    summary = evaluate(cfg)
+    summary = run_evaluate(
+        "dataset=tumvi", f"dataset.root={tumvi_root}", "split=val", "figures=false", f"out_dir={tmp_path}"
+    )
     assert summary["split"] == "val" and all(n.endswith("[50s:]") for n in summary["averaged_sequences"])
     committed = json.loads((REPO / "reports" / "tumvi" / "results.json").read_text())["average_aoe_deg"]
     for method, values in summary["average_aoe_deg"].items():
