@@ -19,13 +19,13 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.models.denoiser import build_model, count_parameters, predict_gyro  # noqa: E402
 from gyrodenoise.pretrained import available_models, load_model  # noqa: E402
 from gyrodenoise.streaming import StreamingCorrector  # noqa: E402
@@ -126,8 +126,8 @@ def main() -> None:
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write(out.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
-    write(out.with_suffix(".md"), markdown(report))
+    write_text(out.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
+    write_text(out.with_suffix(".md"), markdown(report))
     print(json.dumps(report, indent=2))
 
 
@@ -151,13 +151,6 @@ Best sample-by-sample path: `{r["best_per_sample"]["path"]}`, {r["best_per_sampl
 {r["realtime_factor_at_200Hz"]}x real time for a 200 Hz IMU.
 Max |streaming - batch| on 3,000 samples: {r["parity_max_abs_err_rad_s"]:.2e} rad/s.
 """
-
-
-def write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
 
 
 if __name__ == "__main__":

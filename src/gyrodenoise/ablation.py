@@ -20,15 +20,15 @@ import csv
 import io
 import json
 import math
-import os
 import statistics
 import sys
-import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+
+from gyrodenoise.atomic import write_bytes, write_text
 
 SEED_KEY = "seed"
 IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, never a setting
@@ -243,18 +243,6 @@ def _with_ext(prefix: Path, ext: str) -> Path:
     return prefix.parent / (prefix.name + ext)
 
 
-def atomic_write(path: Path, data: str | bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.encode() if isinstance(data, str) else data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def mean_curve(setting: Setting) -> tuple[list[int], list[float]]:
     """Validation AOE vs epoch, averaged over the seeds that validated at each epoch."""
     by_epoch: dict[int, list[float]] = {}
@@ -331,9 +319,9 @@ def collect(
     md += [markdown_table(settings, keys)]
     if unfinished:
         md += [f"Unfinished runs left out: {len(unfinished)}", ""]
-    atomic_write(_with_ext(out, ".md"), "\n".join(md))
-    atomic_write(_with_ext(out, ".csv"), csv_text(settings, keys))
-    atomic_write(_with_ext(out, ".png"), plot_png(settings, keys, title))
+    write_text(_with_ext(out, ".md"), "\n".join(md))
+    write_text(_with_ext(out, ".csv"), csv_text(settings, keys))
+    write_bytes(_with_ext(out, ".png"), plot_png(settings, keys, title))
     return settings
 
 

@@ -41,5 +41,11 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    with atomic_path(path, Path(path).suffix) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
 def write_json(path: str | Path, data: dict) -> Path:
     return write_text(path, json.dumps(data, indent=2, default=float) + "\n")

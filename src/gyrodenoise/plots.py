@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gyrodenoise.atomic import atomic_path  # noqa: E402
 from gyrodenoise.so3 import rpy_of  # noqa: E402
 
 AXES = ("roll", "pitch", "yaw")
@@ -87,6 +90,10 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
     return fig
 
 
-def save(fig, path) -> None:
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def save(fig, path, dpi: int = 110) -> None:
+    """Write the figure atomically (format from the file suffix) and close it."""
+    try:
+        with atomic_path(path, Path(path).suffix) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)

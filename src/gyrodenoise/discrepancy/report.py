@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -13,32 +11,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.discrepancy.workflow import NO_EFFECT  # noqa: E402
+from gyrodenoise.plots import save as save_figure  # noqa: E402
 
 AXES = "xyz"
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def _save_fig(fig, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=90, format="png")
-        os.replace(tmp, path)
-    finally:
-        plt.close(fig)
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def _jsonable(x):
@@ -56,7 +33,7 @@ def _jsonable(x):
 
 
 def write_json(path: Path, data: dict) -> None:
-    _atomic_write(path, json.dumps(_jsonable(data), indent=2) + "\n")
+    write_text(path, json.dumps(_jsonable(data), indent=2) + "\n")
 
 
 def _fmt(v) -> str:
@@ -261,7 +238,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ax.grid(True, which="both", alpha=0.3)
     axs[0].set_ylabel("rad/s")
     axs[0].legend(fontsize=8)
-    _save_fig(fig, out / "allan.png")
+    save_figure(fig, out / "allan.png", dpi=90)
     files.append("allan.png")
 
     sp = arrays["spectrum"]
@@ -275,7 +252,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ax.set_xlabel("Hz")
     axs[0].set_ylabel("(rad/s)^2/Hz")
     axs[0].legend(fontsize=7)
-    _save_fig(fig, out / "spectrum.png")
+    save_figure(fig, out / "spectrum.png", dpi=90)
     files.append("spectrum.png")
 
     rs = arrays["residual_series"]
@@ -288,7 +265,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     axs[0].set_title(f"{rs['name']}: measured - model gyro")
     axs[0].legend(fontsize=8)
     axs[-1].set_xlabel("t (s)")
-    _save_fig(fig, out / "residual.png")
+    save_figure(fig, out / "residual.png", dpi=90)
     files.append("residual.png")
 
     dr = arrays["drift"]
@@ -302,7 +279,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
             )
             ax.set_title(f"attitude drift vs truth over {w} s")
             ax.set_ylabel("deg")
-        _save_fig(fig, out / "drift.png")
+        save_figure(fig, out / "drift.png", dpi=90)
         files.append("drift.png")
 
     gb, ga = report["gap_before"], report["gap_after"]
@@ -319,7 +296,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ax.set_title(lab, fontsize=9)
     fig.suptitle("held-out gap before / after adding the named effects", fontsize=10)
     fig.tight_layout()
-    _save_fig(fig, out / "gap.png")
+    save_figure(fig, out / "gap.png", dpi=90)
     files.append("gap.png")
     return files
 
@@ -330,5 +307,5 @@ def write_report(out_dir: str | Path, report: dict, arrays: dict, make_plots: bo
     if make_plots:
         report["plots"] = plots(out, arrays, report)
     write_json(out / "report.json", report)
-    _atomic_write(out / "report.md", markdown(report))
+    write_text(out / "report.md", markdown(report))
     return out
