@@ -46,14 +46,19 @@ class DenoiserModule(L.LightningModule):
         self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
         return loss
 
+    @staticmethod
+    def _integrate_and_score(batch: dict, gyro: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+        """Open-loop attitude from `gyro` (N, 3) aligned at the first ground truth, and its AOE (3D, yaw) in rad."""
+        rot = batch["rot"][0].cpu().numpy()
+        R_est = integrate_gyro(rot[0], gyro, batch["dt"][0].cpu().numpy())
+        return R_est, aoe(rot, R_est, batch["gt_mask"][0].cpu().numpy())
+
     def _evaluate_sequence(self, batch: dict) -> dict:
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
         w = w_hat[0].double().cpu().numpy()
         rot = batch["rot"][0].cpu().numpy()
-        R_est = integrate_gyro(rot[0], w, batch["dt"][0].cpu().numpy())
-        mask = batch["gt_mask"][0].cpu().numpy()
-        a3d, ayaw = aoe(rot, R_est, mask)
+        R_est, (a3d, ayaw) = self._integrate_and_score(batch, w)
         return {
             "name": batch["name"],
             "loss": float(loss),
@@ -88,8 +93,7 @@ class DenoiserModule(L.LightningModule):
         self.log("test/aoe_deg", math.degrees(o["aoe"]), batch_size=1)  # averaged over sequences
         self.log("test/aoe_yaw_deg", math.degrees(o["aoe_yaw"]), batch_size=1)
         # reference: the raw IMU integrated the same way
-        raw = integrate_gyro(o["rot"][0], batch["imu"][0, :, :3].double().cpu().numpy(), batch["dt"][0].cpu().numpy())
-        raw_3d = math.degrees(aoe(o["rot"], raw, batch["gt_mask"][0].cpu().numpy())[0])
+        raw_3d = math.degrees(self._integrate_and_score(batch, batch["imu"][0, :, :3].double().cpu().numpy())[1][0])
         self.log(f"test/raw_imu_aoe_deg/{o['name']}", raw_3d, batch_size=1)
         self.log("test/raw_imu_aoe_deg", raw_3d, batch_size=1)
 

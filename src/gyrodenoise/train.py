@@ -25,6 +25,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
+from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.pretrained import save_model
 
@@ -65,12 +66,12 @@ def flat_hparams(cfg: DictConfig) -> dict:
 def format_test_table(test: dict[str, float]) -> str:
     """Per-sequence test AOE of the trained model next to the raw IMU, as a markdown table."""
     names = sorted(k.split("/", 2)[2] for k in test if k.startswith("test/aoe_deg/"))
-    rows = ["| sequence | model AOE 3D/yaw (deg) | raw IMU AOE 3D (deg) |", "|---|---|---|"]
+    rows = []
     for n in [*names, None]:
         suffix = f"/{n}" if n else ""
         cells = [test.get(f"test/{k}{suffix}", math.nan) for k in ("aoe_deg", "aoe_yaw_deg", "raw_imu_aoe_deg")]
-        rows.append(f"| {n or '**average**'} | {cells[0]:.2f}/{cells[1]:.2f} | {cells[2]:.2f} |")
-    return "\n".join(rows)
+        rows.append([n or "**average**", f"{cells[0]:.2f}/{cells[1]:.2f}", f"{cells[2]:.2f}"])
+    return markdown_table(["sequence", "model AOE 3D/yaw (deg)", "raw IMU AOE 3D (deg)"], rows)
 
 
 def train(cfg: DictConfig) -> dict:
@@ -134,7 +135,7 @@ def train(cfg: DictConfig) -> dict:
     write_json(out_dir / "summary.json", summary)
     print(f"\nbest validation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({best_path or 'last weights'})")
     if test:
-        print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{format_test_table(test)}")
+        print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{format_test_table(test)}", end="")
     print(f"outputs in {out_dir}")
     for lg in trainer.loggers:
         if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE

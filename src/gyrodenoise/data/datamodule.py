@@ -148,13 +148,12 @@ class ImuDataModule(L.LightningDataModule):
         if stage in (None, "fit", "validate") and not self.train_part:
             for name in sorted(set(self.train_names) | set(self.val_names)):
                 seq = self.load(name)
-                whole = self.train_duration_s is None or name not in self.train_names
-                cut = len(seq) - 1 if whole else seq.index_at(self.train_duration_s)
-                if name in self.train_names:
-                    self.train_part.append(seq.slice(0, cut + 1, name))
-                if name in self.val_names and name not in self.train_names:
+                if name not in self.train_names:  # a validation sequence of its own: whole
                     self.val_part.append(seq)
-                elif name in self.val_names:
+                    continue
+                cut = len(seq) - 1 if self.train_duration_s is None else seq.index_at(self.train_duration_s)
+                self.train_part.append(seq.slice(0, cut + 1, name))
+                if name in self.val_names:
                     if len(seq) - cut <= self.block:
                         raise ValueError(
                             f"validation sequence {name!r} is also a training sequence and nothing of it is "
