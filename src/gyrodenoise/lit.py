@@ -2,7 +2,8 @@
 
 Hyperparameters are plain dicts and numbers only, so checkpoints reload under torch's
 `weights_only` default. Validation integrates the corrected gyro over each whole validation
-sequence and logs its AOE; figures go to TensorBoard when that logger is active.
+sequence (in float64, on the training device) and logs its AOE per validation group; figures go to
+TensorBoard when that logger is active.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ from lightning.pytorch.loggers import TensorBoardLogger
 
 from gyrodenoise import plots
 from gyrodenoise.losses import IncrementLoss
-from gyrodenoise.metrics import aoe
+from gyrodenoise.metrics import aoe_torch
 from gyrodenoise.models.denoiser import build_model
-from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.so3 import integrate_gyro_torch
 
 
 class DenoiserModule(L.LightningModule):
@@ -47,27 +48,26 @@ class DenoiserModule(L.LightningModule):
         return loss
 
     @staticmethod
-    def _integrate_and_score(batch: dict, gyro: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
-        """Open-loop attitude from `gyro` (N, 3) aligned at the first ground truth, and its AOE (3D, yaw) in rad."""
-        rot = batch["rot"][0].cpu().numpy()
-        R_est = integrate_gyro(rot[0], gyro, batch["dt"][0].cpu().numpy())
-        return R_est, aoe(rot, R_est, batch["gt_mask"][0].cpu().numpy())
+    def _integrate_and_score(batch: dict, gyro: torch.Tensor) -> tuple[torch.Tensor, tuple[float, float]]:
+        """Open-loop attitude from `gyro` (N, 3) aligned at the first ground truth, and its AOE (3D, yaw)
+        in rad; in float64 on the batch's device (no copy to the CPU during training)."""
+        rot = batch["rot"][0]
+        R_est = integrate_gyro_torch(rot[0], gyro, batch["dt"][0])
+        return R_est, aoe_torch(rot, R_est, batch["gt_mask"][0])
 
     def _evaluate_sequence(self, batch: dict) -> dict:
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
-        w = w_hat[0].double().cpu().numpy()
-        rot = batch["rot"][0].cpu().numpy()
-        R_est, (a3d, ayaw) = self._integrate_and_score(batch, w)
+        R_est, (a3d, ayaw) = self._integrate_and_score(batch, w_hat[0])
         return {
             "name": batch["name"],
+            "group": batch.get("group", "val"),
             "loss": float(loss),
             "aoe": a3d,
             "aoe_yaw": ayaw,
-            "t": batch["t"][0].cpu().numpy(),
-            "rot": rot,
+            "batch": batch,
             "R_est": R_est,
-            "w_tilde": w - batch["imu"][0, :, :3].double().cpu().numpy(),
+            "w_hat": w_hat[0],
         }
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
@@ -77,10 +77,15 @@ class DenoiserModule(L.LightningModule):
         outs, self._val_outputs = self._val_outputs, []
         if not outs:
             return
+        # one figure set per group: "val" (the selection protocol's sequences) and, in cross-validation,
+        # "val_tail" (the rest of the training flights, the paper's validation) for comparison.
         # sync_dist: under DDP each process validates a share of the sequences; average the shares
-        self.log("val/loss", float(np.mean([o["loss"] for o in outs])), sync_dist=True)
-        self.log("val/aoe_deg", math.degrees(np.mean([o["aoe"] for o in outs])), prog_bar=True, sync_dist=True)
-        self.log("val/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in outs])), sync_dist=True)
+        for group in dict.fromkeys(o["group"] for o in outs):
+            g = [o for o in outs if o["group"] == group]
+            self.log(f"{group}/loss", float(np.mean([o["loss"] for o in g])), sync_dist=True)
+            aoe_deg = math.degrees(np.mean([o["aoe"] for o in g]))
+            self.log(f"{group}/aoe_deg", aoe_deg, prog_bar=group == "val", sync_dist=True)
+            self.log(f"{group}/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in g])), sync_dist=True)
         if not self.trainer.sanity_checking:
             self._val_count += 1
             if self._val_count % self.figure_every_n_val == 1 or self.figure_every_n_val == 1:
@@ -93,7 +98,7 @@ class DenoiserModule(L.LightningModule):
         self.log("test/aoe_deg", math.degrees(o["aoe"]), batch_size=1)  # averaged over sequences
         self.log("test/aoe_yaw_deg", math.degrees(o["aoe_yaw"]), batch_size=1)
         # reference: the raw IMU integrated the same way
-        raw_3d = math.degrees(self._integrate_and_score(batch, batch["imu"][0, :, :3].double().cpu().numpy())[1][0])
+        raw_3d = math.degrees(self._integrate_and_score(batch, batch["imu"][0, :, :3])[1][0])
         self.log(f"test/raw_imu_aoe_deg/{o['name']}", raw_3d, batch_size=1)
         self.log("test/raw_imu_aoe_deg", raw_3d, batch_size=1)
 
@@ -103,12 +108,15 @@ class DenoiserModule(L.LightningModule):
                 tb = logger.experiment
                 step = self.global_step
                 title = f"{o['name']} (epoch {self.current_epoch})"
+                b = o["batch"]
+                t, rot = b["t"][0].cpu().numpy(), b["rot"][0].cpu().numpy()
+                w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
                 tb.add_figure(
                     f"{prefix}/orientation",
-                    plots.orientation_figure(o["t"], o["rot"], {"corrected": o["R_est"]}, title),
+                    plots.orientation_figure(t, rot, {"corrected": o["R_est"].cpu().numpy()}, title),
                     step,
                 )
-                tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(o["t"], o["w_tilde"], title), step)
+                tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(t, w_tilde, title), step)
 
     def configure_optimizers(self):
         o = self.hparams.optim

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+import torch
+
+from gyrodenoise import so3
 from gyrodenoise.so3 import relative_rotvec, yaw_of
 
 
@@ -30,6 +33,17 @@ def aoe(R_gt: np.ndarray, R_est: np.ndarray, mask: np.ndarray | None = None) -> 
     if mask is not None:
         e3d, eyaw = e3d[mask], eyaw[mask]
     return float(np.sqrt(np.mean(e3d**2))), float(np.sqrt(np.mean(eyaw**2)))
+
+
+def aoe_torch(R_gt: torch.Tensor, R_est: torch.Tensor, mask: torch.Tensor | None = None) -> tuple[float, float]:
+    """`aoe` on torch tensors (float64, on their device), for validation during training."""
+    E_body = R_gt.transpose(-1, -2) @ R_est
+    e3d = so3.log(E_body).norm(dim=-1)
+    E_world = R_est @ R_gt.transpose(-1, -2)
+    eyaw = torch.atan2(E_world[..., 1, 0], E_world[..., 0, 0])  # already wrapped to [-pi, pi]
+    if mask is not None:
+        e3d, eyaw = e3d[mask], eyaw[mask]
+    return float(e3d.square().mean().sqrt()), float(eyaw.square().mean().sqrt())
 
 
 def travelled_distance(pos: np.ndarray) -> np.ndarray:

@@ -121,6 +121,20 @@ def tree_product(R: torch.Tensor, levels: int) -> torch.Tensor:
     return R
 
 
+def integrate_gyro_torch(R0: torch.Tensor, gyro: torch.Tensor, dt: torch.Tensor) -> torch.Tensor:
+    """`integrate_gyro` on torch tensors (float64, on their device): what validation runs on the GPU.
+
+    gyro: (N, 3) rad/s, dt: (N,) s (dt[0] unused), R0: (3, 3). Returns (N, 3, 3).
+    """
+    gyro, dt = gyro.double(), dt.double()
+    prefix = torch.cat([torch.eye(3, dtype=gyro.dtype, device=gyro.device)[None], exp(gyro[1:] * dt[1:, None])])
+    shift = 1
+    while shift < len(prefix):  # Hillis-Steele inclusive scan, out of place
+        prefix = torch.cat([prefix[:shift], prefix[:-shift] @ prefix[shift:]])
+        shift *= 2
+    return R0.to(prefix) @ prefix
+
+
 # ---------------------------------------------------------------- numpy helpers (float64)
 
 

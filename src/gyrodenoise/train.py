@@ -22,6 +22,7 @@ import lightning.pytorch as L
 import torch
 from lightning.pytorch.callbacks import LearningRateMonitor
 from lightning.pytorch.loggers import TensorBoardLogger
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
@@ -75,6 +76,8 @@ def format_test_table(test: dict[str, float]) -> str:
 
 
 def train(cfg: DictConfig) -> dict:
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     out_dir = Path(cfg.paths.output_dir)
@@ -95,26 +98,41 @@ def train(cfg: DictConfig) -> dict:
     trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
     wall_s = time.time() - start
 
+    # the model is chosen by a rule fixed before any test: the final weights (`select: last`, the end
+    # of a cosine cycle) or the best validation checkpoint (`select: best_val`)
     ckpt_cb = trainer.checkpoint_callback
-    best_path = ckpt_cb.best_model_path if ckpt_cb is not None else ""
-    if best_path:
-        module = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+    best_path = ckpt_cb.best_model_path if ckpt_cb is not None and ckpt_cb.monitor else ""
+    if cfg.select not in ("last", "best_val"):
+        raise ValueError(f"select={cfg.select!r}: choose 'last' (final weights) or 'best_val'")
+    alternative = None  # the model the other rule would pick, tested too when cfg.test_other_rule
+    if cfg.select == "best_val" and best_path:
+        alternative, module = module, DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+    elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
+        alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     val = trainer.validate(module, datamodule=dm, verbose=False)[0]
-    test = {}
+    test, test_other = {}, {}
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
+        if alternative is not None and cfg.get("test_other_rule"):
+            test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
 
     summary = {
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
+        "config": OmegaConf.to_container(cfg, resolve=True),
+        "seed": cfg.get("seed"),
         "dataset": cfg.dataset.name,
         "model": OmegaConf.to_container(cfg.model, resolve=True),
         "train_wall_time_s": wall_s,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
+        "selection": cfg.select,
         "best_checkpoint": best_path,
         "val": val,
         "test": test,
     }
+    if test_other:
+        summary["test_other_rule"] = {"rule": "best_val" if cfg.select == "last" else "last", **test_other}
     save_model(
         module.model,
         OmegaConf.to_container(cfg.model, resolve=True),
@@ -133,7 +151,8 @@ def train(cfg: DictConfig) -> dict:
         },
     )
     write_json(out_dir / "summary.json", summary)
-    print(f"\nbest validation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({best_path or 'last weights'})")
+    picked = best_path if cfg.select == "best_val" and best_path else f"final weights, epoch {trainer.current_epoch}"
+    print(f"\nvalidation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({picked})")
     if test:
         print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{format_test_table(test)}", end="")
     print(f"outputs in {out_dir}")

@@ -5,6 +5,11 @@ whose start is a multiple of the longest loss increment, so that the ground-trut
 `base_increment` samples are computed once per sequence and only sliced afterwards.
 Validation (`val_seqs`, default: the training sequences): the rest of a training sequence after
 `train_duration_s`, or a sequence that is not trained on, whole. Test: the test sequences, whole.
+
+Cross-validation (`cv_fold=k`): leave-one-flight-out over the training sequences. Flight k of
+`train_seqs` is not trained on and is validated whole (group "val", the selection figure); the
+rest of the other training flights is validated too, as group "val_tail" (the paper's figure),
+so that both protocols are measured on the same run.
 """
 
 from __future__ import annotations
@@ -111,11 +116,22 @@ class ImuDataModule(L.LightningDataModule):
         max_gap_factor: float = 3.0,
         cache_dir: str | None = None,
         sensor: Mapping | None = None,
+        cv_fold: int | None = None,
     ) -> None:
         super().__init__()
         self.name, self.root = name, str(root)
         self.train_names = list(train_seqs)
         self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
+        self.cv_fold, self.cv_holdout = cv_fold, None
+        if cv_fold is not None:
+            if val_seqs is not None:
+                raise ValueError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
+            if not 0 <= cv_fold < len(self.train_names):
+                raise ValueError(
+                    f"dataset.cv_fold={cv_fold}: choose 0..{len(self.train_names) - 1} (one per training sequence "
+                    f"{self.train_names})"
+                )
+            self.cv_holdout = self.train_names.pop(cv_fold)
         self.test_names = list(test_seqs)
         self.train_duration_s = train_duration_s
         self.gt_files = dict(gt_files or {})
@@ -130,6 +146,7 @@ class ImuDataModule(L.LightningDataModule):
         self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
         self.train_part: list[Sequence] = []
         self.val_part: list[Sequence] = []
+        self.val_groups: list[str] = []  # metric group of each validation sequence
         self.test_part: list[Sequence] = []
 
     def _augment_config(self, aug: dict) -> AugmentConfig:
@@ -150,10 +167,13 @@ class ImuDataModule(L.LightningDataModule):
                 seq = self.load(name)
                 if name not in self.train_names:  # a validation sequence of its own: whole
                     self.val_part.append(seq)
+                    self.val_groups.append("val")
                     continue
                 cut = len(seq) - 1 if self.train_duration_s is None else seq.index_at(self.train_duration_s)
                 self.train_part.append(seq.slice(0, cut + 1, name))
                 if name in self.val_names:
+                    if self.cv_holdout is not None and len(seq) - cut <= self.block:
+                        continue  # cross-validation: a flight trained on whole has no tail to compare
                     if len(seq) - cut <= self.block:
                         raise ValueError(
                             f"validation sequence {name!r} is also a training sequence and nothing of it is "
@@ -161,6 +181,7 @@ class ImuDataModule(L.LightningDataModule):
                             "dataset.train_duration_s or name other sequences in dataset.val_seqs"
                         )
                     self.val_part.append(seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]"))
+                    self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
 
@@ -180,12 +201,14 @@ class ImuDataModule(L.LightningDataModule):
         ds = RandomCrops(self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment)
         return DataLoader(ds, batch_size=len(self.train_part), shuffle=False, num_workers=0)
 
-    def _whole(self, seqs: list[Sequence]) -> DataLoader:
+    def _whole(self, seqs: list[Sequence], groups: list[str] | None = None) -> DataLoader:
         items = [sequence_item(s, self.step, self.block) for s in seqs]
+        for item, group in zip(items, groups or [], strict=False):
+            item["group"] = group
         return DataLoader(items, batch_size=1, shuffle=False, collate_fn=_collate_one)
 
     def val_dataloader(self) -> DataLoader:
-        return self._whole(self.val_part)
+        return self._whole(self.val_part, self.val_groups)
 
     def test_dataloader(self) -> DataLoader:
         return self._whole(self.test_part)
