@@ -60,7 +60,10 @@ def run_one(run_id: str, overrides: list[str], out: Path, collect: Path, threads
     summary = json.loads(summary_file.read_text())
     summary["queue"] = {"id": run_id, "overrides": overrides, "process_wall_time_s": wall, "threads": threads}
     write_json(collect / f"{run_id}.json", summary)
-    print(f"done {run_id} in {wall:.0f} s: test AOE {summary.get('test', {}).get('test/aoe_deg', float('nan')):.2f}", flush=True)
+    print(
+        f"done {run_id} in {wall:.0f} s: test AOE {summary.get('test', {}).get('test/aoe_deg', float('nan')):.2f}",
+        flush=True,
+    )
     return run_id, True, wall
 
 
@@ -91,11 +94,15 @@ def main(argv: list[str] | None = None) -> int:
             if not ok:
                 failed.append(run_id)
     elapsed = time.time() - start
-    print(f"{done} runs finished in {elapsed:.0f} s ({3600 * done / max(elapsed, 1e-9):.0f} runs/hour); failed: {failed}")
+    print(
+        f"{done} runs finished in {elapsed:.0f} s ({3600 * done / max(elapsed, 1e-9):.0f} runs/hour); failed: {failed}"
+    )
     return 1 if failed else 0
 
 
-def _guarded(run_id: str, overrides: list[str], args: argparse.Namespace, start: float) -> tuple[str, bool | None, float]:
+def _guarded(
+    run_id: str, overrides: list[str], args: argparse.Namespace, start: float
+) -> tuple[str, bool | None, float]:
     if args.deadline is not None and time.time() - start > args.deadline:
         return run_id, None, 0.0  # past the deadline: not started
     return run_one(run_id, overrides, args.out, args.collect, args.threads)

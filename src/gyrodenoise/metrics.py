@@ -9,7 +9,6 @@ median and quartiles; yaw ROE likewise with the yaw of the world-frame relative 
 from __future__ import annotations
 
 import numpy as np
-
 import torch
 
 from gyrodenoise import so3
