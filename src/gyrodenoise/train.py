@@ -109,7 +109,7 @@ def train(cfg: DictConfig) -> dict:
         alternative, module = module, DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
-    val = trainer.validate(module, datamodule=dm, verbose=False)[0]
+    val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
     test, test_other = {}, {}
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]

@@ -172,8 +172,8 @@ class ImuDataModule(L.LightningDataModule):
                 cut = len(seq) - 1 if self.train_duration_s is None else seq.index_at(self.train_duration_s)
                 self.train_part.append(seq.slice(0, cut + 1, name))
                 if name in self.val_names:
-                    if self.cv_holdout is not None and len(seq) - cut <= self.block:
-                        continue  # cross-validation: a flight trained on whole has no tail to compare
+                    if (self.cv_holdout is not None or self.train_duration_s is None) and len(seq) - cut <= self.block:
+                        continue  # a flight trained on whole has no tail to validate on
                     if len(seq) - cut <= self.block:
                         raise ValueError(
                             f"validation sequence {name!r} is also a training sequence and nothing of it is "
