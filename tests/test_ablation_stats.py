@@ -189,6 +189,16 @@ def test_unpaired_and_repeated_seeds_are_reported(tmp_path):
     # the repeated seed 0 enters as the mean of its two runs
     assert float(nobn["d_test_mean"]) == pytest.approx(np.mean([(3.0 + 3.4) / 2 - 2.1, 3.5 - 2.9, 3.2 - 2.5]), abs=1e-4)
     assert rows["model.batch_norm=true"]["reference"] == "True"
+    assert "different dataset.cv_fold" not in md  # cv_fold = seed in every run
+
+    # a reference made before cv_fold existed pairs with a warning, not silently
+    old = root / "reference" / "gelu_s2.json"
+    summary = json.loads(old.read_text())
+    summary["config"]["dataset"]["cv_fold"] = None
+    old.write_text(json.dumps(summary))
+    a = ablation_report.analyse(load(root, "reference", "batchnorm"), {"model.batch_norm": "true"})
+    assert "seed 2: runs with different dataset.cv_fold (2, null): its val pairs compare folds" in a.warnings
+    assert not any("val_tail" in w for w in a.warnings)  # none of these runs has val_tail: one protocol
 
 
 def test_claim_files_and_command(activation_runs, tmp_path):

@@ -16,8 +16,11 @@ run has one (config-group choices such as +model/shape=wide), else its value in 
 config. By default the ablated keys are the overridden keys whose value differs between runs, except the
 seed and the experiment. Without --reference: PREFIX.md (Markdown table), PREFIX.csv and PREFIX.png
 (validation and test AOE per setting: every seed and mean +- std). With --reference (or --claim): paired
-differences against the reference arm, seed by seed (gyrodenoise.ablation_report). Files are written
-atomically.
+differences against the reference arm, seed by seed (gyrodenoise.ablation_report); a folder named after
+a claim of gyrodenoise.ablation_stats.CLAIMS (reports/ablation_runs/activation) brings that claim's keys,
+reference and expected outcomes, and its sibling reference/ folder when the reference arm is not among
+the runs given. Two runs of the same arm and seed are both kept, with a warning, and their mean is that
+seed's value in the pairs (a repeat is not an independent sample). Files are written atomically.
 """
 
 from __future__ import annotations

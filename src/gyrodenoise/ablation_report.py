@@ -42,7 +42,6 @@ from gyrodenoise.ablation_stats import CLAIMS, Claim, PairedDiff, check, claim_v
 from gyrodenoise.atomic import write_bytes, write_text
 
 SPLITS = ("test", "val", "val_tail")
-SPLIT_NAMES = {"test": "test AOE", "val": "val AOE", "val_tail": "val_tail AOE"}
 REFERENCE_DIR = "reference"  # reports/ablation_runs/reference: the paper's setting, shared by every claim
 APPENDIX_HEADING = "# Appendix: 120-epoch runs (earlier session)"
 
@@ -116,7 +115,7 @@ def _label(keys: Sequence[str], values: Sequence[str]) -> str:
 
 
 def _matches(arm: Arm, keys: Sequence[str], spec: dict[str, str]) -> bool:
-    return all(same_value(arm.values[keys.index(k)], v) for k, v in spec.items())
+    return all(k in keys and same_value(arm.values[keys.index(k)], v) for k, v in spec.items())
 
 
 def analyse(
@@ -177,7 +176,8 @@ def analyse(
             out.warnings.append(f"{arm.label}: seeds {', '.join(arm.no_reference)} have no reference run (unpaired)")
         if arm.missing:
             out.warnings.append(f"{arm.label}: lacks the reference seeds {', '.join(arm.missing)} (unpaired)")
-    protocols = Counter("val_tail" in (r.summary.get("val") or {}) for r in runs)
+    _check_folds(arms, out.warnings)
+    protocols = Counter(math.isfinite(r.metric("val_tail")) for r in runs)
     if len(protocols) > 1:
         out.warnings.append(
             f"{protocols[False]} of {len(runs)} runs have no val_tail/aoe_deg: their val/aoe_deg is the end of "
@@ -197,6 +197,18 @@ def analyse(
         out.verdicts = {s: claim_verdict(checks[s]) for s in splits}
         out.arms = [ref, *named, *(a for a in arms[1:] if a not in named)]  # the claim's order first
     return out
+
+
+def _check_folds(arms: Sequence[Arm], warnings: list[str]) -> None:
+    """A pair is only a pair if both runs held out the same validation flight (dataset.cv_fold): warn
+    about seeds whose runs differ there (e.g. a reference made before cv_fold existed)."""
+    folds: dict[str, set[str]] = {}
+    for arm in arms:
+        for r in arm.runs:
+            folds.setdefault(_seed(r), set()).add(r.value("dataset.cv_fold"))
+    mixed = {s: sorted(f) for s, f in folds.items() if len(f) > 1}
+    for s, f in sorted(mixed.items()):
+        warnings.append(f"seed {s}: runs with different dataset.cv_fold ({', '.join(f)}): its val pairs compare folds")
 
 
 # --- tables -------------------------------------------------------------------------------------------------
