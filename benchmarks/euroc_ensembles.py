@@ -12,7 +12,6 @@ corrected gyro is the mean of its members' (what gyrodenoise's ensemble model co
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import time

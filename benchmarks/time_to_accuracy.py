@@ -1,0 +1,226 @@
+"""Time to accuracy of EuRoC training: wall time vs test AOE over schedules and seeds.
+
+    # train (any machine; several at once on a GPU machine): schedules x seeds through run_queue.py
+    python benchmarks/time_to_accuracy.py run --schedules 300 600 900 1800 --seeds 0 1 2 3 --jobs 8
+    # one default run timed as a user runs it (start-up, fit, test), on an idle machine
+    python benchmarks/time_to_accuracy.py time-default --seed 0
+    # the table, the plot and the json from every collected run
+    python benchmarks/time_to_accuracy.py report
+
+Runs land in benchmarks/results/time_to_accuracy_runs/ (one summary JSON per run, kept across
+sessions). A schedule of E epochs is one cosine cycle of E epochs with the final weights kept,
+except 1800, which is the paper's schedule (T_0 600, T_mult 2, best validation checkpoint). Every
+run also tests the model that the other rule would pick (`test_other_rule=true`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+RUNS = Path("benchmarks/results/time_to_accuracy_runs")
+OUT = Path("benchmarks/results/time_to_accuracy")
+
+
+def schedule_overrides(epochs: int) -> str:
+    if epochs == 1800:
+        return "experiment=paper_schedule"
+    return f"trainer.max_epochs={epochs} optim.scheduler.T_0={epochs}"
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    lines = [
+        f"{RUNS}/{args.prefix}e{e}_s{s} dataset=euroc {schedule_overrides(e)} seed={s} test_other_rule=true"
+        for e in args.schedules
+        for s in args.seeds
+    ]
+    with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return subprocess.call(
+        [sys.executable, "benchmarks/run_queue.py", fh.name, "--jobs", str(args.jobs), "--threads", str(args.threads)]
+        + ["--out", args.out, "--collect", "."]
+    )
+
+
+def cmd_time_default(args: argparse.Namespace) -> int:
+    """`python -m gyrodenoise.train dataset=euroc` with every default, timed from the shell's view."""
+    run_dir = Path(tempfile.mkdtemp()) / "run"
+    start = time.time()
+    rc = subprocess.call(
+        [sys.executable, "-m", "gyrodenoise.train", "dataset=euroc", f"seed={args.seed}", f"hydra.run.dir={run_dir}"]
+    )
+    wall = time.time() - start
+    if rc != 0:
+        return rc
+    summary = json.loads((run_dir / "summary.json").read_text())
+    summary["queue"] = {
+        "id": f"cpu_default_s{args.seed}",
+        "process_wall_time_s": wall,
+        "note": "python -m gyrodenoise.train dataset=euroc, every default, timed end to end",
+    }
+    target = RUNS / f"cpu_default_s{args.seed}.json"
+    target.write_text(json.dumps(summary, indent=1))
+    print(
+        f"wall {wall:.0f} s (fit {summary['train_wall_time_s']:.0f} s), test AOE {summary['test']['test/aoe_deg']:.2f}"
+    )
+    return 0
+
+
+def kind_of(summary: dict) -> str:
+    m = summary.get("machine", "")
+    return "GPU (H100)" if "H100" in m else ("GPU" if "no GPU" not in m else "CPU")
+
+
+def epochs_of(summary: dict) -> int:
+    cfg = summary.get("config", {})
+    return int(cfg.get("trainer", {}).get("max_epochs", summary.get("epochs", 0)))
+
+
+def load_runs() -> list[dict]:
+    runs = []
+    for path in sorted(RUNS.glob("*.json")):
+        s = json.loads(path.read_text())
+        s["_file"] = path.name
+        runs.append(s)
+    return runs
+
+
+def stats(xs: list[float]) -> str:
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    if not xs:
+        return "-"
+    sd = statistics.stdev(xs) if len(xs) > 1 else math.nan
+    return f"{statistics.fmean(xs):.2f} ± {sd:.2f}" if math.isfinite(sd) else f"{xs[0]:.2f}"
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gyrodenoise.atomic import write_json, write_text
+    from gyrodenoise.plots import save
+
+    runs = load_runs()
+    groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
+    for r in runs:
+        if r["_file"].startswith("cpu_default"):
+            continue
+        groups[(kind_of(r), epochs_of(r))].append(r)
+    rows, table = [], []
+    for (kind, epochs), rs in sorted(groups.items()):
+        sel = [r["test"]["test/aoe_deg"] for r in rs]
+        other = [r.get("test_other_rule", {}).get("test/aoe_deg") for r in rs]
+        rule = rs[0]["selection"]
+        other_rule = "best_val" if rule == "last" else "last"
+        walls = [r["train_wall_time_s"] for r in rs]
+        seeds = sorted(r["seed"] for r in rs)
+        rows.append(
+            {
+                "machine": kind,
+                "epochs": epochs,
+                "rule": rule,
+                "seeds": seeds,
+                "test_aoe_deg": sel,
+                "other_rule": other_rule,
+                "other_rule_test_aoe_deg": other,
+                "train_wall_time_s": walls,
+            }
+        )
+        table.append(
+            f"| {kind} | {epochs} | {len(rs)} ({','.join(map(str, seeds))}) | {stats(sel)} ({rule}) | "
+            f"{stats(other)} ({other_rule}) | {stats(walls)} | "
+            f"`python benchmarks/time_to_accuracy.py run --schedules {epochs} --seeds "
+            f"{' '.join(map(str, seeds))}` |"
+        )
+    alone = [r for r in runs if "alone" in r.get("queue", {}).get("note", "")]
+    alone_rows = [
+        f"| {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | {r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
+        for r in alone
+    ]
+    cpu = [r for r in runs if r["_file"].startswith("cpu_default")]
+    cpu_rows = [
+        f"| {r['seed']} | {r['queue']['process_wall_time_s']:.0f} | {r['train_wall_time_s']:.0f} | "
+        f"{r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
+        for r in cpu
+    ]
+    md = [
+        "# Time to accuracy: EuRoC",
+        "",
+        "Generated by `python benchmarks/time_to_accuracy.py report` from the runs in",
+        f"`{RUNS}/` (one summary JSON per run, every run kept). Test AOE: average over the 5 EuRoC test",
+        "flights, V1_01 against the recomputed ground truth. Wall time: `train_wall_time_s` of the run",
+        "(the fit, without start-up and test). GPU rows ran 12-15 trainings at once on one H100 (16 CPU",
+        "cores, 1 thread each; `benchmarks/run_queue.py`), so their wall times are those of a shared GPU.",
+        "",
+        "| machine | epochs | seeds | test AOE (deg), rule of the run | test AOE, other rule | fit wall (s) | command |",
+        "|---|---|---|---|---|---|---|",
+        *table,
+        "",
+        "![wall time vs test AOE](time_to_accuracy/curve.png)",
+        "",
+        "## One run alone on the GPU machine (nothing else running)",
+        "",
+        "| epochs | seed | fit wall (s) | test AOE (deg) | machine |",
+        "|---|---|---|---|---|",
+        *(alone_rows or ["| - | none yet | | | |"]),
+        "",
+        "## The default run on 2 CPU cores, timed end to end",
+        "",
+        "`python benchmarks/time_to_accuracy.py time-default --seed S` runs",
+        "`python -m gyrodenoise.train dataset=euroc` with every default (600 epochs, final weights) and",
+        "times the whole process (imports, data cache, fit, validation, test, outputs).",
+        "",
+        "| seed | process wall (s) | fit wall (s) | test AOE (deg) | machine |",
+        "|---|---|---|---|---|",
+        *(cpu_rows or ["| - | not measured yet | | | |"]),
+        "",
+    ]
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_text(OUT.with_suffix(".md"), "\n".join(md))
+    write_json(OUT.with_suffix(".json"), {"rows": rows, "machine_of_report": platform.node()})
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for row in rows:
+        w = statistics.fmean(row["train_wall_time_s"])
+        for y in row["test_aoe_deg"]:
+            ax.plot(w, y, "o", color="C0" if row["rule"] == "last" else "C1", alpha=0.5)
+        ax.errorbar(w, statistics.fmean(row["test_aoe_deg"]), fmt="k_", ms=14)
+        ax.annotate(f"{row['epochs']} ep", (w, max(row["test_aoe_deg"])), textcoords="offset points", xytext=(0, 5))
+    ax.set_xlabel("fit wall time per run (s), 12-15 runs at once on one H100")
+    ax.set_ylabel("EuRoC test AOE (deg)")
+    ax.set_title("time to accuracy (blue: final weights, orange: best validation)")
+    ax.grid(alpha=0.3)
+    save(fig, OUT / "curve.png")
+    print(f"wrote {OUT.with_suffix('.md')}")
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="train schedules x seeds (benchmarks/run_queue.py)")
+    r.add_argument("--schedules", type=int, nargs="+", default=[300, 600, 900, 1800])
+    r.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    r.add_argument("--jobs", type=int, default=1)
+    r.add_argument("--threads", type=int, default=2)
+    r.add_argument("--out", default="runs/time_to_accuracy")
+    r.add_argument("--prefix", default="", help="run id prefix (e.g. cpu_)")
+    t = sub.add_parser("time-default", help="time one default EuRoC run end to end")
+    t.add_argument("--seed", type=int, default=0)
+    sub.add_parser("report", help="write benchmarks/results/time_to_accuracy.{md,json} and the plot")
+    args = ap.parse_args()
+    return {"run": cmd_run, "time-default": cmd_time_default, "report": cmd_report}[args.cmd](args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
