@@ -145,7 +145,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         )
     alone = [r for r in runs if "alone" in r.get("queue", {}).get("note", "")]
     alone_rows = [
-        f"| {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | {r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
+        f"| {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | "
+        f"{r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
         for r in alone
     ]
     cpu = [r for r in runs if r["_file"].startswith("cpu_default")]
@@ -163,7 +164,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         "(the fit, without start-up and test). GPU rows ran 12-15 trainings at once on one H100 (16 CPU",
         "cores, 1 thread each; `benchmarks/run_queue.py`), so their wall times are those of a shared GPU.",
         "",
-        "| machine | epochs | seeds | test AOE (deg), rule of the run | test AOE, other rule | fit wall (s) | command |",
+        "| machine | epochs | seeds | test AOE (deg), rule of the run | test AOE, other rule | fit wall (s) "
+        "| command |",
         "|---|---|---|---|---|---|---|",
         *table,
         "",
