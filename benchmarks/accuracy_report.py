@@ -1,0 +1,176 @@
+"""Tables and figures of reports/accuracy.md from the committed run summaries.
+
+    python benchmarks/accuracy_report.py            # writes reports/accuracy/*.md, *.png, summary.json
+
+Reads reports/accuracy_runs/**.json (the accuracy runs), reports/ablation_runs/**.json (the
+ablation arms, 600 epochs with dataset.cv_fold = seed) and benchmarks/results/euroc_ensembles.json
+(ensembles scored by benchmarks/euroc_ensembles.py). Protocol figures:
+- new: `val/aoe_deg` of a cross-validation run = AOE of the held-out training flight, whole;
+- old: `val_tail/aoe_deg` = AOE of the rest of the training flights after their first 50 s.
+A recipe's cross-validation figure is the mean of the new figure over its folds.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from scipy.stats import spearmanr  # noqa: E402
+
+from gyrodenoise.atomic import write_json, write_text  # noqa: E402
+from gyrodenoise.evaluate import markdown_table  # noqa: E402
+from gyrodenoise.plots import save  # noqa: E402
+
+OUT = Path("reports/accuracy")
+
+
+def load(pattern: str) -> list[tuple[Path, dict]]:
+    return [(p, json.loads(p.read_text())) for p in sorted(Path(".").glob(pattern))]
+
+
+def ms(xs: list[float]) -> str:
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    if not xs:
+        return "-"
+    return f"{statistics.fmean(xs):.2f} ± {statistics.stdev(xs):.2f}" if len(xs) > 1 else f"{xs[0]:.2f}"
+
+
+def metric(s: dict, key: str) -> float:
+    split = key.split("/")[0].replace("_tail", "")
+    v = (s.get("test") if split == "test" else s.get("val") or {}).get(key)
+    return float(v) if v is not None else math.nan
+
+
+def rank_correlation() -> dict:
+    """Old vs new validation figure against the test, over ablation arms (recipes) and over runs."""
+    arms: dict[str, list[dict]] = defaultdict(list)
+    for p, s in load("reports/ablation_runs/*/*.json"):
+        arms[f"{p.parent.name}/{p.stem.rsplit('_s', 1)[0]}"].append(s)
+    rows = []
+    for name, rs in sorted(arms.items()):
+        tail = [metric(s, "val_tail/aoe_deg") for s in rs]
+        if len(rs) < 4 or not all(math.isfinite(t) for t in tail):
+            continue  # an arm trained on whole flights has no tail: left out of both correlations
+        rows.append(
+            {
+                "arm": name,
+                "n": len(rs),
+                "test": statistics.fmean(metric(s, "test/aoe_deg") for s in rs),
+                "new": statistics.fmean(metric(s, "val/aoe_deg") for s in rs),
+                "old": statistics.fmean(tail),
+            }
+        )
+    runs = [s for rs in arms.values() for s in rs if math.isfinite(metric(s, "val_tail/aoe_deg"))]
+    res = {
+        "arms": rows,
+        "arm_level": {
+            k: float(spearmanr([r[k] for r in rows], [r["test"] for r in rows])[0]) for k in ("new", "old")
+        },
+        "run_level": {
+            k: float(spearmanr([metric(s, key) for s in runs], [metric(s, "test/aoe_deg") for s in runs])[0])
+            for k, key in (("new", "val/aoe_deg"), ("old", "val_tail/aoe_deg"))
+        },
+        "n_arms": len(rows),
+        "n_runs": len(runs),
+    }
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for ax, k, label in ((axes[0], "new", "held-out flight (new)"), (axes[1], "old", "end of training flights (old)")):
+        ax.plot([r[k] for r in rows], [r["test"] for r in rows], "o", alpha=0.7)
+        ax.set_xlabel(f"validation AOE (deg): {label}")
+        ax.set_title(f"{len(rows)} recipes, Spearman {res['arm_level'][k]:+.2f} (runs: {res['run_level'][k]:+.2f})")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("test AOE (deg), mean of 4 seeds")
+    save(fig, OUT / "rank_correlation.png")
+    return res
+
+
+def cv_table() -> tuple[str, dict]:
+    """Per recipe: the cross-validation figure per fold and its mean (EuRoC and TUM-VI)."""
+    fold_runs: dict[tuple[str, str], dict[int, dict]] = defaultdict(dict)
+    for p, s in load("reports/ablation_runs/reference/*.json"):
+        fold_runs[("euroc", "ref")][s["config"]["dataset"]["cv_fold"]] = s
+    for p, s in load("reports/accuracy_runs/*_cv/*.json"):
+        ds = p.parent.name.split("_")[0]
+        fold_runs[(ds, p.stem.rsplit("_f", 1)[0])][s["config"]["dataset"]["cv_fold"]] = s
+    for p, s in load("reports/ablation_runs/train_duration/whole_s*.json"):
+        fold_runs[("euroc", "whole")][s["config"]["dataset"]["cv_fold"]] = s
+    rows, summary = [], {}
+    for (ds, recipe), folds in sorted(fold_runs.items()):
+        vals = [metric(folds[f], "val/aoe_deg") for f in sorted(folds)]
+        tests = [metric(folds[f], "test/aoe_deg") for f in sorted(folds)]
+        summary[f"{ds}/{recipe}"] = {"folds": sorted(folds), "cv": vals, "cv_mean": statistics.fmean(vals)}
+        rows.append(
+            [ds, recipe, " ".join(f"{f}:{v:.2f}" for f, v in zip(sorted(folds), vals, strict=True)),
+             f"**{statistics.fmean(vals):.2f}**", f"{statistics.median(vals):.2f}", ms(tests)]
+        )
+    head = ["dataset", "recipe", "held-out flight AOE per fold (deg)", "CV mean", "CV median", "fold models' test AOE"]
+    return markdown_table(head, rows), summary
+
+
+def runs_table() -> str:
+    rows = []
+    for p, s in load("reports/accuracy_runs/*/*.json"):
+        ov = " ".join(o for o in s.get("overrides") or s.get("queue", {}).get("overrides", []))
+        rows.append(
+            [f"{p.parent.name}/{p.stem}", f"{metric(s, 'val/aoe_deg'):.2f}", f"{metric(s, 'val_tail/aoe_deg'):.2f}",
+             f"{metric(s, 'test/aoe_deg'):.2f}", f"{s['train_wall_time_s']:.0f}", f"`python -m gyrodenoise.train {ov}`"]
+        )
+    head = ["run", "val AOE", "val_tail AOE", "test AOE", "fit s", "command"]
+    return markdown_table(head, rows).replace("| nan ", "| - ")
+
+
+def full_data_table() -> tuple[str, dict]:
+    """Single models on all six flights, per recipe (the default 600-epoch runs of both benchmarks)."""
+    rec: dict[str, dict[int, float]] = defaultdict(dict)
+    for p, s in load("benchmarks/results/time_to_accuracy_runs/e600_s*.json"):
+        rec["ref (50 s)"][s["seed"]] = metric(s, "test/aoe_deg")
+    for p, s in load("reports/accuracy_runs/euroc_full/*.json"):
+        name = {"ref": "ref (50 s)", "whole": "whole flights", "calibrated": "calibrated"}[p.stem.rsplit("_s", 1)[0]]
+        rec[name].setdefault(s["seed"], metric(s, "test/aoe_deg"))
+    rows, out = [], {}
+    for name, by_seed in rec.items():
+        xs = [by_seed[k] for k in sorted(by_seed)]
+        out[name] = {"seeds": sorted(by_seed), "test": xs}
+        rows.append([name, ", ".join(f"{x:.2f}" for x in xs), ms(xs)])
+    return markdown_table(["recipe", "test AOE per seed 0.. (deg)", "mean ± sd"], rows), out
+
+
+def ensemble_table() -> str:
+    path = Path("benchmarks/results/euroc_ensembles.json")
+    if not path.is_file():
+        return "(benchmarks/results/euroc_ensembles.json not found)"
+    d = json.loads(path.read_text())
+    seqs = [k for k in next(iter(d["members"].values())) if k != "average"]
+    rows = []
+    for name, e in d["ensembles"].items():
+        rows.append([f"**{name}**", *(f"{e['aoe_deg'][q]:.2f}" for q in seqs), f"**{e['aoe_deg']['average']:.2f}**"])
+    for name, m in d["members"].items():
+        rows.append([name, *(f"{m[q]:.2f}" for q in seqs), f"{m['average']:.2f}"])
+    return markdown_table(["model", *seqs, "average"], rows)
+
+
+def main() -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    rc = rank_correlation()
+    cv_md, cv = cv_table()
+    full_md, full = full_data_table()
+    write_text(OUT / "cv.md", cv_md)
+    write_text(OUT / "runs.md", runs_table())
+    write_text(OUT / "full_data.md", full_md)
+    write_text(OUT / "ensembles.md", ensemble_table())
+    arm_rows = [[r["arm"], f"{r['new']:.2f}", f"{r['old']:.2f}", f"{r['test']:.2f}"] for r in rc["arms"]]
+    write_text(OUT / "rank_arms.md", markdown_table(["recipe (ablation arm)", "new val", "old val", "test"], arm_rows))
+    write_json(OUT / "summary.json", {"rank_correlation": rc, "cv": cv, "full_data": full})
+    print(json.dumps({"rank": {k: rc[k] for k in ("arm_level", "run_level", "n_arms", "n_runs")},
+                      "cv_means": {k: round(v["cv_mean"], 2) for k, v in cv.items()}}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
