@@ -22,7 +22,8 @@ def test_queue_runs_two_at_once_and_resumes(tmp_path):
         f"dataset=euroc dataset.root={root} dataset.train_seqs=[a,b] dataset.test_seqs=[c] "
         "dataset.train_duration_s=4 "
         "dataset.window=256 dataset.gt_files={} dataset.eval_gt_variants={} model.channels=[4,8] model.dilations=[1,2] "
-        "trainer.max_epochs=2 trainer.check_val_every_n_epoch=1 trainer.accelerator=cpu optim.scheduler.T_0=2 logger=none"
+        "trainer.max_epochs=2 trainer.check_val_every_n_epoch=1 trainer.accelerator=cpu optim.scheduler.T_0=2 "
+        "logger=none"
     )
     queue = tmp_path / "queue.txt"
     queue.write_text(
