@@ -60,7 +60,10 @@ def window_bounds(dt: np.ndarray, window_s: float, gt_mask: np.ndarray | None = 
     if window_s <= 0:
         raise ValueError(f"window_s={window_s}: must be positive")
     t = np.concatenate([[0.0], np.cumsum(np.asarray(dt, dtype=np.float64)[1:])])
-    edges = np.searchsorted(t, np.arange(0.0, t[-1] + 1e-12, window_s))
+    # window edges on the sample nearest to each multiple of window_s (half a sample of slack: the
+    # sum of dt lands a rounding error on either side of the exact multiple)
+    half = 0.5 * float(np.median(dt[1:])) if len(t) > 1 else 0.0
+    edges = np.searchsorted(t, np.arange(0.0, t[-1] + half, window_s) - half)
     starts, ends = edges[:-1], edges[1:]
     keep = ends > starts
     if gt_mask is not None:
@@ -139,12 +142,17 @@ def calibration(
     starts, ends = window_bounds(dt, window_s, gt_mask)
     pred = predicted_increment_error(std, dt, starts, ends, mode)
     act = actual_increment_error(gyro, dt, rot_gt, starts, ends)
-    if len(pred) >= 3 and np.ptp(pred) > 0 and np.ptp(act) > 0:
-        res = stats.spearmanr(pred, act)
-        rho, p = float(res.statistic), float(res.pvalue)
-    else:  # a rank correlation needs variation on both sides
-        rho, p = float("nan"), float("nan")
+    rho, p = _spearman(pred, act)
     return CalibrationResult(pred, act, starts, ends, rho, p, reliability_table(pred, act, n_bins), window_s, mode)
+
+
+def _spearman(pred: np.ndarray, act: np.ndarray) -> tuple[float, float]:
+    """(rho, p-value); NaN when either side does not vary beyond rounding (ranks of noise mean nothing)."""
+    varies = lambda a: np.ptp(a) > 1e-9 * np.abs(a).max()  # noqa: E731
+    if len(pred) < 3 or not varies(pred) or not varies(act):
+        return float("nan"), float("nan")
+    res = stats.spearmanr(pred, act)
+    return float(res.statistic), float(res.pvalue)
 
 
 def pooled(results: list[CalibrationResult], n_bins: int = 10) -> CalibrationResult:
@@ -153,8 +161,7 @@ def pooled(results: list[CalibrationResult], n_bins: int = 10) -> CalibrationRes
         raise ValueError("no calibration results to pool")
     pred = np.concatenate([r.predicted for r in results])
     act = np.concatenate([r.actual for r in results])
-    res = stats.spearmanr(pred, act) if len(pred) >= 3 else None
-    rho, p = (float(res.statistic), float(res.pvalue)) if res is not None else (float("nan"), float("nan"))
+    rho, p = _spearman(pred, act)
     idx = np.concatenate([r.starts for r in results]), np.concatenate([r.ends for r in results])
     return CalibrationResult(
         pred, act, *idx, rho, p, reliability_table(pred, act, n_bins), results[0].window_s, results[0].mode
