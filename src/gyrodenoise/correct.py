@@ -10,7 +10,9 @@ the units of the file. Sanity checks run first (gyrodenoise.data.checks): units,
 against the model's training rate, |acc| = g at rest, gaps and duplicated stamps.
 
 Output (in --out-dir): `imu_corrected.csv`, the corrected gyro with the accelerometer, in the ASL
-format (ns, rad/s, m/s^2) that the loaders read; `orientation.txt`, the open-loop orientation
+format (ns, rad/s, m/s^2) that the loaders read (an ensemble model adds 3 columns
+`w_std_x,w_std_y,w_std_z [rad s^-1]`: the per-sample spread of its members, the uncertainty of the
+corrected gyro; the loaders read the first 7 columns); `orientation.txt`, the open-loop orientation
 R_n = R_{n-1} exp(w_n dt_n) in TUM format (`t[s] tx ty tz qx qy qz qw`, translation zero), starting
 at identity unless --initial-orientation says otherwise; `correct_summary.json` (beside the CSV), what was done.
 """
@@ -30,8 +32,8 @@ from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.data.checks import CheckReport, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
 from gyrodenoise.data.readers import DataFormatError
-from gyrodenoise.models.denoiser import GyroCorrection, predict_gyro
-from gyrodenoise.pretrained import load_model
+from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
+from gyrodenoise.pretrained import load_model, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.streaming import StreamingCorrector
 
@@ -43,6 +45,7 @@ STREAM_CHUNK = 4096  # samples per push_chunk: bounded memory on long recordings
 class Correction:
     rec: ImuRecording  # the samples corrected (after deduplication / resampling)
     gyro: np.ndarray  # (N, 3) corrected, rad/s
+    std: np.ndarray | None  # (N, 3) rad/s, spread of an ensemble's members; None for a single model
     R: np.ndarray  # (N, 3, 3) open-loop orientation
     report: CheckReport
     resampled_to_hz: float | None
@@ -65,14 +68,33 @@ def find_imu_file(path: str | Path) -> Path:
     return p
 
 
-def correct_gyro(model: GyroCorrection, imu: np.ndarray, engine: str = "batch") -> np.ndarray:
-    """(N, 6) raw IMU -> (N, 3) corrected gyro, by the batch model or the streaming corrector."""
+def correct_gyro(
+    model: CorrectionModel, imu: np.ndarray, engine: str = "batch"
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """(N, 6) raw IMU -> ((N, 3) corrected gyro, (N, 3) ensemble std or None), by the batch model or
+    the streaming corrector."""
     if engine == "batch":
-        return predict_gyro(model, imu).numpy()
+        return predict_with_spread(model, imu)
     if engine == "streaming":
         sc = StreamingCorrector(model)
-        return np.concatenate([sc.push_chunk(imu[i : i + STREAM_CHUNK]) for i in range(0, len(imu), STREAM_CHUNK)])
+        parts = [sc.push_chunk_with_spread(imu[i : i + STREAM_CHUNK]) for i in range(0, len(imu), STREAM_CHUNK)]
+        gyro = np.concatenate([g for g, _ in parts])
+        return gyro, (None if parts[0][1] is None else np.concatenate([s for _, s in parts]))
     raise ValueError(f"engine={engine!r}; choose one of {ENGINES}")
+
+
+STD_HEADER = ",w_std_x [rad s^-1],w_std_y [rad s^-1],w_std_z [rad s^-1]"
+
+
+def corrected_csv_text(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, std: np.ndarray | None) -> str:
+    """The ASL text of the corrected IMU; with an ensemble's std, 3 more columns at the end of each line."""
+    text = asl_text(t_ns, gyro, acc)
+    if std is None:
+        return text
+    lines = text.rstrip("\n").split("\n")
+    out = [lines[0] + STD_HEADER]
+    out += [f"{line},{s[0]:.6g},{s[1]:.6g},{s[2]:.6g}" for line, s in zip(lines[1:], std.tolist(), strict=True)]
+    return "\n".join(out) + "\n"
 
 
 def initial_rotation(spec: str, rec: ImuRecording) -> np.ndarray:
@@ -106,7 +128,7 @@ def tum_text(t_ns: np.ndarray, R: np.ndarray) -> str:
 
 def correct_recording(
     rec: ImuRecording,
-    model: GyroCorrection,
+    model: CorrectionModel,
     meta: dict,
     resample_to_model: bool = False,
     drop_duplicates: bool = False,
@@ -118,11 +140,11 @@ def correct_recording(
     rec, report, need_resample = run_checks(rec, rate, resample_to_model, drop_duplicates, force)
     if need_resample:
         rec = resample(rec, rate)
-    gyro = correct_gyro(model, rec.imu, engine)
+    gyro, std = correct_gyro(model, rec.imu, engine)
     t = (rec.t_ns - rec.t_ns[0]) * 1e-9
     dt = np.diff(t, prepend=t[0])
     R = integrate_gyro(initial_rotation(initial, rec), gyro, dt)
-    return Correction(rec, gyro, R, report, rate if need_resample else None)
+    return Correction(rec, gyro, std, R, report, rate if need_resample else None)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -182,11 +204,12 @@ def main(argv: list[str] | None = None) -> int:
     except (DataFormatError, FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    for w in res.report.warnings:
+    model_warning = not_better_warning(meta)
+    for w in [*([model_warning] if model_warning else []), *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
     out_csv = args.out_csv or args.out_dir / "imu_corrected.csv"
     out_tum = args.out_tum or args.out_dir / "orientation.txt"
-    write_text(out_csv, asl_text(res.rec.t_ns, res.gyro, res.rec.acc))
+    write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
     write_text(out_tum, tum_text(res.rec.t_ns, res.R))
     delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)
     summary = {
@@ -202,7 +225,10 @@ def main(argv: list[str] | None = None) -> int:
         "g_measured_m_s2": res.report.g_measured,
         "rest_fraction": res.report.rest_fraction,
         "mean_correction_deg_s": float(np.degrees(delta.mean())),
-        "warnings": res.report.warnings,
+        "ensemble_members": len(model.members) if res.std is not None else None,
+        "mean_std_deg_s": None if res.std is None else float(np.degrees(np.linalg.norm(res.std, axis=1).mean())),
+        "beats_calibrated": meta.get("beats_calibrated"),
+        "warnings": ([model_warning] if model_warning else []) + res.report.warnings,
         "outputs": {"imu_csv": str(out_csv), "orientation_tum": str(out_tum)},
     }
     write_json(out_csv.parent / "correct_summary.json", summary)

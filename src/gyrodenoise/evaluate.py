@@ -5,10 +5,14 @@
     python -m gyrodenoise.evaluate dataset=tumvi split=val   # validation parts (test rooms withheld)
 
 Methods: raw IMU (integrated gyro), zero motion (initial orientation held), calibrated IMU (the
-12-parameter baseline), proposed (the denoiser). Every estimate is aligned on ground truth at the
-first instant. Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
+12-parameter baseline), proposed (the denoiser, or an ensemble of them). Every estimate is aligned
+on ground truth at the first instant. Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
 roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
 trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation).
+An ensemble as the proposed model adds its uncertainty: a +-2 sigma band in the correction figures,
+and in results.json / figures/uncertainty_calibration.png the calibration of its spread against the
+actual 1-s increment errors (gyrodenoise.uncertainty). A model whose metadata says it did not beat
+the calibrated baseline on validation gets a warning (gyrodenoise.pretrained.ModelQualityWarning).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,25 +29,34 @@ import numpy as np
 from omegaconf import DictConfig
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise import plots
+from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
-from gyrodenoise.models.denoiser import GyroCorrection, predict_gyro
-from gyrodenoise.pretrained import load_model
+from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
 
 
-def gyro_method(model: GyroCorrection | None) -> Callable[[Sequence], np.ndarray | None]:
-    """Corrected gyro of a sequence: raw IMU when `model` is None."""
+def gyro_method(model: CorrectionModel | None) -> Callable[[Sequence], np.ndarray | None]:
+    """Corrected gyro of a sequence (an ensemble: the members' mean): raw IMU when `model` is None."""
 
     def run(seq: Sequence) -> np.ndarray:
-        return seq.gyro if model is None else predict_gyro(model, seq.imu).numpy()
+        return seq.gyro if model is None else predict_with_spread(model, seq.imu)[0]
 
     return run
+
+
+def load_checked(name_or_path: str) -> tuple[CorrectionModel, dict, str | None]:
+    """load_model, and warn when the model's metadata says it did not beat the calibrated baseline."""
+    model, meta = load_model(name_or_path)
+    msg = not_better_warning(meta)
+    if msg:
+        warnings.warn(msg, ModelQualityWarning, stacklevel=2)
+    return model, meta, msg
 
 
 def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
@@ -107,13 +121,12 @@ def evaluate(cfg: DictConfig) -> dict:
     if split not in ("test", "val"):
         raise ValueError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
     dm.setup("test" if split == "test" else "fit")
-    proposed, proposed_meta = load_model(cfg.weights.proposed)
-    calibrated, calibrated_meta = load_model(cfg.weights.calibrated)
-    methods = {
+    proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
+    calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)
+    methods = {  # "proposed" is run in the loop below, with its spread when it is an ensemble
         "raw IMU": gyro_method(None),
         "zero motion": lambda seq: None,
         "calibrated IMU": gyro_method(calibrated),
-        "proposed": gyro_method(proposed),
     }
     sequences: dict[str, Sequence] = {}
     averaged: list[str] = []  # one row per test sequence, with the dataset's configured ground truth
@@ -129,8 +142,12 @@ def evaluate(cfg: DictConfig) -> dict:
 
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
+    calib: dict[str, uncertainty.CalibrationResult] = {}
     for label, seq in sequences.items():
         gyros = {m: fn(seq) for m, fn in methods.items()}
+        gyros["proposed"], spread = predict_with_spread(proposed, seq.imu)
+        if spread is not None:
+            calib[label] = uncertainty.calibration(gyros["proposed"], spread, seq.dt, seq.rot, seq.gt_mask)
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
         folder = out / "trajectories" / slug(label)
@@ -145,7 +162,7 @@ def evaluate(cfg: DictConfig) -> dict:
             errs = {m: orientation_errors(seq.rot, R) for m, R in shown.items()}
             plots.save(plots.error_figure(seq.t, errs, label), figs / f"error_{slug(label)}.png")
             w_tilde = gyros["proposed"] - seq.gyro @ proposed.C_hat.detach().double().numpy().T
-            plots.save(plots.correction_figure(seq.t, w_tilde, label), figs / f"correction_{slug(label)}.png")
+            plots.save(plots.correction_figure(seq.t, w_tilde, label, spread), figs / f"correction_{slug(label)}.png")
 
     header = ["sequence", *[f"{m} (3D/yaw deg)" for m in METHODS]]
     rows = table_rows(results, averaged)
@@ -180,9 +197,32 @@ def evaluate(cfg: DictConfig) -> dict:
             m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in METHODS
         },
     }
+    warned = [w for w in (proposed_warning, calibrated_warning) if w]
+    if warned:
+        summary["warnings"] = warned
+    if calib:
+        pooled = uncertainty.pooled([calib[n] for n in averaged])
+        summary["uncertainty"] = {
+            "ensemble_members": len(proposed.members),
+            "sequences": {n: c.summary() for n, c in calib.items()},
+            "pooled": pooled.summary(),
+        }
+        if cfg.figures:
+            plots.save(
+                plots.calibration_figure(pooled, f"ensemble spread on {dm.name} {split}"),
+                out / "figures" / "uncertainty_calibration.png",
+            )
     write_json(out / "results.json", summary)
     print(f"\nAOE 3D/yaw (deg) on {dm.name} {'test sequences' if split == 'test' else 'validation parts'}:\n")
     print(markdown_table(header, rows))
+    if calib:
+        u = summary["uncertainty"]["pooled"]
+        print(
+            f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
+            f"RMS actual / predicted {u['rms_actual_deg'] / u['rms_predicted_deg']:.2f} ({u['windows']} windows)"
+        )
+    for w in warned:
+        print(f"WARNING: {w}")
     print(f"outputs in {out}")
     return summary
 

@@ -2,7 +2,9 @@
 
 The exported graph is the whole correction: raw IMU (B, N, 6) [gyro rad/s, acc m/s^2] in,
 corrected gyro (B, N, 3) rad/s out. Input normalisation (the model's mean/std buffers), the causal
-left padding and C_hat are inside the graph; the length N (and batch B) are dynamic.
+left padding and C_hat are inside the graph; the length N (and batch B) are dynamic. An ensemble
+(`EnsembleCorrection`) exports to one graph with two outputs: the members' mean `gyro_corrected`
+and their per-sample std `gyro_std` (B, N, 3) rad/s.
 
     python -m gyrodenoise.export euroc --onnx euroc.onnx [--pt2 euroc.pt2]
 
@@ -20,26 +22,33 @@ import torch
 from torch import nn
 
 from gyrodenoise.atomic import atomic_path
-from gyrodenoise.models.denoiser import GyroCorrection
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.pretrained import load_model
 
-INPUT_NAME, OUTPUT_NAME = "imu", "gyro_corrected"
+INPUT_NAME, OUTPUT_NAME, STD_NAME = "imu", "gyro_corrected", "gyro_std"
 OPSET = 18
 
 
 class ExportWrapper(nn.Module):
-    """A plain forward(imu) -> corrected gyro, in eval mode, float32, on the CPU."""
+    """A plain forward(imu) -> corrected gyro (an ensemble: (mean, std)), in eval mode, float32, on the CPU."""
 
-    def __init__(self, model: GyroCorrection) -> None:
+    def __init__(self, model: CorrectionModel) -> None:
         super().__init__()
         self.model = copy.deepcopy(model).cpu().float()  # the caller's model stays as it was
+        self.is_ensemble = isinstance(model, EnsembleCorrection)
         self.eval()
 
-    def forward(self, imu: torch.Tensor) -> torch.Tensor:
+    def forward(self, imu: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        if self.is_ensemble:
+            return self.model.forward_with_spread(imu)
         return self.model(imu)
 
 
-def _example(model: GyroCorrection, n: int = 0) -> torch.Tensor:
+def output_names(model: CorrectionModel) -> list[str]:
+    return [OUTPUT_NAME, STD_NAME] if isinstance(model, EnsembleCorrection) else [OUTPUT_NAME]
+
+
+def _example(model: CorrectionModel, n: int = 0) -> torch.Tensor:
     # longer than the receptive field, so tracing sees no special case of short inputs
     n = n or 2 * int(getattr(model, "receptive_field", 1)) + 7
     return torch.randn(2, n, 6) + torch.tensor([0.0, 0.0, 0.0, 0.0, 0.0, 9.81])
@@ -49,14 +58,14 @@ def _dynamic_shapes() -> dict:
     return {"imu": {0: torch.export.Dim("batch", min=1), 1: torch.export.Dim("length", min=1)}}
 
 
-def export_program(model: GyroCorrection) -> torch.export.ExportedProgram:
+def export_program(model: CorrectionModel) -> torch.export.ExportedProgram:
     """torch.export program with dynamic batch and length."""
     wrapper = ExportWrapper(model)
     with torch.no_grad():
         return torch.export.export(wrapper, (_example(model),), dynamic_shapes=_dynamic_shapes())
 
 
-def export_pt2(model: GyroCorrection, path: str | Path) -> Path:
+def export_pt2(model: CorrectionModel, path: str | Path) -> Path:
     """Save the torch.export program (load with torch.export.load(path).module())."""
     path = Path(path)
     program = export_program(model)
@@ -65,7 +74,7 @@ def export_pt2(model: GyroCorrection, path: str | Path) -> Path:
     return path
 
 
-def export_onnx(model: GyroCorrection, path: str | Path, opset: int = OPSET) -> Path:
+def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET) -> Path:
     """Write a self-contained ONNX file (weights inside) with dynamic batch and length."""
     for mod in ("onnx", "onnxscript"):
         try:
@@ -80,7 +89,7 @@ def export_onnx(model: GyroCorrection, path: str | Path, opset: int = OPSET) -> 
             (_example(model),),
             dynamo=True,
             input_names=[INPUT_NAME],
-            output_names=[OUTPUT_NAME],
+            output_names=output_names(model),
             dynamic_shapes=_dynamic_shapes(),
             opset_version=opset,
             external_data=False,
@@ -112,12 +121,12 @@ def main(argv: list[str] | None = None) -> None:
         msg = f"wrote {args.onnx}"
         if not args.no_check:
             err = onnx_parity(model, args.onnx)
-            msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s)"
+            msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s over {', '.join(output_names(model))})"
         print(msg)
 
 
-def onnx_parity(model: GyroCorrection, path: str | Path, n: int = 1500) -> float:
-    """Max |onnxruntime - PyTorch| on random input of a length the export did not see."""
+def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> float:
+    """Max |onnxruntime - PyTorch| over all outputs, on random input of a length the export did not see."""
     import numpy as np
 
     try:
@@ -126,10 +135,11 @@ def onnx_parity(model: GyroCorrection, path: str | Path, n: int = 1500) -> float
         raise ImportError("the parity check needs onnxruntime: pip install 'gyrodenoise[export]'") from None
     x = _example(model, n)[:1]
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    (y,) = sess.run([OUTPUT_NAME], {INPUT_NAME: x.numpy()})
+    ys = sess.run(output_names(model), {INPUT_NAME: x.numpy()})
     with torch.no_grad():
-        ref = ExportWrapper(model)(x).numpy()
-    return float(np.abs(y - ref).max())
+        ref = ExportWrapper(model)(x)
+    refs = ref if isinstance(ref, tuple) else (ref,)
+    return max(float(np.abs(y - r.numpy()).max()) for y, r in zip(ys, refs, strict=True))
 
 
 if __name__ == "__main__":

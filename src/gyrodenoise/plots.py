@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 
 from gyrodenoise.atomic import atomic_path  # noqa: E402
 from gyrodenoise.so3 import rpy_of  # noqa: E402
+from gyrodenoise.uncertainty import CalibrationResult  # noqa: E402
 
 AXES = ("roll", "pitch", "yaw")
 
@@ -51,16 +52,51 @@ def error_figure(t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]]
     return fig
 
 
-def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = ""):
-    """Gyro correction w_hat - w_imu per axis (deg/s) over time (Fig. 8)."""
+def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = "", spread: np.ndarray | None = None):
+    """Gyro correction w_hat - w_imu per axis (deg/s) over time (Fig. 8); with `spread` (N, 3) rad/s,
+    an ensemble's per-sample std, a +-2 sigma band around each axis."""
     fig, ax = plt.subplots(figsize=(9, 3.5))
     for k, lab in enumerate("xyz"):
-        ax.plot(t, np.degrees(w_tilde[:, k]), lw=0.8, label=f"$\\tilde\\omega_{lab}$")
+        (line,) = ax.plot(t, np.degrees(w_tilde[:, k]), lw=0.8, label=f"$\\tilde\\omega_{lab}$")
+        if spread is not None:
+            c, s2 = np.degrees(w_tilde[:, k]), 2 * np.degrees(spread[:, k])
+            ax.fill_between(t, c - s2, c + s2, color=line.get_color(), alpha=0.25, lw=0)
+    if spread is not None:
+        ax.fill_between([], [], [], color="0.5", alpha=0.25, label="$\\pm 2\\sigma$ (ensemble)")
     ax.set_xlabel("t (s)")
     ax.set_ylabel("correction (deg/s)")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def calibration_figure(result: CalibrationResult, title: str = ""):
+    """Predicted vs actual increment error per window (log-log scatter) with the reliability bins
+    (RMS actual vs RMS predicted) and the line of a calibrated spread."""
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    pred, act = np.degrees(result.predicted), np.degrees(result.actual)
+    ax.scatter(pred, act, s=4, alpha=0.3, color="0.4", label=f"{len(pred)} windows of {result.window_s:g} s")
+    rows = result.table
+    ax.plot(
+        [r["rms_predicted_deg"] for r in rows],
+        [r["rms_actual_deg"] for r in rows],
+        "o-",
+        color="C3",
+        label="bins (RMS)",
+    )
+    pos = np.concatenate([pred[pred > 0], act[act > 0]])
+    if len(pos):
+        lim = [pos.min() * 0.8, pos.max() * 1.25]
+        ax.plot(lim, lim, "k--", lw=1, label="calibrated")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("predicted increment error (deg)")
+    ax.set_ylabel("actual increment error (deg)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{title}\nSpearman {result.spearman:.2f} ({result.mode})".strip())
     fig.tight_layout()
     return fig
 

@@ -2,7 +2,12 @@
 
 A model file is a plain torch dict (loads with weights_only=True): the model's config values, its
 state dict (normalisation statistics included) and metadata (dataset, split, metrics, command).
-Lightning checkpoints of DenoiserModule load too.
+An ensemble is the same format: config {"name": "ensemble", "members": [member configs]}, state
+dict keys `members.<k>.*`. Lightning checkpoints of DenoiserModule load too.
+
+Safety metadata: `beats_calibrated` (True / False / None: unknown) says whether the model beat the
+12-parameter calibrated baseline fitted on the same training data, on the validation data
+(`calibrated_val_aoe_deg`); `not_better_warning` turns a False into the message users see.
 """
 
 from __future__ import annotations
@@ -13,7 +18,8 @@ from pathlib import Path
 import torch
 
 from gyrodenoise.atomic import atomic_path
-from gyrodenoise.models.denoiser import GyroCorrection, build_model
+from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.models.ensemble import CorrectionModel
 
 FORMAT = "gyrodenoise-model/1"
 
@@ -26,7 +32,7 @@ def available_models() -> list[str]:
     return sorted(p.stem for p in shipped_dir().glob("*.pt"))
 
 
-def save_model(model: GyroCorrection, model_cfg: dict, path: str | Path, meta: dict | None = None) -> Path:
+def save_model(model: CorrectionModel, model_cfg: dict, path: str | Path, meta: dict | None = None) -> Path:
     """Write atomically: an interrupted save never leaves a file that looks whole."""
     path = Path(path)
     payload = {
@@ -53,7 +59,7 @@ def resolve(name_or_path: str | Path) -> Path:
     )
 
 
-def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[GyroCorrection, dict]:
+def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
     """Returns (model in eval mode, metadata)."""
     path = resolve(name_or_path)
     blob = torch.load(path, map_location=map_location, weights_only=True)
@@ -69,3 +75,27 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Gyr
     model.load_state_dict(state)
     model.eval()
     return model, {"model": cfg, **meta, "path": str(path)}
+
+
+class ModelQualityWarning(UserWarning):
+    """A loaded model's metadata says it is worse than a simpler model."""
+
+
+def not_better_warning(meta: dict) -> str | None:
+    """The warning for a model whose metadata says it did not beat the calibrated baseline, else None."""
+    if meta.get("beats_calibrated") is not False:
+        return None
+    name = meta.get("path", "this model")
+    model_val, cal_val = meta.get("val_aoe_deg"), meta.get("calibrated_val_aoe_deg")
+    numbers = ""
+    if model_val is not None and cal_val is not None:
+        numbers = f" (validation AOE {float(model_val):.2f} deg vs {float(cal_val):.2f} deg)"
+    instead = meta.get("calibrated_model")
+    if not instead and meta.get("dataset") and f"{meta['dataset']}-calibrated" in available_models():
+        instead = f"{meta['dataset']}-calibrated"
+    advice = (
+        f"use the calibrated model {instead!r} instead"
+        if instead
+        else "use a calibrated model (python -m gyrodenoise.train model=calibrated ...) instead"
+    )
+    return f"model {name} did not beat the 12-parameter calibrated baseline on its validation data{numbers}: {advice}."

@@ -9,9 +9,13 @@ that constant repeated. Outputs therefore match `predict_gyro` from the first sa
 
 Batch norm (eval mode) is folded into its convolution; dropout is the identity at inference.
 
-    sc = StreamingCorrector(model)          # a trained GyroCorrection
+    sc = StreamingCorrector(model)          # a trained GyroCorrection or EnsembleCorrection
     w = sc.push(imu_sample)                 # (6,) raw gyro rad/s + acc m/s^2 -> (3,) rad/s
     W = sc.push_chunk(imu_block)            # (N, 6) -> (N, 3), same state
+    w, s = sc.push_with_spread(imu_sample)  # an ensemble: mean and std over its members
+
+An ensemble streams as one state per member; the output is the members' mean and their sample
+standard deviation (K - 1 denominator), as `EnsembleCorrection.forward_with_spread`.
 """
 
 from __future__ import annotations
@@ -26,7 +30,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import special
 from torch import nn
 
-from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser, GyroCorrection
+from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
 BACKENDS = ("numpy", "torch")
 
@@ -113,10 +118,16 @@ class StreamingCorrector:
     runs) or float64. Outputs are float64 rad/s.
     """
 
-    def __init__(self, model: GyroCorrection, backend: str = "numpy", dtype: str = "float32") -> None:
+    def __init__(self, model: CorrectionModel, backend: str = "numpy", dtype: str = "float32") -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r}; choose one of {BACKENDS}")
         self.backend = backend
+        self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
+        if isinstance(model, EnsembleCorrection):
+            self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
+            self.receptive_field = max(m.receptive_field for m in self.members)
+            self.reset()
+            return
         self.np_dtype = np.dtype(dtype)
         self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
         model = copy.deepcopy(model).cpu()  # read the weights without moving the caller's model
@@ -157,6 +168,8 @@ class StreamingCorrector:
 
     def reset(self) -> None:
         """Forget the past: the next sample pushed is treated as the first of a sequence."""
+        for m in self.members or []:
+            m.reset()
         self._buf: list = []
         self._pos = 0
         self.n_pushed = 0
@@ -174,9 +187,33 @@ class StreamingCorrector:
             v = NUMPY_ACTIVATIONS[ly.act](ly.weight.sum(2) @ v + ly.bias)
         self._pos = [ly.span - 1 for ly in self.layers]  # index of the newest row
 
+    # ------------------------------------------------------------------ ensembles
+    @staticmethod
+    def _mean_std(outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        stack = np.stack(outs)
+        std = stack.std(0, ddof=1) if len(outs) > 1 else np.zeros_like(stack[0])
+        return stack.mean(0), std
+
+    def push_with_spread(self, sample) -> tuple[np.ndarray, np.ndarray | None]:
+        """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
+        if self.members is None:
+            return self.push(sample), None
+        self.n_pushed += 1
+        return self._mean_std([m.push(sample) for m in self.members])
+
+    def push_chunk_with_spread(self, chunk) -> tuple[np.ndarray, np.ndarray | None]:
+        """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
+        if self.members is None:
+            return self.push_chunk(chunk), None
+        outs = [m.push_chunk(chunk) for m in self.members]
+        self.n_pushed += len(outs[0])
+        return self._mean_std(outs)
+
     # ------------------------------------------------------------------ per sample
     def push(self, sample) -> np.ndarray:
-        """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64."""
+        """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean)."""
+        if self.members is not None:
+            return self.push_with_spread(sample)[0]
         if self.backend == "torch":
             return self._push_torch(sample)
         x = np.asarray(sample, dtype=self.np_dtype)
@@ -226,6 +263,8 @@ class StreamingCorrector:
         Each layer runs as a valid convolution over [its past inputs, the chunk], vectorised over
         the chunk (O(1) per sample, amortised).
         """
+        if self.members is not None:
+            return self.push_chunk_with_spread(chunk)[0]
         x = np.asarray(chunk, dtype=self.np_dtype)
         if x.ndim != 2 or x.shape[1] != 6:
             raise ValueError(f"push_chunk expects (N, 6) samples, got shape {x.shape}")

@@ -1,3 +1,11 @@
 from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, GyroCorrection, build_model
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
-__all__ = ["CalibratedImu", "DilatedCNNDenoiser", "GyroCorrection", "build_model"]
+__all__ = [
+    "CalibratedImu",
+    "CorrectionModel",
+    "DilatedCNNDenoiser",
+    "EnsembleCorrection",
+    "GyroCorrection",
+    "build_model",
+]

@@ -1,0 +1,232 @@
+"""Make one ensemble model file from K trained model files (`gyrodenoise.models.ensemble`).
+
+    python -m gyrodenoise.ensemble build outputs/train/a/model.pt outputs/train/b/model.pt --out euroc-ensemble.pt
+    python -m gyrodenoise.ensemble build --from-multirun multirun/train/<date> [--out ...]
+
+Training K members with one command is a Hydra multirun over seeds; `experiment=ensemble` sweeps
+seeds 0-3 and builds `<sweep dir>/ensemble.pt` when the last run has finished:
+
+    python -m gyrodenoise.train -m experiment=ensemble dataset=euroc          # or seed=0,1,2,3,4,5,6,7
+    python -m gyrodenoise.train -m dataset=euroc seed=0,1,2,3 && \\
+        python -m gyrodenoise.ensemble build --from-multirun multirun/train/<date> --out euroc-ensemble.pt
+
+The ensemble's metadata records each member's file, seed, fold, training data and metrics. Members
+must share the input conventions: same sampling rate, and (unless --allow-mixed) the same dataset
+and sensor. The file loads like any model: `gyrodenoise.pretrained.load_model(path)`, or by name
+once copied into gyrodenoise/weights/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import re
+import sys
+import warnings
+from pathlib import Path
+
+from gyrodenoise.models.denoiser import GyroCorrection
+from gyrodenoise.models.ensemble import EnsembleCorrection
+from gyrodenoise.pretrained import load_model, save_model
+
+RATE_RTOL = 0.01  # members trained at rates further apart than this see different physics per sample
+
+
+def _sha256(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _seed(path: Path, meta: dict) -> int | None:
+    """The training seed: from the metadata, else the Hydra run config beside the file, else the command."""
+    if meta.get("seed") is not None:
+        return int(meta["seed"])
+    hydra_cfg = path.parent / ".hydra" / "config.yaml"
+    if hydra_cfg.is_file():
+        from omegaconf import OmegaConf
+
+        seed = OmegaConf.load(hydra_cfg).get("seed")
+        if seed is not None:
+            return int(seed)
+    m = re.search(r"(?:^|\s)\+?seed=(\d+)", str(meta.get("command", "")))
+    return int(m.group(1)) if m else None
+
+
+def member_record(path: str | Path, meta: dict) -> dict:
+    """What the ensemble remembers of one member file."""
+    path = Path(path)
+    test = meta.get("test") or {}
+    return {
+        "path": str(path),
+        "sha256": _sha256(path),
+        "model": meta.get("model"),
+        "dataset": meta.get("dataset"),
+        "sensor": meta.get("sensor"),
+        "rate_hz": meta.get("rate_hz"),
+        "seed": _seed(path, meta),
+        "fold": meta.get("fold"),
+        "train_seqs": meta.get("train_seqs"),
+        "train_duration_s": meta.get("train_duration_s"),
+        "val_aoe_deg": meta.get("val_aoe_deg"),
+        "test_aoe_deg": test.get("test/aoe_deg"),
+        "test": test,
+        "beats_calibrated": meta.get("beats_calibrated"),
+        "calibrated_val_aoe_deg": meta.get("calibrated_val_aoe_deg"),
+        "command": meta.get("command"),
+    }
+
+
+def check_compatible(records: list[dict], allow_mixed: bool = False) -> None:
+    """Members must read their input the same way: same rate; same dataset and sensor unless allowed."""
+    rates = [r["rate_hz"] for r in records if r.get("rate_hz")]
+    if rates and (max(rates) - min(rates)) > RATE_RTOL * min(rates):
+        listing = ", ".join(f"{r['path']}: {r.get('rate_hz')}" for r in records)
+        raise ValueError(f"ensemble members were trained at different IMU rates (Hz) -- {listing}")
+    if allow_mixed:
+        return
+    for key in ("dataset", "sensor"):
+        values = {repr(r.get(key)) for r in records if r.get(key) is not None}
+        if len(values) > 1:
+            listing = ", ".join(f"{r['path']}: {r.get(key)}" for r in records)
+            raise ValueError(
+                f"ensemble members come from different {key}s ({listing}); their input conventions "
+                "(sensor, mounting, units) may differ. Pass --allow-mixed if they are the same sensor."
+            )
+
+
+def _common(records: list[dict], key: str):
+    values = [r.get(key) for r in records]
+    return values[0] if all(v == values[0] for v in values) else None
+
+
+def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[EnsembleCorrection, dict, dict]:
+    """Load the member files -> (ensemble model, model config, metadata). An ensemble file among
+    them contributes its members (and their records)."""
+    if not paths:
+        raise ValueError("no member model files given")
+    members: list[GyroCorrection] = []
+    cfgs: list[dict] = []
+    records: list[dict] = []
+    for p in paths:
+        model, meta = load_model(p)
+        if isinstance(model, EnsembleCorrection):
+            members += list(model.members)
+            cfgs += [dict(c) for c in meta["model"]["members"]]
+            records += list(meta.get("members") or [member_record(meta["path"], meta)] * len(model))
+        else:
+            members.append(model)
+            cfgs.append(dict(meta["model"]))
+            records.append(member_record(meta["path"], meta))
+    check_compatible(records, allow_mixed)
+    beats = [r.get("beats_calibrated") for r in records]
+    if any(b is False for b in beats):
+        bad = [r["path"] for r in records if r.get("beats_calibrated") is False]
+        warnings.warn(f"ensemble members that did not beat the calibrated baseline: {bad}", stacklevel=2)
+    cal_vals = [r["calibrated_val_aoe_deg"] for r in records if r.get("calibrated_val_aoe_deg") is not None]
+    finite = [r["val_aoe_deg"] for r in records if r.get("val_aoe_deg") is not None]
+    rates = [r["rate_hz"] for r in records if r.get("rate_hz")]
+    meta = {
+        "dataset": _common(records, "dataset"),
+        "sensor": _common(records, "sensor"),
+        "rate_hz": float(sum(rates) / len(rates)) if len(rates) == len(records) else None,
+        "train_seqs": _common(records, "train_seqs"),
+        "train_duration_s": _common(records, "train_duration_s"),
+        "n_members": len(members),
+        "members": records,
+        "member_val_aoe_deg": [r.get("val_aoe_deg") for r in records],
+        "member_val_aoe_deg_mean": (sum(finite) / len(finite)) if finite else None,
+        # the ensemble itself was not compared with the calibrated baseline: unknown until evaluated
+        "beats_calibrated": None,
+        "members_beat_calibrated": beats,
+        "calibrated_val_aoe_deg": (sum(cal_vals) / len(cal_vals)) if cal_vals else None,
+    }
+    return EnsembleCorrection(members), {"name": "ensemble", "members": cfgs}, meta
+
+
+def multirun_members(sweep_dir: str | Path) -> list[Path]:
+    """`<sweep dir>/*/model.pt` in job order (Hydra's numbered subfolders)."""
+    d = Path(sweep_dir)
+    if not d.is_dir():
+        raise FileNotFoundError(f"{d}: not a folder (give a Hydra multirun sweep folder)")
+    found = list(d.glob("*/model.pt"))
+    if not found:
+        raise FileNotFoundError(f"{d}: no */model.pt (have the runs of this multirun finished?)")
+
+    def key(p: Path) -> tuple:
+        name = p.parent.name
+        return (0, int(name), "") if name.isdigit() else (1, 0, name)
+
+    return sorted(found, key=key)
+
+
+def build_ensemble(
+    paths: list[str | Path],
+    out: str | Path,
+    name: str | None = None,
+    allow_mixed: bool = False,
+    command: str | None = None,
+) -> Path:
+    """Write the ensemble of the member files to `out` (same file format as any model)."""
+    model, cfg, meta = make_ensemble(paths, allow_mixed)
+    meta["name"] = name or Path(out).stem
+    meta["command"] = command
+    return save_model(model, cfg, out, meta)
+
+
+try:  # the Hydra hook of experiment=ensemble; Hydra is a dependency, the guard keeps this module light
+    from hydra.experimental.callback import Callback as _HydraCallback
+except ImportError:  # pragma: no cover
+    _HydraCallback = object  # type: ignore[assignment,misc]
+
+
+class BuildEnsembleCallback(_HydraCallback):
+    """Hydra callback: after a multirun, build `<sweep dir>/<filename>` from its runs' model.pt."""
+
+    def __init__(self, filename: str = "ensemble.pt") -> None:
+        self.filename = filename
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        sweep = Path(config.hydra.sweep.dir)
+        try:
+            paths = multirun_members(sweep)
+        except FileNotFoundError as e:
+            print(f"ensemble not built: {e}", file=sys.stderr)
+            return
+        out = build_ensemble(paths, sweep / self.filename, command=f"BuildEnsembleCallback on {sweep}")
+        print(f"ensemble of {len(paths)} models: {out}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m gyrodenoise.ensemble",
+        description="Make one ensemble model file (mean + per-sample spread) from trained model files.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 1)[1],
+    )
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    b = sub.add_parser("build", help="build an ensemble file from member model files")
+    b.add_argument("models", nargs="*", help="member model files (.pt / .ckpt) or shipped model names")
+    b.add_argument("--from-multirun", type=Path, help="a Hydra multirun folder: its */model.pt are the members")
+    b.add_argument("--out", type=Path, help="output file (default with --from-multirun: DIR/ensemble.pt)")
+    b.add_argument("--name", help="name recorded in the metadata (default: the output file's stem)")
+    b.add_argument("--allow-mixed", action="store_true", help="allow members from different datasets / sensors")
+    args = ap.parse_args(argv)
+    try:
+        paths: list[str | Path] = list(args.models)
+        if args.from_multirun:
+            paths += multirun_members(args.from_multirun)
+        out = args.out or (args.from_multirun / "ensemble.pt" if args.from_multirun else None)
+        if out is None:
+            ap.error("give --out FILE")
+        if not paths:
+            ap.error("give member model files or --from-multirun DIR")
+        command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
+        build_ensemble(paths, out, args.name, args.allow_mixed, command)
+    except (FileNotFoundError, ValueError, TypeError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} ({len(paths)} member files)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

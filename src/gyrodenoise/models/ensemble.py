@@ -1,0 +1,92 @@
+"""An ensemble of gyro correction models: K trained networks, one corrected gyro and its spread.
+
+Each member keeps its own normalisation buffers and C_hat; the ensemble's output is the mean of the
+members' corrected gyros, w_hat = (1/K) sum_k (C_k w_imu + w_tilde_k), and the per-sample, per-axis
+standard deviation across members is the uncertainty output (`forward_with_spread`). Members that
+agree where they were trained and disagree elsewhere make that spread a warning sign of inputs
+unlike the training data; how well it predicts the actual error is measured by
+`gyrodenoise.uncertainty`.
+
+Stored like any model (`gyrodenoise.pretrained`): config {"name": "ensemble", "members": [cfg, ...]},
+state dict keys `members.<k>.<member key>`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+import torch
+from torch import nn
+
+from gyrodenoise.models.denoiser import GyroCorrection
+
+
+class EnsembleCorrection(nn.Module):
+    """Mean and spread of K `GyroCorrection` members (any mix of denoisers and calibrated models)."""
+
+    def __init__(self, members: Iterable[GyroCorrection]) -> None:
+        super().__init__()
+        members = list(members)
+        if not members:
+            raise ValueError("an ensemble needs at least one member model")
+        for k, m in enumerate(members):
+            if isinstance(m, EnsembleCorrection):
+                raise TypeError(f"member {k} is itself an ensemble: pass its members instead (ensemble.members)")
+            if not isinstance(m, GyroCorrection):
+                raise TypeError(f"member {k} is a {type(m).__name__}, not a GyroCorrection (raw IMU (B, N, 6) -> gyro)")
+        self.members = nn.ModuleList(members)
+        # the ensemble output at n depends on what the longest-memory member sees
+        self.receptive_field = max(int(getattr(m, "receptive_field", 1)) for m in members)
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    def member_outputs(self, imu: torch.Tensor) -> torch.Tensor:
+        """(B, N, 6) raw IMU -> (K, B, N, 3) corrected gyro of each member."""
+        return torch.stack([m(imu) for m in self.members])
+
+    def forward(self, imu: torch.Tensor) -> torch.Tensor:
+        """(B, N, 6) raw gyro (rad/s) + acc (m/s^2) -> mean corrected gyro (B, N, 3) rad/s."""
+        return self.member_outputs(imu).mean(0)
+
+    def forward_with_spread(self, imu: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, std) over the members, each (B, N, 3) rad/s.
+
+        std is the sample standard deviation (K - 1 in the denominator: the unbiased variance of
+        the members' spread); a single member has no spread and gets zeros.
+        """
+        out = self.member_outputs(imu)
+        mean = out.mean(0)
+        if len(self.members) == 1:
+            return mean, torch.zeros_like(mean)
+        return mean, out.std(0, correction=1)
+
+    @property
+    def C_hat(self) -> torch.Tensor:
+        """Mean of the members' C_hat: the mean output is C_mean w_imu + mean(w_tilde_k), so
+        `w_hat - w_imu @ C_hat.T` is the mean of the members' corrections w_tilde."""
+        return torch.stack([m.C_hat for m in self.members]).mean(0)
+
+
+CorrectionModel = GyroCorrection | EnsembleCorrection
+
+
+def model_device(model: nn.Module) -> torch.device:
+    return next(iter(model.buffers()), torch.zeros(())).device
+
+
+@torch.no_grad()
+def predict_with_spread(model: CorrectionModel, imu) -> tuple[np.ndarray, np.ndarray | None]:
+    """Corrected gyro (N, 3) float64 of one whole sequence (N, 6) in eval mode, and the ensemble's
+    per-sample std (N, 3) float64 (None for a single model, which has no spread)."""
+    was_training = model.training
+    model.eval()
+    x = torch.as_tensor(np.asarray(imu), dtype=torch.float32, device=model_device(model))[None]
+    try:
+        if isinstance(model, EnsembleCorrection):
+            mean, std = model.forward_with_spread(x)
+            return mean[0].double().cpu().numpy(), std[0].double().cpu().numpy()
+        return model(x)[0].double().cpu().numpy(), None
+    finally:
+        model.train(was_training)
