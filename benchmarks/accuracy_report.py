@@ -70,9 +70,7 @@ def rank_correlation() -> dict:
     runs = [s for rs in arms.values() for s in rs if math.isfinite(metric(s, "val_tail/aoe_deg"))]
     res = {
         "arms": rows,
-        "arm_level": {
-            k: float(spearmanr([r[k] for r in rows], [r["test"] for r in rows])[0]) for k in ("new", "old")
-        },
+        "arm_level": {k: float(spearmanr([r[k] for r in rows], [r["test"] for r in rows])[0]) for k in ("new", "old")},
         "run_level": {
             k: float(spearmanr([metric(s, key) for s in runs], [metric(s, "test/aoe_deg") for s in runs])[0])
             for k, key in (("new", "val/aoe_deg"), ("old", "val_tail/aoe_deg"))
@@ -94,12 +92,12 @@ def rank_correlation() -> dict:
 def cv_table() -> tuple[str, dict]:
     """Per recipe: the cross-validation figure per fold and its mean (EuRoC and TUM-VI)."""
     fold_runs: dict[tuple[str, str], dict[int, dict]] = defaultdict(dict)
-    for p, s in load("reports/ablation_runs/reference/*.json"):
+    for _p, s in load("reports/ablation_runs/reference/*.json"):
         fold_runs[("euroc", "ref")][s["config"]["dataset"]["cv_fold"]] = s
     for p, s in load("reports/accuracy_runs/*_cv/*.json"):
         ds = p.parent.name.split("_")[0]
         fold_runs[(ds, p.stem.rsplit("_f", 1)[0])][s["config"]["dataset"]["cv_fold"]] = s
-    for p, s in load("reports/ablation_runs/train_duration/whole_s*.json"):
+    for _p, s in load("reports/ablation_runs/train_duration/whole_s*.json"):
         fold_runs[("euroc", "whole")][s["config"]["dataset"]["cv_fold"]] = s
     rows, summary = [], {}
     for (ds, recipe), folds in sorted(fold_runs.items()):
@@ -107,8 +105,14 @@ def cv_table() -> tuple[str, dict]:
         tests = [metric(folds[f], "test/aoe_deg") for f in sorted(folds)]
         summary[f"{ds}/{recipe}"] = {"folds": sorted(folds), "cv": vals, "cv_mean": statistics.fmean(vals)}
         rows.append(
-            [ds, recipe, " ".join(f"{f}:{v:.2f}" for f, v in zip(sorted(folds), vals, strict=True)),
-             f"**{statistics.fmean(vals):.2f}**", f"{statistics.median(vals):.2f}", ms(tests)]
+            [
+                ds,
+                recipe,
+                " ".join(f"{f}:{v:.2f}" for f, v in zip(sorted(folds), vals, strict=True)),
+                f"**{statistics.fmean(vals):.2f}**",
+                f"{statistics.median(vals):.2f}",
+                ms(tests),
+            ]
         )
     head = ["dataset", "recipe", "held-out flight AOE per fold (deg)", "CV mean", "CV median", "fold models' test AOE"]
     return markdown_table(head, rows), summary
@@ -119,8 +123,14 @@ def runs_table() -> str:
     for p, s in load("reports/accuracy_runs/*/*.json"):
         ov = " ".join(o for o in s.get("overrides") or s.get("queue", {}).get("overrides", []))
         rows.append(
-            [f"{p.parent.name}/{p.stem}", f"{metric(s, 'val/aoe_deg'):.2f}", f"{metric(s, 'val_tail/aoe_deg'):.2f}",
-             f"{metric(s, 'test/aoe_deg'):.2f}", f"{s['train_wall_time_s']:.0f}", f"`python -m gyrodenoise.train {ov}`"]
+            [
+                f"{p.parent.name}/{p.stem}",
+                f"{metric(s, 'val/aoe_deg'):.2f}",
+                f"{metric(s, 'val_tail/aoe_deg'):.2f}",
+                f"{metric(s, 'test/aoe_deg'):.2f}",
+                f"{s['train_wall_time_s']:.0f}",
+                f"`python -m gyrodenoise.train {ov}`",
+            ]
         )
     head = ["run", "val AOE", "val_tail AOE", "test AOE", "fit s", "command"]
     return markdown_table(head, rows).replace("| nan ", "| - ")
@@ -129,7 +139,7 @@ def runs_table() -> str:
 def full_data_table() -> tuple[str, dict]:
     """Single models on all six flights, per recipe (the default 600-epoch runs of both benchmarks)."""
     rec: dict[str, dict[int, float]] = defaultdict(dict)
-    for p, s in load("benchmarks/results/time_to_accuracy_runs/e600_s*.json"):
+    for _p, s in load("benchmarks/results/time_to_accuracy_runs/e600_s*.json"):
         rec["ref (50 s)"][s["seed"]] = metric(s, "test/aoe_deg")
     for p, s in load("reports/accuracy_runs/euroc_full/*.json"):
         name = {"ref": "ref (50 s)", "whole": "whole flights", "calibrated": "calibrated"}[p.stem.rsplit("_s", 1)[0]]
@@ -168,8 +178,15 @@ def main() -> None:
     arm_rows = [[r["arm"], f"{r['new']:.2f}", f"{r['old']:.2f}", f"{r['test']:.2f}"] for r in rc["arms"]]
     write_text(OUT / "rank_arms.md", markdown_table(["recipe (ablation arm)", "new val", "old val", "test"], arm_rows))
     write_json(OUT / "summary.json", {"rank_correlation": rc, "cv": cv, "full_data": full})
-    print(json.dumps({"rank": {k: rc[k] for k in ("arm_level", "run_level", "n_arms", "n_runs")},
-                      "cv_means": {k: round(v["cv_mean"], 2) for k, v in cv.items()}}, indent=1))
+    print(
+        json.dumps(
+            {
+                "rank": {k: rc[k] for k in ("arm_level", "run_level", "n_arms", "n_runs")},
+                "cv_means": {k: round(v["cv_mean"], 2) for k, v in cv.items()},
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":
