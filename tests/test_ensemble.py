@@ -444,3 +444,29 @@ def test_real_euroc_slice_ensemble(euroc_root):
     assert np.abs(m2 - mean).max() < STREAM_ATOL and np.abs(s2 - std).max() < STREAM_ATOL
     res = calibration(mean, std, seq.dt, seq.rot, seq.gt_mask)
     assert len(res.predicted) == 19 and np.isfinite(res.spearman)
+
+
+@pytest.mark.slow
+def test_evaluate_with_an_ensemble(euroc_root, tmp_path):
+    """evaluate with an ensemble as the proposed model: Table 1 rows, the spread's calibration in
+    results.json and its figure, the +-2 sigma correction figure."""
+    if not {"euroc", "euroc-calibrated"} <= set(available_models()):
+        pytest.skip("shipped EuRoC models absent")
+    from test_evaluate import run_evaluate
+
+    assert ensemble_cli.main(["build", "euroc", "euroc-calibrated", "--out", str(tmp_path / "e.pt")]) == 0
+    out = tmp_path / "eval"
+    summary = run_evaluate(
+        "dataset=euroc",
+        f"dataset.root={euroc_root}",
+        "dataset.test_seqs=[V1_03_difficult]",
+        f"weights.proposed={tmp_path / 'e.pt'}",
+        f"out_dir={out}",
+    )
+    u = summary["uncertainty"]
+    assert u["ensemble_members"] == 2 and u["pooled"]["windows"] > 50
+    assert -1 <= u["pooled"]["spearman"] <= 1 and len(u["pooled"]["table"]) == 10
+    a = summary["aoe_deg"]["V1_03_difficult"]
+    assert a["proposed"][0] < a["raw IMU"][0]
+    for name in ("figures/uncertainty_calibration.png", "figures/correction_V1_03_difficult.png", "results.json"):
+        assert (out / name).is_file(), name

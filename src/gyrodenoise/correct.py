@@ -235,7 +235,14 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"corrected {len(res.rec)} samples ({summary['duration_s']:.1f} s at {res.report.rate_hz:.4g} Hz"
         f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta.get('path')}; "
-        f"mean correction {summary['mean_correction_deg_s']:.3f} deg/s\n  {out_csv}\n  {out_tum}"
+        f"mean correction {summary['mean_correction_deg_s']:.3f} deg/s"
+        + (
+            f"; ensemble of {summary['ensemble_members']}: mean spread {summary['mean_std_deg_s']:.3f} deg/s "
+            "(columns w_std_x,y,z)"
+            if res.std is not None
+            else ""
+        )
+        + f"\n  {out_csv}\n  {out_tum}"
     )
     return 0
 

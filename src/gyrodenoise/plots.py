@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -92,6 +93,10 @@ def calibration_figure(result: CalibrationResult, title: str = ""):
         ax.plot(lim, lim, "k--", lw=1, label="calibrated")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    for axis in (ax.xaxis, ax.yaxis):  # 1-2-5 labels: default minor labels overlap on narrow log ranges
+        axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+        axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("predicted increment error (deg)")
     ax.set_ylabel("actual increment error (deg)")
     ax.grid(alpha=0.3, which="both")
