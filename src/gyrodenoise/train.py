@@ -26,6 +26,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
+from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.pretrained import save_model
@@ -75,6 +76,34 @@ def format_test_table(test: dict[str, float]) -> str:
     return markdown_table(["sequence", "model AOE 3D/yaw (deg)", "raw IMU AOE 3D (deg)"], rows)
 
 
+def calibrated_baseline(cfg: DictConfig, dm, module: DenoiserModule, out_dir: Path) -> dict:
+    """The safety net: the 12-parameter calibrated baseline fitted on the same training data with the
+    same loss (seconds), scored on the same validation ("val" group: the held-out flight under
+    cross-validation) and test sequences; whether the trained model beats it on validation."""
+    if cfg.model.name == "calibrated":
+        return {}
+    start = time.time()
+    cal = fit_calibrated(dm.train_part, loss=OmegaConf.to_container(cfg.loss, resolve=True))
+    cal_path = out_dir / "calibrated.pt"
+    save_model(
+        cal, {"name": "calibrated"}, cal_path, meta={"dataset": cfg.dataset.name, "fit": "baseline.fit_calibrated"}
+    )
+    val_seqs = [seq for seq, group in zip(dm.val_part, dm.val_groups, strict=True) if group == "val"]
+    out = safety_meta(module.model, cal, val_seqs, calibrated_path=cal_path.name)
+    if cfg.get("test") and dm.test_part:
+        per_seq = evaluate_on(cal, dm.test_part)
+        out["calibrated_test_aoe_deg"] = float(sum(per_seq.values()) / len(per_seq))
+        out["calibrated_test_aoe_deg_per_sequence"] = per_seq
+    out["fit_and_score_s"] = time.time() - start
+    verdict = {
+        True: "the model beats it on validation",
+        False: "the model does NOT beat it on validation: prefer the calibrated model",
+        None: "no validation data to compare them on",
+    }[out["beats_calibrated"]]
+    print(f"calibrated baseline (same data, same loss, {cal_path.name}): {verdict}")
+    return out
+
+
 def train(cfg: DictConfig) -> dict:
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
@@ -116,6 +145,8 @@ def train(cfg: DictConfig) -> dict:
         if alternative is not None and cfg.get("test_other_rule"):
             test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
 
+    safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
+
     summary = {
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
         "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
@@ -131,6 +162,8 @@ def train(cfg: DictConfig) -> dict:
         "val": val,
         "test": test,
     }
+    if safety:
+        summary["calibrated_baseline"] = safety
     if test_other:
         summary["test_other_rule"] = {"rule": "best_val" if cfg.select == "last" else "last", **test_other}
     save_model(
@@ -148,6 +181,7 @@ def train(cfg: DictConfig) -> dict:
             "train_wall_time_s": wall_s,
             "machine": summary["machine"],
             "command": summary["command"],
+            **{k: safety[k] for k in ("beats_calibrated", "calibrated_val_aoe_deg", "calibrated_model") if k in safety},
         },
     )
     write_json(out_dir / "summary.json", summary)
