@@ -56,6 +56,11 @@ def test_seeded_runs_are_reproducible(root, tmp_path):
     assert "test/aoe_deg" in a["test"] and (tmp_path / "a" / "summary.json").is_file()
     # the raw IMU as a reference: no correction model of any kind, so both runs agree and it is finite
     assert a["test"]["test/raw_imu_aoe_deg/c"] == b["test"]["test/raw_imu_aoe_deg/c"] > 0
+    # the safety net: the calibrated baseline fitted on the same data, compared on the same validation
+    safety = a["calibrated_baseline"]
+    assert safety["beats_calibrated"] in (True, False) and safety["calibrated_test_aoe_deg"] > 0
+    meta = torch.load(tmp_path / "a" / "model.pt", weights_only=True)["meta"]
+    assert meta["beats_calibrated"] == safety["beats_calibrated"] and (tmp_path / "a" / "calibrated.pt").is_file()
     table = format_test_table(a["test"])
     assert "| c |" in table and "| **average** |" in table and "nan" not in table
 
