@@ -14,6 +14,7 @@ import torch
 
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.denoiser import GyroCorrection, build_model
+from gyrodenoise.paths import portable_path
 
 FORMAT = "gyrodenoise-model/1"
 
@@ -53,8 +54,17 @@ def resolve(name_or_path: str | Path) -> Path:
     )
 
 
+def model_name(path: str | Path) -> str:
+    """How reports name a model file: its shipped name ('euroc') when it is a shipped model, else its
+    portable path (the install folder of the package differs between machines)."""
+    p = Path(path)
+    if p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve():
+        return p.stem
+    return portable_path(p)
+
+
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[GyroCorrection, dict]:
-    """Returns (model in eval mode, metadata)."""
+    """Returns (model in eval mode, metadata); metadata 'path' is the file, 'name' how reports name it."""
     path = resolve(name_or_path)
     blob = torch.load(path, map_location=map_location, weights_only=True)
     if blob.get("format") == FORMAT:
@@ -62,10 +72,10 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Gyr
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
         cfg = blob["hyper_parameters"]["model"]
         state = {k[len("model.") :]: v for k, v in blob["state_dict"].items() if k.startswith("model.")}
-        meta = {"checkpoint": str(path), "epoch": blob.get("epoch")}
+        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch")}
     else:
         raise ValueError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     model = build_model(**cfg)
     model.load_state_dict(state)
     model.eval()
-    return model, {"model": cfg, **meta, "path": str(path)}
+    return model, {"model": cfg, **meta, "path": str(path), "name": model_name(path)}

@@ -27,6 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from gyrodenoise.atomic import write_json
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import save_model
 
 
@@ -105,13 +106,13 @@ def train(cfg: DictConfig) -> dict:
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
 
     summary = {
-        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "command": Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:]),
         "dataset": cfg.dataset.name,
         "model": OmegaConf.to_container(cfg.model, resolve=True),
         "train_wall_time_s": wall_s,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
-        "best_checkpoint": best_path,
+        "best_checkpoint": portable_path(best_path) if best_path else "",
         "val": val,
         "test": test,
     }

@@ -19,6 +19,7 @@ from pathlib import Path
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.workflow import run
+from gyrodenoise.paths import portable_command
 from gyrodenoise.sim.effects import EFFECTS
 
 
@@ -144,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
 
     fit, holdout = load(args.fit), load(args.holdout)
     report, arrays = run(fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed)
-    report["command"] = "python -m gyrodenoise.discrepancy " + " ".join(sys.argv[1:] if argv is None else argv)
+    report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
