@@ -30,6 +30,7 @@ from gyrodenoise.correct import main as correct_main
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import predict_gyro
+from gyrodenoise.paths import portable_command
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro
 
@@ -106,8 +107,8 @@ def main() -> None:
             rows[name] = row
             print(name, json.dumps(row), flush=True)
     report = {
-        "command": " ".join(["python", *sys.argv]),
-        "model": meta.get("path"),
+        "command": "python " + portable_command(sys.argv),
+        "model": meta["name"],
         "model_meta": {k: meta.get(k) for k in ("dataset", "train_seqs", "epoch", "checkpoint") if k in meta},
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
         "sequences": rows,

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.discrepancy.hidden import CASES, run_case
+from gyrodenoise.paths import portable_command, portable_path
 
 OUT = Path(__file__).parent / "results"
 
@@ -59,10 +60,10 @@ def main() -> None:
         for n in r["named_labels"] or ["nothing"]:
             confusion[r["effect"]][n] += 1
     result = {
-        "command": "python " + " ".join(sys.argv),
+        "command": "python " + portable_command(sys.argv),
         "machine": f"{platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} CPU threads)",
         "wall_time_s": time.time() - t0,
-        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "settings": {k: portable_path(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
         "confusion": confusion,
         "null_false_positive_rate": fpr,
         "null_named": [r["named"] for r in nulls],

@@ -27,6 +27,7 @@ import torch  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.models.denoiser import build_model, count_parameters, predict_gyro  # noqa: E402
+from gyrodenoise.paths import portable_command  # noqa: E402
 from gyrodenoise.pretrained import available_models, load_model  # noqa: E402
 from gyrodenoise.streaming import StreamingCorrector  # noqa: E402
 
@@ -71,7 +72,7 @@ def main() -> None:
     torch.set_num_threads(1)
     if args.model in available_models() or Path(args.model).is_file():
         model, meta = load_model(args.model)
-        model_desc = f"{args.model} ({meta.get('path')})"
+        model_desc = meta["name"]
     else:  # same architecture, so the same cost
         model = build_model("denoiser").eval()
         torch.nn.init.normal_(model.net[-1].weight, std=0.1)  # a non-zero correction for the parity check
@@ -107,7 +108,7 @@ def main() -> None:
 
     best_key = max((k for k in results if k.startswith("push_") and "chunk" not in k), key=results.get)
     report = {
-        "command": " ".join(["python", *sys.argv]),
+        "command": "python " + portable_command(sys.argv),
         "machine": f"{platform.node()} ({platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} CPU threads visible, pinned to 1 core, 1 thread)",
         "load_average_1min_at_start": load_at_start,

@@ -224,6 +224,12 @@ def test_nan_and_unknown_column(tmp_path, model_file, capsys):
     expect_error(capsys, [bad_file(tmp_path, "ok.csv"), "-m", model_file, "--columns", "timestamp,a,b,c,d,e,f"], "'a'")
 
 
+def test_binary_file_is_named_with_what_to_do(tmp_path, model_file, capsys):
+    f = tmp_path / "imu.bin"
+    f.write_bytes(b"\x89\xb9PNG\r\n" + bytes(range(256)) * 20)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:1: byte 0x89 at offset 0", "not a UTF-8 text CSV")
+
+
 def test_missing_model_lists_choices(tmp_path, capsys):
     expect_error(capsys, [bad_file(tmp_path), "-m", "no_such_model"], "neither a file nor a shipped model")
 

@@ -17,6 +17,14 @@ from gyrodenoise.pretrained import available_models, load_model
 
 REPO = Path(__file__).resolve().parents[1]
 
+# Tolerance against the committed reports, which were computed on another machine. The network runs in
+# float32 (eps ~1.2e-7): its output differs in the last bits between CPUs, thread counts and library
+# builds (kernel choice, summation order). Those per-sample differences accumulate over the tens of
+# thousands of integration steps of a sequence (~sqrt(3e4) * 1.2e-7 ~ 2e-5 relative, observed 4.5e-6),
+# so 1e-4 (relative, and 1e-4 deg absolute for near-zero values) leaves margin while any real change of
+# a model or of the method moves the AOE by far more (>1e-2 deg).
+REPORT_RTOL, REPORT_ATOL_DEG = 1e-4, 1e-4
+
 
 def test_shipped_models_load_by_name():
     assert {"euroc", "euroc-calibrated", "tumvi", "tumvi-calibrated"} <= set(available_models())
@@ -37,10 +45,14 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     )
     rows = summary["aoe_deg"]
     assert set(rows) == {"V1_01_easy (data_recomputed_openvins)", "V1_01_easy (original GT)"}
+    # shipped models by their shipped name: the install folder is not a fact about the results
+    assert summary["models"] == {"proposed": "euroc", "calibrated IMU": "euroc-calibrated"}
     committed = json.loads((REPO / "reports" / "euroc" / "results.json").read_text())["aoe_deg"]
     for row, methods in rows.items():
         for method, values in methods.items():
-            np.testing.assert_allclose(values, committed[row][method], rtol=1e-6, err_msg=f"{row} / {method}")
+            np.testing.assert_allclose(
+                values, committed[row][method], rtol=REPORT_RTOL, atol=REPORT_ATOL_DEG, err_msg=f"{row} / {method}"
+            )
     r = rows["V1_01_easy (data_recomputed_openvins)"]
     assert r["proposed"][0] < r["calibrated IMU"][0] < r["raw IMU"][0]
     # outputs: tables, figures, TUM files that parse back to unit quaternions
@@ -60,7 +72,7 @@ def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):
     assert summary["split"] == "val" and all(n.endswith("[50s:]") for n in summary["averaged_sequences"])
     committed = json.loads((REPO / "reports" / "tumvi" / "results.json").read_text())["average_aoe_deg"]
     for method, values in summary["average_aoe_deg"].items():
-        np.testing.assert_allclose(values, committed[method], rtol=1e-6, err_msg=method)
+        np.testing.assert_allclose(values, committed[method], rtol=REPORT_RTOL, atol=REPORT_ATOL_DEG, err_msg=method)
     for name, method in (("tumvi", "proposed"), ("tumvi-calibrated", "calibrated IMU")):
         _, meta = load_model(name)
         assert abs(meta["rate_hz"] - 199.4) < 0.2

@@ -53,6 +53,21 @@ def test_not_a_number_names_line_and_column(tmp_path):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
 
 
+@pytest.mark.parametrize("reader", [read_imu, read_groundtruth])
+def test_binary_file_names_file_byte_and_layout(tmp_path, reader):
+    # a valid first line, then a Latin-1 byte on line 3 (byte offset: header + line 2 + 1)
+    rows = (IMU_HEADER + imu_rows(1)[0] + "\n").encode()
+    path = tmp_path / "mav0" / "imu0" / "data.csv"
+    path.parent.mkdir(parents=True)
+    path.write_bytes(rows + b"1\xb9\x00\xff" + bytes(range(256)) * 40)
+    with pytest.raises(DataFormatError, match=rf"data.csv:3: byte 0xb9 at offset {len(rows) + 1} is not UTF-8") as e:
+        reader(path)
+    assert "not a UTF-8 text CSV file; expected an ASL" in str(e.value) and "converted to CSV" in str(e.value)
+    path.write_bytes(b"\x00" * 64)  # valid UTF-8, but binary
+    with pytest.raises(DataFormatError, match=r"data.csv:1: NUL byte \(binary data\)"):
+        reader(path)
+
+
 def test_nan_is_reported_not_dropped(tmp_path):
     rows = imu_rows()
     rows[7] = rows[7].replace("9.8", "nan")

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from gyrodenoise.discrepancy.__main__ import main
+from gyrodenoise.discrepancy.__main__ import build_parser, main
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import CASES, make_measured, run_case
 from gyrodenoise.discrepancy.rank import select_effects
@@ -76,3 +76,20 @@ def test_cli_writes_report(tmp_path):
 def test_cli_rejects_overlapping_split(tmp_path):
     with pytest.raises(SystemExit):
         main(["--root", str(tmp_path), "--fit", "a", "--holdout", "a", "--out", str(tmp_path / "o")])
+
+
+def test_help_explains_every_option_and_ends_with_an_example(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for action in build_parser()._actions:
+        if not action.option_strings or action.dest == "help":
+            continue
+        option = action.option_strings[-1]
+        # a help text, with the default (or "required"), is what --help prints next to the option
+        assert action.help and ("default" in action.help or action.required), f"{option}: no help text/default"
+        assert option in text and " ".join(action.help.split()[:3]) in " ".join(text.split()), option
+    assert "(default: 0.05 s)" in text  # units and defaults filled in
+    example = text.rstrip().split("\n\n")[-1]
+    assert example.startswith("example") and "python -m gyrodenoise.discrepancy --root" in example

@@ -76,3 +76,40 @@ def test_ckpt_path_resumes(root, tmp_path):
     assert [p.name for p in (tmp_path / "first" / "checkpoints").glob("best-*")] == ["best-epoch0001.ckpt"]
     resumed = train(config(root, tmp_path / "second", "trainer.max_epochs=4", f"ckpt_path={last}"))
     assert resumed["epochs"] == 4
+
+
+def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
+    """experiment=sim_quick (the README's main job) on tiny settings: TensorBoard gets the scalars, the
+    figures and the hparams; without a terminal the progress is one plain line every N epochs."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    overrides = [
+        "experiment=sim_quick",
+        "dataset.generation.duration_s=12",
+        "dataset.train_seqs=[drone_00]",
+        "dataset.val_seqs=[hand_05]",
+        "dataset.test_seqs=[drone_10]",
+        "dataset.window=256",
+        "model.channels=[4,8]",
+        "model.dilations=[1,2]",
+        "trainer.max_epochs=4",
+        "trainer.check_val_every_n_epoch=2",
+        "callbacks.progress_bar.print_every_n_epochs=2",
+        f"paths.output_dir={tmp_path}",
+    ]
+    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
+        cfg = compose("train", overrides=overrides)
+    train(cfg)
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if ln.startswith("epoch ")]
+    assert [ln.split(" | ")[0] for ln in lines] == ["epoch 2/4", "epoch 4/4"], out
+    assert "left | train/loss " in lines[0] and "| val/aoe_deg " in lines[1], lines
+    assert "\r" not in out and "Epoch 0" not in out  # no redrawn (per-epoch) tqdm bars in a log
+
+    ev = EventAccumulator(str(tmp_path / "tensorboard"), size_guidance={"images": 0})
+    ev.Reload()
+    tags = ev.Tags()
+    assert {"train/loss", "lr-Adam", "val/aoe_deg", "test/aoe_deg"} <= set(tags["scalars"]), tags["scalars"]
+    assert len(ev.Scalars("train/loss")) == 4
+    assert {"val/orientation", "val/gyro_correction"} <= set(tags["images"]), tags["images"]
+    assert "_hparams_/session_start_info" in ev.summary_metadata

@@ -39,6 +39,7 @@ from pathlib import Path
 import yaml
 
 from gyrodenoise.atomic import write_bytes, write_text
+from gyrodenoise.paths import portable_path
 
 SEED_KEY = "seed"
 IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, never a setting
@@ -405,7 +406,7 @@ def collect(
         raise ValueError("the runs do not differ in any overridden key: name the ablated keys with --keys")
     settings = group(runs, keys)
     title = title or f"Ablation over {', '.join(keys)} ({len(runs)} runs)"
-    md = [f"# {title}\n", f"Runs: {', '.join(str(d) for d in dirs)}", ""]
+    md = [f"# {title}\n", f"Runs: {', '.join(portable_path(d) for d in dirs)}", ""]
     if where:
         md += [f"Filter: {', '.join(f'{k}={v}' for k, v in where)}", ""]
     md += [markdown_table(settings, keys)]

@@ -33,6 +33,7 @@ from gyrodenoise.data.checks import CheckReport, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
+from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import load_model, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.streaming import StreamingCorrector
@@ -213,9 +214,9 @@ def main(argv: list[str] | None = None) -> int:
     write_text(out_tum, tum_text(res.rec.t_ns, res.R))
     delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)
     summary = {
-        "command": " ".join(["gyrodenoise-correct", *(argv if argv is not None else sys.argv[1:])]),
-        "input": str(path),
-        "model": meta.get("path"),
+        "command": "gyrodenoise-correct " + portable_command(argv if argv is not None else sys.argv[1:]),
+        "input": portable_path(path),
+        "model": meta["name"],
         "model_rate_hz": model_rate(meta),
         "engine": args.engine,
         "samples": len(res.rec),
@@ -229,12 +230,12 @@ def main(argv: list[str] | None = None) -> int:
         "mean_std_deg_s": None if res.std is None else float(np.degrees(np.linalg.norm(res.std, axis=1).mean())),
         "beats_calibrated": meta.get("beats_calibrated"),
         "warnings": ([model_warning] if model_warning else []) + res.report.warnings,
-        "outputs": {"imu_csv": str(out_csv), "orientation_tum": str(out_tum)},
+        "outputs": {"imu_csv": portable_path(out_csv), "orientation_tum": portable_path(out_tum)},
     }
     write_json(out_csv.parent / "correct_summary.json", summary)
     print(
         f"corrected {len(res.rec)} samples ({summary['duration_s']:.1f} s at {res.report.rate_hz:.4g} Hz"
-        f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta.get('path')}; "
+        f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta['name']}; "
         f"mean correction {summary['mean_correction_deg_s']:.3f} deg/s"
         + (
             f"; ensemble of {summary['ensemble_members']}: mean spread {summary['mean_std_deg_s']:.3f} deg/s "

@@ -190,7 +190,7 @@ def evaluate(cfg: DictConfig) -> dict:
     summary = {
         "dataset": dm.name,
         "split": split,
-        "models": {"proposed": proposed_meta.get("path"), "calibrated IMU": calibrated_meta.get("path")},
+        "models": {"proposed": proposed_meta["name"], "calibrated IMU": calibrated_meta["name"]},  # no machine paths
         "averaged_sequences": averaged,
         "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in METHODS} for n, r in results.items()},
         "average_aoe_deg": {

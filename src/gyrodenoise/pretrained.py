@@ -20,6 +20,7 @@ import torch
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.denoiser import build_model
 from gyrodenoise.models.ensemble import CorrectionModel
+from gyrodenoise.paths import portable_path
 
 FORMAT = "gyrodenoise-model/1"
 
@@ -59,8 +60,17 @@ def resolve(name_or_path: str | Path) -> Path:
     )
 
 
+def model_name(path: str | Path) -> str:
+    """How reports name a model file: its shipped name ('euroc') when it is a shipped model, else its
+    portable path (the install folder of the package differs between machines)."""
+    p = Path(path)
+    if p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve():
+        return p.stem
+    return portable_path(p)
+
+
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
-    """Returns (model in eval mode, metadata)."""
+    """Returns (model in eval mode, metadata); metadata 'path' is the file, 'name' how reports name it."""
     path = resolve(name_or_path)
     blob = torch.load(path, map_location=map_location, weights_only=True)
     if blob.get("format") == FORMAT:
@@ -68,13 +78,13 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
         cfg = blob["hyper_parameters"]["model"]
         state = {k[len("model.") :]: v for k, v in blob["state_dict"].items() if k.startswith("model.")}
-        meta = {"checkpoint": str(path), "epoch": blob.get("epoch")}
+        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch")}
     else:
         raise ValueError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     model = build_model(**cfg)
     model.load_state_dict(state)
     model.eval()
-    return model, {"model": cfg, **meta, "path": str(path)}
+    return model, {"model": cfg, **meta, "path": str(path), "name": model_name(path)}
 
 
 class ModelQualityWarning(UserWarning):
@@ -85,7 +95,7 @@ def not_better_warning(meta: dict) -> str | None:
     """The warning for a model whose metadata says it did not beat the calibrated baseline, else None."""
     if meta.get("beats_calibrated") is not False:
         return None
-    name = meta.get("path", "this model")
+    name = meta.get("name", meta.get("path", "this model"))
     model_val, cal_val = meta.get("val_aoe_deg"), meta.get("calibrated_val_aoe_deg")
     numbers = ""
     if model_val is not None and cal_val is not None:

@@ -29,6 +29,7 @@ from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import save_model
 
 
@@ -148,7 +149,7 @@ def train(cfg: DictConfig) -> dict:
     safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
 
     summary = {
-        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "command": Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:]),
         "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
         "config": OmegaConf.to_container(cfg, resolve=True),
         "seed": cfg.get("seed"),
@@ -158,7 +159,7 @@ def train(cfg: DictConfig) -> dict:
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
         "selection": cfg.select,
-        "best_checkpoint": best_path,
+        "best_checkpoint": portable_path(best_path) if best_path else "",
         "val": val,
         "test": test,
     }

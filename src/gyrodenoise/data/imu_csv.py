@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.data.readers import DataFormatError, text_lines
 
 G0 = 9.80665  # standard gravity, m/s^2 per g
 TIME_UNITS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}  # ns per unit
@@ -25,6 +25,10 @@ FIELDS = ("t", "wx", "wy", "wz", "ax", "ay", "az")
 ASL_HEADER = (
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
     "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
+CSV_LAYOUT = (
+    f"a text CSV of IMU samples: by default ASL imu0/data.csv with the header '{ASL_HEADER}', or any delimited "
+    "text with --columns and its units"
 )
 
 
@@ -124,39 +128,38 @@ def read_imu_csv(
     rows: list[list[float]] = []
     line_numbers: list[int] = []
     ns_per = TIME_UNITS[time_unit]
-    with open(path, encoding="utf-8") as fh:
-        for lineno, raw in enumerate(fh, start=1):
-            s = raw.strip()
-            if not s:
+    for lineno, raw in text_lines(path, CSV_LAYOUT):
+        s = raw.strip()
+        if not s:
+            continue
+        if delimiter is None and header is None and idx is None:
+            delimiter = _guess_delimiter(s.lstrip("#"))
+        if s.startswith("#"):
+            if header is None and idx is None:
+                header = _split(s.lstrip("#"), delimiter)
+            continue
+        fields = _split(s, delimiter)
+        if idx is None:
+            if header is None and not all(_is_number(f) for f in fields):
+                header = fields
                 continue
-            if delimiter is None and header is None and idx is None:
-                delimiter = _guess_delimiter(s.lstrip("#"))
-            if s.startswith("#"):
-                if header is None and idx is None:
-                    header = _split(s.lstrip("#"), delimiter)
-                continue
-            fields = _split(s, delimiter)
-            if idx is None:
-                if header is None and not all(_is_number(f) for f in fields):
-                    header = fields
-                    continue
-                idx = _resolve_columns(columns, header, path)
-            if len(fields) <= max(idx):
-                raise DataFormatError(
-                    f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
-                    "remove the truncated line, or check --columns/--delimiter."
-                )
-            t_field = fields[idx[0]]
+            idx = _resolve_columns(columns, header, path)
+        if len(fields) <= max(idx):
+            raise DataFormatError(
+                f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
+                "remove the truncated line, or check --columns/--delimiter."
+            )
+        t_field = fields[idx[0]]
+        try:
             try:
-                try:
-                    stamps.append(int(t_field) * ns_per)  # integers stay exact
-                except ValueError:
-                    stamps.append(round(float(t_field) * ns_per))
-                rows.append([float(fields[i]) for i in idx[1:]])
+                stamps.append(int(t_field) * ns_per)  # integers stay exact
             except ValueError:
-                bad = next(i for i in idx if not _is_number(fields[i]))
-                raise DataFormatError(f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number.") from None
-            line_numbers.append(lineno)
+                stamps.append(round(float(t_field) * ns_per))
+            rows.append([float(fields[i]) for i in idx[1:]])
+        except ValueError:
+            bad = next(i for i in idx if not _is_number(fields[i]))
+            raise DataFormatError(f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number.") from None
+        line_numbers.append(lineno)
     if not rows:
         raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")
     values = np.array(rows, dtype=np.float64)

@@ -6,12 +6,21 @@ and what to do. Nothing is dropped silently.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 QUAT_NORM_TOL = 1e-3  # |q| may deviate this much (6-decimal files reach ~1e-6); renormalised after
+IMU_LAYOUT = (
+    "an ASL IMU text file (mav0/imu0/data.csv): a '#timestamp [ns],w_RS_S_x [rad s^-1],...' header, then lines "
+    "t[ns],w_x,w_y,w_z[rad/s],a_x,a_y,a_z[m/s^2]"
+)
+GT_LAYOUT = (
+    "an ASL ground-truth text file (mav0/state_groundtruth_estimate0/data.csv or mav0/mocap0/data.csv): "
+    "lines t[ns],p_x,p_y,p_z[m],q_w,q_x,q_y,q_z"
+)
 
 
 class DataFormatError(ValueError):
@@ -34,7 +43,41 @@ class GroundTruthData:
     path: Path
 
 
-def read_csv_table(path: Path, min_cols: int, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _first_undecodable(path: Path) -> tuple[int, int, int]:
+    """(1-based line, byte offset, byte value) of the first byte that is not UTF-8; (0, -1, 0) if none."""
+    offset = 0
+    with open(path, "rb") as fh:  # line by line: the error path never holds a big file in memory at once
+        for lineno, raw in enumerate(fh, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                return lineno, offset + e.start, raw[e.start]
+            offset += len(raw)
+    return 0, -1, 0
+
+
+def text_lines(path: Path, expected: str) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line) of a UTF-8 text file. A binary file or one in another encoding raises
+    DataFormatError naming the file, the first bad byte (offset and line) and what was expected, instead of
+    the bare 'utf-8 codec can't decode byte' that says neither which file nor what to do."""
+    advice = (
+        f"This is not a UTF-8 text CSV file; expected {expected}. A binary log (rosbag, .bin, ...) must be "
+        "converted to CSV first; a text file in another encoding (e.g. Latin-1) must be saved as UTF-8."
+    )
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for lineno, line in enumerate(fh, start=1):
+                if "\x00" in line:  # NUL is valid UTF-8 but never in a text CSV: a binary file
+                    raise DataFormatError(f"{path}:{lineno}: NUL byte (binary data). {advice}")
+                yield lineno, line
+    except UnicodeDecodeError:
+        lineno, offset, byte = _first_undecodable(path)
+        raise DataFormatError(f"{path}:{lineno}: byte 0x{byte:02x} at offset {offset} is not UTF-8. {advice}") from None
+
+
+def read_csv_table(
+    path: Path, min_cols: int, what: str, expected: str = "a comma-separated ASL file"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a comma-separated numeric table with '#' comment lines.
 
     Returns (t_ns int64, values float64 with the `min_cols - 1` columns after the time, line numbers).
@@ -49,26 +92,24 @@ def read_csv_table(path: Path, min_cols: int, what: str) -> tuple[np.ndarray, np
     stamps: list[int] = []
     rows: list[list[str]] = []
     line_numbers: list[int] = []
-    with open(path, encoding="utf-8") as fh:
-        for lineno, line in enumerate(fh, start=1):
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            fields = [f.strip() for f in s.split(",")]
-            if len(fields) < min_cols:
-                raise DataFormatError(
-                    f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least "
-                    f"{min_cols}. Fix or remove the truncated line."
-                )
-            try:
-                stamps.append(int(fields[0]))
-            except ValueError:
-                raise DataFormatError(
-                    f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number "
-                    "of nanoseconds."
-                ) from None
-            rows.append(fields[1:min_cols])
-            line_numbers.append(lineno)
+    for lineno, line in text_lines(path, expected):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        fields = [f.strip() for f in s.split(",")]
+        if len(fields) < min_cols:
+            raise DataFormatError(
+                f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least "
+                f"{min_cols}. Fix or remove the truncated line."
+            )
+        try:
+            stamps.append(int(fields[0]))
+        except ValueError:
+            raise DataFormatError(
+                f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number of nanoseconds."
+            ) from None
+        rows.append(fields[1:min_cols])
+        line_numbers.append(lineno)
     if not rows:
         raise DataFormatError(f"{path}: no data lines in {what} file (only comments or empty).")
     try:
@@ -117,14 +158,14 @@ def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> N
 
 def read_imu(path: str | Path) -> ImuData:
     """ASL IMU file: t[ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]."""
-    t, v, _ = read_csv_table(Path(path), 7, "IMU")
+    t, v, _ = read_csv_table(Path(path), 7, "IMU", IMU_LAYOUT)
     return ImuData(t_ns=t, gyro=v[:, 0:3], acc=v[:, 3:6], path=Path(path))
 
 
 def read_groundtruth(path: str | Path) -> GroundTruthData:
     """ASL ground truth: t[ns], p_x, p_y, p_z [m], q_w, q_x, q_y, q_z, then optional columns."""
     path = Path(path)
-    t, v, lines = read_csv_table(path, 8, "ground truth")
+    t, v, lines = read_csv_table(path, 8, "ground truth", GT_LAYOUT)
     q_wxyz = v[:, 3:7]
     norm = np.linalg.norm(q_wxyz, axis=1)
     bad = np.abs(norm - 1.0) > QUAT_NORM_TOL

@@ -4,19 +4,7 @@
         --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
         --out reports/discrepancy_euroc
 
-Options:
-  --root DIR            folder holding the ASL sequences (<root>/<name>/mav0/...)
-  --fit NAMES...        sequences the model is fitted on
-  --holdout NAMES...    sequences the gap is measured on (never fitted)
-  --base EFFECTS        comma-separated base model (default: bias,white_noise)
-  --candidates EFFECTS  comma-separated effects to try (default: the whole vocabulary)
-  --gt-file NAME=PATH   ground-truth file (relative to mav0) for one sequence; repeatable
-  --knot-spacing S      spline knot spacing of the ground-truth fit, s (default 0.05)
-  --bic-threshold X     BIC gain an effect needs to be named (default 10)
-  --min-gain F          fraction of the remaining residual an effect must explain (default 0)
-  --network MODEL       also regress the correction of a trained denoiser on the effect library
-  --seed N              seed of the re-simulations (default 0)
-  --out DIR             output folder (report.json, report.md, plots)
+Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 """
 
 from __future__ import annotations
@@ -31,6 +19,7 @@ from pathlib import Path
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.workflow import run
+from gyrodenoise.paths import portable_command
 from gyrodenoise.sim.effects import EFFECTS
 
 
@@ -42,20 +31,97 @@ def _effects(s: str) -> list[str]:
     return names
 
 
+EXAMPLE = """example (EuRoC, as in reports/discrepancy_euroc):
+  python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
+      --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
+      --network euroc --out reports/discrepancy_euroc
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m gyrodenoise.discrepancy",
+        description=__doc__.split("\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,  # keeps the example's line breaks
+        epilog=EXAMPLE,
+    )
+    vocabulary = ", ".join(sorted(EFFECTS))
+    p.add_argument(
+        "--root", required=True, type=Path, metavar="DIR", help="folder of ASL sequences (DIR/NAME/mav0/...); required"
+    )
+    p.add_argument(
+        "--fit", nargs="+", required=True, metavar="NAME", help="sequences the effects are fitted on; required"
+    )
+    p.add_argument(
+        "--holdout",
+        nargs="+",
+        required=True,
+        metavar="NAME",
+        help="sequences the gap is measured on, never fitted (disjoint from --fit); required",
+    )
+    p.add_argument(
+        "--base",
+        type=_effects,
+        default="bias,white_noise",  # a string default goes through `type` too
+        metavar="EFFECTS",
+        help="comma-separated effects every model contains (default: %(default)s)",
+    )
+    p.add_argument(
+        "--candidates",
+        type=_effects,
+        default=None,
+        metavar="EFFECTS",
+        help=f"comma-separated effects to try (default: the whole vocabulary: {vocabulary})",
+    )
+    p.add_argument(
+        "--gt-file",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        help="ground-truth file of sequence NAME, relative to DIR/NAME/mav0; repeatable (default: "
+        "state_groundtruth_estimate0/data.csv, else mocap0/data.csv)",
+    )
+    p.add_argument(
+        "--knot-spacing",
+        type=float,
+        default=0.05,
+        metavar="S",
+        help="knot spacing of the spline fitted to the ground truth, in seconds (default: %(default)s s)",
+    )
+    p.add_argument(
+        "--bic-threshold",
+        type=float,
+        default=10.0,
+        metavar="X",
+        help="BIC decrease (dimensionless) an effect needs to be named (default: %(default)s)",
+    )
+    p.add_argument(
+        "--min-gain",
+        type=float,
+        default=0.0,
+        metavar="F",
+        help="fraction (0-1) of the remaining residual an effect must explain to be named (default: %(default)s)",
+    )
+    p.add_argument(
+        "--network",
+        default=None,
+        metavar="MODEL",
+        help="also regress the correction of a trained denoiser (shipped name such as euroc, or a .pt/.ckpt "
+        "path) on the effect library (default: none)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of the re-simulations (default: %(default)s)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output folder for report.md, report.json and the plots; required",
+    )
+    return p
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m gyrodenoise.discrepancy", description=__doc__.split("\n")[0])
-    p.add_argument("--root", required=True, type=Path)
-    p.add_argument("--fit", nargs="+", required=True)
-    p.add_argument("--holdout", nargs="+", required=True)
-    p.add_argument("--base", type=_effects, default=["bias", "white_noise"])
-    p.add_argument("--candidates", type=_effects, default=None)
-    p.add_argument("--gt-file", action="append", default=[], metavar="NAME=PATH")
-    p.add_argument("--knot-spacing", type=float, default=0.05)
-    p.add_argument("--bic-threshold", type=float, default=10.0)
-    p.add_argument("--min-gain", type=float, default=0.0)
-    p.add_argument("--network", default=None)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", type=Path, required=True)
+    p = build_parser()
     args = p.parse_args(argv)
     overlap = set(args.fit) & set(args.holdout)
     if overlap:
@@ -79,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
 
     fit, holdout = load(args.fit), load(args.holdout)
     report, arrays = run(fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed)
-    report["command"] = "python -m gyrodenoise.discrepancy " + " ".join(sys.argv[1:] if argv is None else argv)
+    report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects

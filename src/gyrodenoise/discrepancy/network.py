@@ -58,7 +58,7 @@ def network_effects(model: str, fcs: list[FitContext], bic_threshold: float = 10
         )
     off = C - np.diag(np.diag(C))
     return {
-        "model": meta.get("path", model),
+        "model": meta["name"],  # the shipped name or a portable path, never this machine's install folder
         "model_dataset": meta.get("dataset"),
         "C_hat": C.tolist(),
         "C_hat_as_effects": {

@@ -1,0 +1,38 @@
+"""Paths as written into reports, summaries and model metadata: portable, never the developer's machine.
+
+Committed reports are read on other machines, so an absolute path such as /home/me/repo/outputs/... says
+nothing there (and leaks the folder layout). Shipped models are named by their shipped name (see
+gyrodenoise.pretrained); other paths are written relative to the working directory (the repository root
+for the commands in the README) when they lie inside it or beside it, else under '~' when in the home
+folder, else as given.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+
+def portable_path(path: str | Path) -> str:
+    """`path` for a report: 'outputs/x', '../shared/data/euroc', '~/.cache/...', or unchanged."""
+    p = Path(path)
+    if not p.is_absolute():
+        return str(path)
+    p = Path(os.path.abspath(p))  # normalise '..' without resolving symlinks (a linked data folder keeps its name)
+    cwd = Path.cwd()
+    if cwd.parent != cwd.parent.parent and p.is_relative_to(cwd.parent):  # inside the working directory or beside it
+        return Path(os.path.relpath(p, cwd)).as_posix()
+    home = Path.home()
+    if p.is_relative_to(home):
+        return "~/" + p.relative_to(home).as_posix()
+    return str(path)
+
+
+def portable_command(args: Iterable[str]) -> str:
+    """A command line with each absolute path argument (also `key=/abs/path` overrides) made portable."""
+    out = []
+    for a in map(str, args):
+        key, sep, value = a.rpartition("=") if "=" in a and not a.startswith("/") else ("", "", a)
+        out.append(key + sep + portable_path(value) if value.startswith("/") else a)
+    return " ".join(out)
