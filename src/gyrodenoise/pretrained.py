@@ -63,10 +63,12 @@ def resolve(name_or_path: str | Path) -> Path:
 def model_name(path: str | Path) -> str:
     """How reports name a model file: its shipped name ('euroc') when it is a shipped model, else its
     portable path (the install folder of the package differs between machines)."""
+    return Path(path).stem if is_shipped(path) else portable_path(path)
+
+
+def is_shipped(path: str | Path) -> bool:
     p = Path(path)
-    if p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve():
-        return p.stem
-    return portable_path(p)
+    return p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve()
 
 
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
@@ -84,7 +86,9 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     model = build_model(**cfg)
     model.load_state_dict(state)
     model.eval()
-    return model, {"model": cfg, **meta, "path": str(path), "name": model_name(path)}
+    # the name reports use: the shipped name, else the name the file records (ensembles), else its path
+    name = Path(path).stem if is_shipped(path) else meta.get("name") or portable_path(path)
+    return model, {"model": cfg, **meta, "path": str(path), "name": name}
 
 
 class ModelQualityWarning(UserWarning):
