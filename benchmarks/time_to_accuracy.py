@@ -102,6 +102,15 @@ def stats(xs: list[float]) -> str:
     return f"{statistics.fmean(xs):.2f} ± {sd:.2f}" if math.isfinite(sd) else f"{xs[0]:.2f}"
 
 
+def queue_throughput() -> list[tuple[Path, str]]:
+    """(log, closing line) of every committed GPU queue log: runs, seconds, runs per hour."""
+    out = []
+    for path in sorted(Path("benchmarks/results/gpu_queue_logs").glob("*.log")):
+        lines = [ln for ln in path.read_text().splitlines() if "runs finished in" in ln]
+        out += [(path, lines[-1].strip())] if lines else []
+    return out
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     import matplotlib
 
@@ -176,6 +185,16 @@ def cmd_report(args: argparse.Namespace) -> int:
         "| epochs | seed | fit wall (s) | test AOE (deg) | machine |",
         "|---|---|---|---|---|",
         *(alone_rows or ["| - | none yet | | | |"]),
+        "",
+        "## Many trainings at once on one GPU machine",
+        "",
+        "The queue logs of the GPU calls are in `benchmarks/results/gpu_queue_logs/` (one H100, 16 CPU cores,",
+        "`python benchmarks/run_queue.py QUEUE --jobs J --threads 1`; J = 12 in call 1, 14 in call 3, 15 in",
+        "calls 4-5, 8 with 2 threads in call 6; call 1's single run was the 1800-epoch run alone). The runs mix",
+        "600-epoch EuRoC runs with 300-1800-epoch and TUM-VI ones, so runs/hour is that of each call's mix;",
+        "a mostly-600-epoch EuRoC queue (calls 3-4) ran at 571-652 runs/hour. Their closing lines:",
+        "",
+        *[f"- `{line}` ({path.name})" for path, line in queue_throughput()],
         "",
         "## The default run on 2 CPU cores, timed end to end",
         "",
