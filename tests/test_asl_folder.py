@@ -100,5 +100,8 @@ def test_validation_split(asl_root):
     assert val == [("walk_1[5s:]", n - int(5.0 * RATE)), ("walk_2", n)]
     train, val = parts(train_seqs=["walk_1", "walk_2"], val_seqs=["walk_3"], train_duration_s=None)
     assert train == [n, n] and val == [("walk_3", n)]
-    with pytest.raises(ValueError, match="nothing of it is left"):
-        parts(train_seqs=["walk_1"], val_seqs=None, train_duration_s=None)
+    with pytest.raises(ValueError, match="nothing of it is left"):  # named for validation, but all trained on
+        parts(train_seqs=["walk_1"], val_seqs=["walk_1"], train_duration_s=None)
+    # whole training sequences and no validation sequence named: nothing to validate on (select=last needs none)
+    train, val = parts(train_seqs=["walk_1"], val_seqs=None, train_duration_s=None)
+    assert train == [n] and val == []

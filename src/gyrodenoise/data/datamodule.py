@@ -122,6 +122,7 @@ class ImuDataModule(L.LightningDataModule):
         self.name, self.root = name, str(root)
         self.train_names = list(train_seqs)
         self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
+        self.val_explicit = val_seqs is not None  # named validation sequences must have data to validate on
         self.cv_fold, self.cv_holdout = cv_fold, None
         if cv_fold is not None:
             if val_seqs is not None:
@@ -172,8 +173,8 @@ class ImuDataModule(L.LightningDataModule):
                 cut = len(seq) - 1 if self.train_duration_s is None else seq.index_at(self.train_duration_s)
                 self.train_part.append(seq.slice(0, cut + 1, name))
                 if name in self.val_names:
-                    if (self.cv_holdout is not None or self.train_duration_s is None) and len(seq) - cut <= self.block:
-                        continue  # a flight trained on whole has no tail to validate on
+                    if (self.cv_holdout is not None or not self.val_explicit) and len(seq) - cut <= self.block:
+                        continue  # a flight trained on whole has no tail; validation was not asked for by name
                     if len(seq) - cut <= self.block:
                         raise ValueError(
                             f"validation sequence {name!r} is also a training sequence and nothing of it is "
