@@ -63,13 +63,14 @@ def test_configs_exist():
 @pytest.mark.parametrize("name", EXPERIMENTS)
 def test_experiment_composes(name):
     """Every experiment config composes into a model, loss and data module; an ablation also at every
-    point of its sweep, with 3 seeds per setting."""
+    point of its sweep, with the 4 paired seeds whose held-out flight is the seed (cv_fold = seed)."""
     cfg = compose_train([f"experiment={name}"])
     _build(cfg)
     params = cfg.hydra.sweeper.get("params")
     params = OmegaConf.to_container(params) if params is not None else {}
     if name.startswith("ablation_"):
-        assert params["seed"] == "0,1,2", "every ablation runs 3 seeds per setting"
+        assert params["seed"] == "0,2,3,5", "every ablation runs the 4 paired seeds per setting"
+        assert cfg.dataset.cv_fold == cfg.seed, "the held-out validation flight is tied to the seed"
         assert cfg.task_name == name
         assert cfg.dataset.name == "euroc", "the paper's claims are about EuRoC, not the sim default"
     for key, values in params.items():
