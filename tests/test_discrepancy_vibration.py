@@ -19,7 +19,8 @@ from gyrodenoise.discrepancy.hidden import (
     run_case,
 )
 from gyrodenoise.discrepancy.spectral import fit_band
-from gyrodenoise.sim.effects import SignalContext, Vibration, WhiteNoise
+from gyrodenoise.sim.context import SignalContext
+from gyrodenoise.sim.effects import Vibration, WhiteNoise
 
 DURATION = 30.0
 RATE = 200.0

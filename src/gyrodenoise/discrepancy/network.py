@@ -13,7 +13,8 @@ from dataclasses import replace
 import numpy as np
 
 from gyrodenoise.discrepancy.rank import select_effects
-from gyrodenoise.sim.effects import EFFECTS, FitContext
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS
 
 DETERMINISTIC = [
     "scale_factor",

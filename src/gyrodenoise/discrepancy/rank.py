@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyrodenoise.discrepancy.spectral import BAND_PARAMS, BandFit, fit_band
-from gyrodenoise.sim.effects import EFFECTS, Effect, FitContext, Quantization, Saturation
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS, Effect, Quantization, Saturation
 
 # nonlinear parameters searched by `prepare` (counted in the BIC penalty)
 NONLINEAR_PARAMS = {"vibration": 1, "warmup_bias": 1, "bias_random_walk": 1}

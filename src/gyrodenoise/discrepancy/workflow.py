@@ -14,17 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrodenoise.discrepancy.compare import (
-    allan_taus,
-    cross_correlations,
-    drift_vs_truth_deg,
-    pooled_allan,
-    spectrum,
-    window_drift_deg,
-)
+from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.rank import Selection, per_sequence_refit, residuals_after, select_effects
 from gyrodenoise.discrepancy.spectral import psd_gap
-from gyrodenoise.sim.effects import EFFECTS, FitContext, Quantization, SignalContext, Vibration
+from gyrodenoise.sim.context import FitContext, SignalContext
+from gyrodenoise.sim.effects import EFFECTS, Quantization, Vibration
 
 DRIFT_WINDOWS_S = (1.0, 10.0, 60.0)
 SIM_DRAWS = 4  # re-simulations per held-out sequence for the Allan and spectral gaps

@@ -16,45 +16,17 @@ Residual convention: r = measured gyro - true body rate. Stages give the order o
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 from scipy import signal
 
+from gyrodenoise.allan import fit_allan_noise
+from gyrodenoise.sim.context import FitContext, SignalContext
+
 DEG = np.pi / 180.0
 G0 = 9.80665
 _MISALIGN_PAIRS = [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
-
-
-@dataclass
-class SignalContext:
-    """What an effect sees when it is applied (high internal rate)."""
-
-    t: np.ndarray  # (M,) s since power-on / sequence start
-    omega: np.ndarray  # (M, 3) true body rate
-    alpha: np.ndarray  # (M, 3) true body angular acceleration
-    f: np.ndarray  # (M, 3) true specific force
-    rate_hz: float
-    kinematics_at: Any = None  # callable t -> Kinematics, for the time offset
-
-
-@dataclass
-class FitContext:
-    """One measured sequence as the detector sees it (IMU rate)."""
-
-    name: str
-    t: np.ndarray  # (N,) s since the first IMU sample
-    gyro: np.ndarray  # (N, 3) measured
-    omega: np.ndarray  # (N, 3) true rate from the smooth ground-truth fit
-    alpha: np.ndarray
-    f: np.ndarray
-    rate_hz: float
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def residual(self) -> np.ndarray:
-        return self.gyro - self.omega
 
 
 EFFECTS: dict[str, type[Effect]] = {}
@@ -535,8 +507,6 @@ class BiasRandomWalk(Effect):
         return c
 
     def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
-        from gyrodenoise.discrepancy.compare import fit_allan_noise  # detector-side statistics
-
         n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz)
         k = np.sqrt(np.clip(k2, 0.0, None))
         se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
