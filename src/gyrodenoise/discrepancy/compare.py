@@ -9,7 +9,7 @@ import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_imu
+from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.trajectory import SmoothTrajectory
@@ -29,7 +29,9 @@ def load_fit_context(
     mav0 = sequence_folder(root, name)
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     imu = read_imu(mav0 / "imu0" / "data.csv")
-    traj = SmoothTrajectory.from_asl(gt_path, knot_spacing=knot_spacing)
+    gt = read_groundtruth(gt_path)
+    t_gt = (gt.t_ns - gt.t_ns[0]) * 1e-9
+    traj = SmoothTrajectory.fit(t_gt, gt.quat_xyzw, gt.pos, knot_spacing, t0_ns=int(gt.t_ns[0]), source=str(gt_path))
     t_imu = (imu.t_ns - traj.t0_ns) * 1e-9
     keep = (t_imu >= traj.t_start + margin_s) & (t_imu <= traj.t_end - margin_s)
     if keep.sum() < 100:
@@ -55,8 +57,20 @@ def load_fit_context(
             "gt_file": str(gt_path),
             # truth at other times (sequence time), for the time-offset regressor
             "kinematics_at": lambda tt, off=float(t_imu[0]): traj.evaluate(tt + off),
+            # the ground truth around its own fit, for the trusted band (`reconstruction.estimate_band`)
+            **gt_fit_residual(traj, t_gt, gt.quat_xyzw, margin_s),
+            "knot_spacing": knot_spacing,
         },
     )
+
+
+def gt_fit_residual(traj: SmoothTrajectory, t: np.ndarray, quat_xyzw: np.ndarray, margin_s: float = 0.5) -> dict:
+    """Rotation vector of R_fit(t)^T R_gt(t) at the ground-truth samples inside the span (minus
+    `margin_s`): the ground truth's noise plus the motion the spline does not follow."""
+    keep = (t >= traj.t_start + margin_s) & (t <= traj.t_end - margin_s)
+    rot_fit = Rotation.from_matrix(traj.evaluate(t[keep]).rot)
+    res = (rot_fit.inv() * Rotation.from_quat(quat_xyzw[keep])).as_rotvec()
+    return {"gt_t": t[keep], "gt_rotvec_residual": res}
 
 
 # ----------------------------------------------------------------------------- spectra, correlation

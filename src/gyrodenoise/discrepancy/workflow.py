@@ -16,10 +16,12 @@ import numpy as np
 
 from gyrodenoise.allan import allan_taus, pooled_allan
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
+from gyrodenoise.discrepancy.design import band_power
 from gyrodenoise.discrepancy.rank import Selection, per_sequence_refit, residuals_after, select_effects
+from gyrodenoise.discrepancy.reconstruction import band_limit
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.sim.context import FitContext, SignalContext
-from gyrodenoise.sim.effects import EFFECTS, Quantization, Vibration
+from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
 
 DRIFT_WINDOWS_S = (1.0, 10.0, 60.0)
 SIM_DRAWS = 4  # re-simulations per held-out sequence for the Allan and spectral gaps
@@ -37,12 +39,15 @@ def simulate_like(
     The white noise is drawn first, so two models simulated with generators of the same seed share
     its draws (common random numbers: their gaps differ by the models, not by the draws)."""
     if pred is None:
-        pred, _ = per_sequence_refit(sel, fc)
+        pred = per_sequence_refit(sel, fc)
     y = fc.omega + pred
     sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
     for name in ("white_noise", "bias_random_walk"):
         if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
-            y = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, y, rng)
+            noise = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, np.zeros_like(y), rng)
+            if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
+                noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
+            y = y + noise
     if sel.band_vibration:  # band-limited vibration: noise, drawn like the white noise
         y = Vibration(**sel.params["vibration"]).apply(sig, y, rng)
     if "saturation" in sel.params:
@@ -53,9 +58,23 @@ def simulate_like(
     return y, pred
 
 
-def allan_gap(meas_res: list[np.ndarray], sim_res: list[np.ndarray], rate_hz: float) -> float:
-    """Mean |log10(ADEV measured / ADEV simulated)| over cluster times and axes."""
+def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:
+    """White noise x (N, 3) given the PSD shape of a sensor low-pass (`SensorBandwidth.floor_shape`)."""
+    f = np.fft.rfftfreq(len(x), 1.0 / rate_hz)
+    gain = np.sqrt(SensorBandwidth.floor_shape(f, corner_hz, rate_hz))
+    return np.fft.irfft(np.fft.rfft(x, axis=0) * gain[:, None], len(x), axis=0)
+
+
+def allan_gap(
+    meas_res: list[np.ndarray], sim_res: list[np.ndarray], rate_hz: float, f_max: float | None = None
+) -> float:
+    """Mean |log10(ADEV measured / ADEV simulated)| over cluster times and axes. `f_max`: both are
+    limited to the trusted band [0, f_max] and compared at cluster times >= 1 / f_max."""
     taus = allan_taus(min(len(r) for r in meas_res), rate_hz, per_octave=2)
+    if f_max is not None and f_max < rate_hz / 2:
+        meas_res = [band_limit(r, rate_hz, f_max) for r in meas_res]
+        sim_res = [band_limit(r, rate_hz, f_max) for r in sim_res]
+        taus = taus[taus >= 1.0 / f_max]
     a = pooled_allan(meas_res, rate_hz, taus)
     b = pooled_allan(sim_res, rate_hz, taus)
     ok = np.isfinite(a) & np.isfinite(b) & (a > 0) & (b > 0)
@@ -70,14 +89,17 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
     draw)."""
     res, drifts, sims, meas, sim_noise = [], [], [], [], []
     per_seq = {}
+    ones = np.ones(3)
+    in_band = []
     for s, fc in enumerate(fcs):
-        pred, _ = per_sequence_refit(sel, fc)
+        pred = per_sequence_refit(sel, fc)
         for k in range(SIM_DRAWS):
             y_sim, _ = simulate_like(sel, fc, np.random.default_rng([seed, s, k]), pred)
             sims.append(y_sim - fc.omega)
             sim_noise.append(y_sim - fc.omega - pred)
         e = fc.residual - pred
         res.append(e)
+        in_band.append(band_power(fc, e, ones))
         d = window_drift_deg(fc.gyro, fc.omega + pred, 1.0 / fc.rate_hz, 10.0)
         drifts.append(d)
         meas.append(fc.residual)
@@ -87,12 +109,17 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
         }
     allres = np.concatenate(res)
     alld = np.concatenate(drifts)
+    f_hi = min(fc.extra.get("band_hz") or fc.rate_hz / 2 for fc in fcs)
+    weights = [len(fc.t) for fc in fcs]
     return {
         "residual_rms_rad_s": float(np.sqrt(np.mean(allres**2))),
+        # what the comparison can trust: the residual in the trusted band (Parseval), and that band
+        "residual_rms_in_band_rad_s": float(np.sqrt(np.average(in_band, weights=weights))),
+        "band_hz": f_hi,
         "residual_rms_per_axis_rad_s": np.sqrt(np.mean(allres**2, 0)).tolist(),
         "drift_10s_median_deg": float(np.median(alld)) if len(alld) else float("nan"),
-        "allan_gap_log10": allan_gap(meas, sims, fcs[0].rate_hz),
-        "psd_gap_log10": psd_gap(res, sim_noise, fcs[0].rate_hz),
+        "allan_gap_log10": allan_gap(meas, sims, fcs[0].rate_hz, f_hi),
+        "psd_gap_log10": psd_gap(res, sim_noise, fcs[0].rate_hz, f_max=f_hi),
         "per_sequence": per_seq,
     }
 
