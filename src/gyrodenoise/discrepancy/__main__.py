@@ -12,8 +12,12 @@ Options:
   --candidates EFFECTS  comma-separated effects to try (default: the whole vocabulary)
   --gt-file NAME=PATH   ground-truth file (relative to mav0) for one sequence; repeatable
   --knot-spacing S      spline knot spacing of the ground-truth fit, s (default 0.05)
-  --bic-threshold X     BIC gain an effect needs to be named (default 10)
-  --min-gain F          fraction of the remaining residual an effect must explain (default 0)
+  --bic-threshold X     smallest BIC gain an effect needs to be named (default 10); the null
+                        distribution's 95th percentile raises it per candidate
+  --null-draws N        re-simulations of the fitted base model for the null distribution of every
+                        candidate's delta BIC (default 30; 0: the fixed threshold alone)
+  --min-gain F          share of the in-band residual power (held-out sequences) an effect must
+                        close to be named (default 0.01)
   --network MODEL       also regress the correction of a trained denoiser on the effect library
   --seed N              seed of the re-simulations (default 0)
   --out DIR             output folder (report.json, report.md, plots)
@@ -29,6 +33,8 @@ import time
 from pathlib import Path
 
 from gyrodenoise.discrepancy.compare import load_fit_context
+from gyrodenoise.discrepancy.null import DRAWS
+from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.sim.effects import EFFECTS
@@ -52,7 +58,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--gt-file", action="append", default=[], metavar="NAME=PATH")
     p.add_argument("--knot-spacing", type=float, default=0.05)
     p.add_argument("--bic-threshold", type=float, default=10.0)
-    p.add_argument("--min-gain", type=float, default=0.0)
+    p.add_argument("--min-gain", type=float, default=MIN_GAIN)
+    p.add_argument("--null-draws", type=int, default=DRAWS)
     p.add_argument("--network", default=None)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True)
@@ -78,7 +85,9 @@ def main(argv: list[str] | None = None) -> int:
         return [load_fit_context(args.root, n, args.gt_files.get(n), args.knot_spacing) for n in names]
 
     fit, holdout = load(args.fit), load(args.holdout)
-    report, arrays = run(fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed)
+    report, arrays = run(
+        fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed, args.null_draws
+    )
     report["command"] = "python -m gyrodenoise.discrepancy " + " ".join(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     if args.network:

@@ -17,8 +17,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from gyrodenoise.discrepancy.reconstruction import band_rows, estimate_band, row_frequencies
-from gyrodenoise.discrepancy.spectral import fit_nuisance, spectra
+from gyrodenoise.discrepancy.reconstruction import band_rows, estimate_band, row_frequencies, sensor_floor
+from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, spectra
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect, SensorBandwidth
 
@@ -75,13 +75,15 @@ def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, 
     return Xb.reshape(-1, k), rb.reshape(-1)
 
 
-def nuisance_of(fcs: list[FitContext]) -> list:
-    """Per sequence, its reconstruction-error PSD (f -> (len f, 3)) or None (exact ground truth)."""
-    out = []
+def nuisance_of(fcs: list[FitContext]) -> Nuisance | None:
+    """The reconstruction error of `fcs` as a spectral nuisance term (None: exact ground truth)."""
+    psd = []
     for fc in fcs:
         b = fc.extra.get("band")
-        out.append(None if b is None or b.exact else b.error_psd)
-    return out
+        psd.append(None if b is None or b.exact else b.error_psd)
+    if all(p is None for p in psd):
+        return None
+    return Nuisance(psd, fcs[0].extra.get("sensor_floor"))
 
 
 def set_row_weights(fcs: list[FitContext], floor: np.ndarray, kappa: np.ndarray) -> None:
@@ -101,13 +103,20 @@ def set_reconstruction_model(fcs: list[FitContext], residuals: list[np.ndarray])
     base residuals, and the rows' GLS weights. Returns the per-axis noise std the floor implies at
     the IMU rate (the rows' weights), or None when nothing is band-limited or carries an error."""
     set_bands(fcs, residuals)
-    fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nuisance_of(fcs))
-    if fit is None:
+    nu = nuisance_of(fcs)
+    if nu is None:
         return band_noise_weights(fcs, residuals) if band_limited(fcs) else None
-    floor, kappa = fit
-    set_row_weights(fcs, floor, kappa)
+    # the sensor's floor where the reconstruction error does not reach (inside the band it may
+    # swamp it), then the error's level beside it in the band
+    floor = sensor_floor([fc.extra["band"] for fc in fcs])
     for fc in fcs:
         fc.extra["sensor_floor"] = floor
+    nu.floor = floor
+    fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nu)
+    if fit is None:
+        return band_noise_weights(fcs, residuals)
+    floor, kappa = fit
+    set_row_weights(fcs, floor, kappa)
     return np.maximum(np.sqrt(floor * fcs[0].rate_hz / 2), 1e-12)
 
 
@@ -253,8 +262,13 @@ def band_noise_weights(fcs: list[FitContext], residuals: list[np.ndarray]) -> np
 def band_power(fc: FitContext, r: np.ndarray, sigma: np.ndarray) -> float:
     """Weighted power of residual r (N, 3) of sequence `fc` in its trusted band (mean square of
     the rows a fit would use)."""
-    _, rows = fit_rows(fc, np.zeros((r.size, 0)), (r / sigma).reshape(-1))
-    return float(np.mean(rows**2))
+    m = row_mask(fc)
+    x = np.where(m, r / sigma, 0.0)
+    f_max, w = fc.extra.get("band_hz"), fc.extra.get("row_weights")
+    if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
+        return float(np.mean(x[m] ** 2))
+    rows = band_rows(x, fc.rate_hz, f_max, force=True)
+    return float(np.mean((rows if w is None else rows * w) ** 2))
 
 
 def sensor_view(fc: FitContext, corner_hz: float | None) -> FitContext:

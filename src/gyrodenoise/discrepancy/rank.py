@@ -169,7 +169,9 @@ def score_step(
         if vib is not None and "vibration" in selected and vib.stochastic:
             named_band = (float(vib.params["frequency_hz"]), float(vib.params["bandwidth_hz"]))
         floor = fit_floor_shape(resid, rate, row_masks(fcs), band_edges(fcs), named_band, nuisance_of(fcs))
-        if floor is not None and floor.corner_hz < CORNER_FLAT * rate:
+        if floor is None:
+            not_ident["sensor_bandwidth"] = {"reason": "the noise floor is not visible in the trusted band"}
+        elif floor.corner_hz < CORNER_FLAT * rate:
             # the motion part of the low-pass: the same model seen through the filter
             view = [sensor_view(fc, floor.corner_hz) for fc in raw]
             d_lp = Design(view, {n: effects[n] for n in selected}, sigma)
@@ -392,7 +394,7 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     wn = EFFECTS["white_noise"]()
     sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
     corner = sel.corner_hz
-    if band_limited(fcs) or corner is not None or any(e is not None for e in nuisance_of(fcs)):
+    if band_limited(fcs) or corner is not None or nuisance_of(fcs) is not None:
         # the level of the floor in the trusted band (at 0 Hz under a named low-pass): first
         # differences would read the reconstruction error or the low-pass's droop instead
         c, c_se = fit_floor(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), corner, nuisance_of(fcs))

@@ -41,6 +41,7 @@ WELCH_SECONDS = 2.0  # Welch segment of the band estimate: 0.5 Hz resolution
 NOISE_BAND = (0.6, 0.9)  # fraction of the ground truth's Nyquist where sigma_n is read
 MC_SECONDS = 120.0  # length of the Monte Carlo noise record for the spline's transfer
 MIN_BAND_HZ = 1.0  # never narrower than this: below it only slow effects live
+FLOOR_QUANTILE = 0.1  # the sensor floor where the reconstruction error swamps it: this quantile of the PSD
 NEGLIGIBLE = 1e-3  # reconstruction error below this fraction of the sensor's PSD: not carried
 
 
@@ -160,7 +161,11 @@ def estimate_band(fc: FitContext, residual: np.ndarray, trust_ratio: float = TRU
     lost_angle = np.clip(p_gt - sigma2[None] * k_res[:, None], 0.0, None)
     noise = sigma2[None] * k_rate[:, None]
     lost = np.where(np.isnan(lost_angle), np.inf, w2[:, None] * np.nan_to_num(lost_angle))
-    sensor = np.clip(p_imu - noise - lost, 0.0, None)
+    # the sensor's own share of the residual; where the reconstruction error swamps it, at least
+    # the floor the residual shows where it is lowest (a low quantile over frequency)
+    hz = (f >= MIN_BAND_HZ) & (f < rate / 2)
+    floor = np.quantile(p_imu[hz], FLOOR_QUANTILE, axis=0) if hz.any() else np.zeros(3)
+    sensor = np.maximum(p_imu - noise - lost, floor[None])
     bad = np.any(lost > trust_ratio * sensor, axis=1) & (f >= MIN_BAND_HZ)
     if bad.any():
         k = int(np.argmax(bad))
@@ -174,6 +179,24 @@ def estimate_band(fc: FitContext, residual: np.ndarray, trust_ratio: float = TRU
     return ReconstructionBand(
         fc.name, f_max, rate, gt_rate, h, np.sqrt(sigma2), f, k_rate_w2, lost_angle, p_imu, limited, f_equal, negligible
     )
+
+
+def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1) -> np.ndarray:
+    """(3,) one-sided PSD of the sensor's noise floor: the median of the measured residual's PSD
+    over the frequencies (>= MIN_BAND_HZ) where the estimated reconstruction error is below `share`
+    of it, pooled over sequences; where there are none, its FLOOR_QUANTILE quantile."""
+    out = np.zeros(3)
+    for a in range(3):
+        vals, low = [], []
+        for b in bands:
+            ok = (b.f_hz >= MIN_BAND_HZ) & (b.f_hz < b.rate_hz / 2)
+            p = b.residual_psd[ok, a]
+            e = b.error_psd(b.f_hz[ok])[:, a]
+            vals.append(p[e < share * p])
+            low.append(p)
+        v = np.concatenate(vals)
+        out[a] = np.median(v) if len(v) >= 10 else np.quantile(np.concatenate(low), FLOOR_QUANTILE)
+    return out
 
 
 def band_bins(n: int, rate_hz: float, f_max_hz: float | None) -> np.ndarray:
@@ -217,3 +240,18 @@ def band_limit(x: np.ndarray, rate_hz: float, f_max_hz: float | None) -> np.ndar
     X = np.fft.rfft(x, axis=0)
     X[np.fft.rfftfreq(len(x), 1.0 / rate_hz) > f_max_hz] = 0.0
     return np.fft.irfft(X, len(x), axis=0)
+
+
+def draw_error(fc: FitContext, rng: np.random.Generator) -> np.ndarray | None:
+    """One draw (N, 3) of the reconstructed rate's error of sequence `fc`: Gaussian with the PSD
+    kappa E(f) of its band (`fc.extra['band']`, level `fc.extra['nuisance_level']`), zero above
+    the band's edge (it is not compared there). None: no error to draw (exact ground truth)."""
+    b = fc.extra.get("band")
+    kappa = fc.extra.get("nuisance_level")
+    if b is None or b.exact or kappa is None:
+        return None
+    n = len(fc.t)
+    f = np.fft.rfftfreq(n, 1.0 / fc.rate_hz)
+    psd = np.where((f <= b.f_max_hz)[:, None], kappa * b.error_psd(f), 0.0)
+    w = np.fft.rfft(rng.standard_normal((n, 3)), axis=0)
+    return np.fft.irfft(w * np.sqrt(psd * fc.rate_hz / 2), n, axis=0)

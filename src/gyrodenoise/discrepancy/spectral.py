@@ -48,6 +48,16 @@ X_SUPPORT = 6.0  # band-pass prototype variable beyond which the band's PSD is n
 
 
 @dataclass
+class Nuisance:
+    """The reconstruction error of the true rate as a nuisance term of the residual's spectrum
+    (`reconstruction`): per sequence its PSD, f -> (len f, 3) (None: exact ground truth), and the
+    sensor's floor when it is known from outside the band (None: fitted)."""
+
+    psd: list[Callable[[np.ndarray], np.ndarray] | None]
+    floor: np.ndarray | None = None
+
+
+@dataclass
 class Spectra:
     """Periodograms of the residuals of several sequences, bins of [F_MIN_HZ, rate/2), all
     sequences' bins together sorted by frequency."""
@@ -62,6 +72,9 @@ class Spectra:
     # (M, 3) reconstruction-error PSD at each bin (`reconstruction`), a nuisance term with a fitted
     # level; None: an exact ground truth
     E: np.ndarray | None = None
+    # (3,) the sensor's floor when it is known from elsewhere (where the reconstruction error
+    # swamps it in the band, `reconstruction.sensor_floor`); fixed in the nuisance fits
+    floor: np.ndarray | None = None
     cum: np.ndarray = field(init=False, repr=False)  # (M + 1, 3) cumulative sums of I
 
     def __post_init__(self) -> None:
@@ -77,7 +90,7 @@ class Spectra:
         m = self.seq == s
         shape = None if self.shape is None else self.shape[m]
         E = None if self.E is None else self.E[m]
-        return Spectra(self.f[m], self.I[m], np.zeros(int(m.sum()), dtype=int), self.rate_hz, 1, shape, E)
+        return Spectra(self.f[m], self.I[m], np.zeros(int(m.sum()), dtype=int), self.rate_hz, 1, shape, E, self.floor)
 
     def shaped(self, corner_hz: float | None) -> Spectra:
         """The periodogram divided by the floor shape of a sensor low-pass of corner `corner_hz`
@@ -87,7 +100,7 @@ class Spectra:
             return self
         a = SensorBandwidth.floor_shape(self.f, corner_hz, self.rate_hz)
         E = None if self.E is None else self.E / a[:, None]
-        return Spectra(self.f, self.I / a[:, None], self.seq, self.rate_hz, self.n_seq, a, E)
+        return Spectra(self.f, self.I / a[:, None], self.seq, self.rate_hz, self.n_seq, a, E, self.floor)
 
     @property
     def log_shape(self) -> float:
@@ -122,6 +135,7 @@ class BandFit:
     amplitude_se: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     per_sequence: list[dict] = field(default_factory=list)
     f_hi_hz: float = float("inf")  # upper edge of the compared band (the trusted band)
+    mean_psd: np.ndarray | None = None  # (3,) mean periodogram over the compared bins
 
     @property
     def amplitude(self) -> np.ndarray:
@@ -140,6 +154,9 @@ class BandFit:
         """Share of the (1/sigma^2-weighted) residual power that the band carries."""
         w = 1 / sigma**2
         width = min(self.f_hi_hz, rate_hz / 2)
+        if self.mean_psd is not None:  # all the residual's power in the compared bins (floor, nuisance, band)
+            total = self.mean_psd * (width - F_MIN_HZ)
+            return float((w * self.power).sum() / (w * np.maximum(total, self.power)).sum())
         return float((w * self.power).sum() / (w * (self.power + self.floor * width)).sum())
 
     def params(self) -> tuple[dict, dict]:
@@ -161,15 +178,14 @@ def spectra(
     rate_hz: float,
     masks: list[np.ndarray] | None = None,
     bands: list[float | None] | None = None,
-    nuisance: list[Callable[[np.ndarray], np.ndarray] | None] | None = None,
+    nuisance: Nuisance | None = None,
 ) -> Spectra:
     """Tapered periodograms of each residual (N, 3). Masked samples (False in `masks`, e.g. near a
     saturation limit) are set to zero and the power rescaled by the fraction kept. `bands`: upper
     edge per sequence of the band where the reconstructed rate is trusted (`reconstruction`); the
-    bins above it are left out. `nuisance`: per sequence, f -> (len f, 3) reconstruction-error PSD
-    (`ReconstructionBand.error_psd`), carried as a nuisance term; all None: none."""
+    bins above it are left out. `nuisance`: the reconstruction error, carried as a nuisance term."""
     fs, Is, seqs, Es = [], [], [], []
-    with_e = nuisance is not None and any(e is not None for e in nuisance)
+    with_e = nuisance is not None and any(e is not None for e in nuisance.psd)
     for s, r in enumerate(residuals):
         m = np.ones(r.shape, dtype=bool) if masks is None or masks[s] is None else masks[s]
         keep = np.maximum(m.sum(0), 1)
@@ -184,16 +200,23 @@ def spectra(
         Is.append(I[ok])
         seqs.append(np.full(int(ok.sum()), s))
         if with_e:
-            e = nuisance[s]
+            e = nuisance.psd[s]
             Es.append(np.zeros((int(ok.sum()), 3)) if e is None else e(f[ok]))
     E = np.concatenate(Es) if with_e else None
     if E is not None and not np.any(E > 0):
         E = None
-    return Spectra(np.concatenate(fs), np.concatenate(Is), np.concatenate(seqs), rate_hz, len(residuals), E=E)
+    floor = None if E is None else nuisance.floor
+    return Spectra(
+        np.concatenate(fs), np.concatenate(Is), np.concatenate(seqs), rate_hz, len(residuals), E=E, floor=floor
+    )
 
 
 def _fit_levels_nuisance(
-    sp: Spectra, band: tuple[float, float] | None, theta: np.ndarray | None = None, iters: int = 60
+    sp: Spectra,
+    band: tuple[float, float] | None,
+    theta: np.ndarray | None = None,
+    iters: int = 60,
+    fixed_floor: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """Whittle fit with the reconstruction error as a nuisance term: S = c + P g(f; band) + kappa E(f)
     per axis, all levels >= 0 (projected Fisher scoring). Returns (theta (3, 3): rows c, P, kappa;
@@ -204,14 +227,18 @@ def _fit_levels_nuisance(
         G = G / sp.shape[:, None]
     G = np.broadcast_to(G, I.shape)
     B = np.stack([np.ones_like(I), G, E], -1)  # (M, 3 axes, 3 levels)
-    free = np.array([True, band is not None, True])
+    floor = sp.floor if fixed_floor is None else fixed_floor
+    free = np.array([floor is None, band is not None, True])
     if theta is None or theta.shape[0] < 3:
         lo = sp.f <= np.quantile(sp.f, 0.2)  # where the error is smallest: a floor start
         c = np.median(I[lo], axis=0) / np.log(2) if lo.any() else I.mean(0)
-        th = np.stack([c, np.zeros(3), np.full(3, 0.5)])
+        th = np.stack([c if floor is None else floor, np.zeros(3), np.full(3, 1.0)])
     else:
         th = theta.copy()
-    th[~free] = 0.0
+        if floor is not None:
+            th[0] = floor
+    if band is None:
+        th[1] = 0.0
     for _ in range(iters):
         S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
         W = 1 / S**2
@@ -225,6 +252,7 @@ def _fit_levels_nuisance(
                 step[act, a] = np.linalg.solve(Fa, score[act, a])
         new = th + step
         new[0] = np.maximum(new[0], 0.2 * th[0])  # damped: the floor stays positive
+        new[2] = np.clip(new[2], 0.2 * th[2], 5.0 * th[2] + 1e-12)  # and so does the nuisance's level
         new = np.maximum(new, 0.0)
         done = np.all(np.abs(new - th) <= 1e-8 * (np.abs(th) + th[0:1] + 1e-300))
         th = new
@@ -298,8 +326,10 @@ def _bounds(rate_hz: float) -> tuple[float, float, float]:
     return F_MIN_HZ / 2, 0.49 * rate_hz, BW_MIN_WELCH_BINS * rate_hz / WELCH_NPERSEG
 
 
-def _clip_band(f0: float, bw: float, rate_hz: float) -> tuple[float, float]:
+def _clip_band(f0: float, bw: float, rate_hz: float, f_hi: float | None = None) -> tuple[float, float]:
     lo_min, hi_max, bw_min = _bounds(rate_hz)
+    if f_hi is not None:  # a band beyond the compared bins would be fitted to nothing
+        hi_max = max(min(hi_max, f_hi), lo_min + bw_min)
     bw = float(np.clip(bw, bw_min, hi_max - lo_min))
     f0 = float(np.clip(f0, lo_min + bw / 2, hi_max - bw / 2))
     return f0, bw
@@ -350,7 +380,7 @@ class _Profile:
         self.best = (-np.inf, 0.0, 0.0, None, None)
 
     def __call__(self, u: np.ndarray) -> float:
-        f0, bw = _clip_band(float(u[0]), float(np.exp(u[1])), self.sp.rate_hz)
+        f0, bw = _clip_band(float(u[0]), float(np.exp(u[1])), self.sp.rate_hz, float(self.sp.f[-1]))
         theta, ll, info = _fit_levels(self.sp, (f0, bw), self.theta)
         if ll > self.best[0]:
             self.best = (ll, f0, bw, theta, info)
@@ -381,7 +411,7 @@ def fit_band(
     starts: list[tuple[float, float]] | None = None,
     bands: list[float | None] | None = None,
     floor_corner_hz: float | None = None,
-    nuisance: list[Callable[[np.ndarray], np.ndarray] | None] | None = None,
+    nuisance: Nuisance | None = None,
 ) -> BandFit | None:
     """Maximum-Whittle-likelihood band-limited vibration (see the module docstring); None when the
     residuals show no excess to start from. `with_errors`: standard errors (a few more fits).
@@ -398,7 +428,8 @@ def fit_band(
     _, ll0, _ = _fit_levels(sp, None)
     prof = _maximise(sp, starts)
     ll, f0, bw, theta, info = prof.best
-    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi)
+    mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
+    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
     if with_errors:
         _errors(fit, sp, info, prof)
     return fit
@@ -509,14 +540,16 @@ def fit_floor_shape(
     masks: list[np.ndarray] | None = None,
     bands: list[float | None] | None = None,
     band: tuple[float, float] | None = None,
-    nuisance: list[Callable[[np.ndarray], np.ndarray] | None] | None = None,
+    nuisance: Nuisance | None = None,
 ) -> FloorShapeFit | None:
     """Maximum-Whittle-likelihood corner of a first-order sensor low-pass from the residual spectra
     (floor c_a A(f; corner) against the flat c_a; with a named band-limited vibration `band`
     = (f0, bw), its power is refitted beside the floor in both). Corners from 2 Hz to 50 x the
     rate (beyond that the floor is flat to 1e-3 in [0, rate/2])."""
     sp = spectra(residuals, rate_hz, masks, bands, nuisance)
-    if len(sp.f) < 20:
+    if len(sp.f) < 20 or sp.floor is not None:
+        # floor known only from outside the band (the reconstruction error swamps it inside):
+        # its shape cannot be read here
         return None
     _, ll_flat, _ = _fit_levels(sp, band)
 
@@ -546,7 +579,7 @@ def fit_floor(
     masks: list[np.ndarray] | None = None,
     bands: list[float | None] | None = None,
     corner_hz: float | None = None,
-    nuisance: list[Callable[[np.ndarray], np.ndarray] | None] | None = None,
+    nuisance: Nuisance | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Whittle level (3,) of a flat floor (shaped by a low-pass of `corner_hz` if given: its level
     at 0 Hz) over the trusted band, with its standard error: (one-sided PSD, SE)."""
@@ -560,7 +593,7 @@ def fit_nuisance(
     rate_hz: float,
     masks: list[np.ndarray] | None,
     bands: list[float | None] | None,
-    nuisance: list[Callable[[np.ndarray], np.ndarray] | None],
+    nuisance: Nuisance | None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(c, kappa): the sensor's floor (one-sided PSD, (3,)) and the level (3,) of the reconstruction
     error beside it, fitted to the residual spectra in the trusted band. None: no nuisance term."""

@@ -17,8 +17,9 @@ import numpy as np
 from gyrodenoise.allan import allan_taus, pooled_allan
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
-from gyrodenoise.discrepancy.rank import Selection, per_sequence_refit, residuals_after, select_effects
-from gyrodenoise.discrepancy.reconstruction import band_limit
+from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
+from gyrodenoise.discrepancy.rank import MIN_GAIN, Selection, per_sequence_refit, residuals_after, select_effects
+from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.sim.context import FitContext, SignalContext
 from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
@@ -48,6 +49,9 @@ def simulate_like(
             if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
                 noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
             y = y + noise
+    err = draw_error(fc, rng)  # the reconstruction error, as the measured residual carries it
+    if err is not None:
+        y = y + err
     if sel.band_vibration:  # band-limited vibration: noise, drawn like the white noise
         y = Vibration(**sel.params["vibration"]).apply(sig, y, rng)
     if "saturation" in sel.params:
@@ -176,19 +180,48 @@ def comparisons(sel_base: Selection, sel: Selection, fcs: list[FitContext], seed
     return out
 
 
+def _tolist(x):
+    return None if x is None else np.asarray(x).tolist()
+
+
+def decide(
+    fit: list[FitContext],
+    holdout: list[FitContext],
+    base: list[str] = ("bias", "white_noise"),
+    candidates: list[str] | None = None,
+    bic_threshold: float = 10.0,
+    min_gain: float = MIN_GAIN,
+    null_draws: int = DRAWS,
+    seed: int = 0,
+) -> tuple[Selection, Selection, NullDistribution | None]:
+    """The base model, the null distribution of every candidate's delta BIC under it (`null.py`;
+    null_draws = 0: none, the fixed `bic_threshold` decides) and the greedy selection with those
+    thresholds and the practical minimum `min_gain` on the held-out sequences.
+    Returns (base selection, final selection, null distribution)."""
+    base = list(base)
+    sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold, holdout=holdout)
+    null = None
+    thresholds = None
+    if null_draws > 0:
+        null = null_distribution(sel_base, fit, candidates, null_draws, seed)
+        thresholds = null.thresholds(bic_threshold)
+    sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
+    return sel_base, sel, null
+
+
 def run(
     fit: list[FitContext],
     holdout: list[FitContext],
     base: list[str] = ("bias", "white_noise"),
     candidates: list[str] | None = None,
     bic_threshold: float = 10.0,
-    min_gain: float = 0.0,
+    min_gain: float = MIN_GAIN,
     seed: int = 0,
+    null_draws: int = DRAWS,
 ) -> tuple[dict, dict]:
     """Steps (1)-(5). Returns (report dict, arrays for the plots)."""
     base = list(base)
-    sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold)
-    sel = select_effects(fit, base, candidates, bic_threshold=bic_threshold, min_gain=min_gain)
+    sel_base, sel, null = decide(fit, holdout, base, candidates, bic_threshold, min_gain, null_draws, seed)
     gap_before = gap(sel_base, holdout, seed)
     gap_after = gap(sel, holdout, seed)
     named = []
@@ -211,6 +244,11 @@ def run(
             "datasheet": ds,
             "delta_bic": cand.get("delta_bic"),
             "explained_fraction": cand.get("gain"),
+            "holdout_gain": cand.get("holdout_gain"),
+            "threshold": cand.get("threshold"),
+            "null_p_value": None
+            if null is None or cand.get("delta_bic") is None
+            else null.p_value(name, cand["delta_bic"]),
         }
         if "variant" in cand:
             entry["variant"] = cand["variant"]
@@ -232,7 +270,22 @@ def run(
         "fit_sequences": [fc.name for fc in fit],
         "holdout_sequences": [fc.name for fc in holdout],
         "selection_steps": sel.steps,
-        "settings": {"bic_threshold": bic_threshold, "min_gain": min_gain, "seed": seed, "candidates": candidates},
+        "settings": {
+            "bic_threshold": bic_threshold,
+            "min_gain": min_gain,
+            "seed": seed,
+            "candidates": candidates,
+            "null_draws": null_draws,
+        },
+        "null": None if null is None else {"draws": null.draws, "per_candidate": null.summary(bic_threshold)},
+        "thresholds": sel.thresholds,
+        "identifiability": sel.identifiability,
+        "reconstruction": {
+            "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
+            "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],
+            "sensor_floor_psd": _tolist(fit[0].extra.get("sensor_floor")),
+            "nuisance_level": _tolist(fit[0].extra.get("nuisance_level")),
+        },
         "noise_sigma_per_axis_rad_s": sel.sigma.tolist(),
         "saturation_check": sel.saturation,
         "cross_correlation_fit_base_residual": cross_correlations(fit, fit_resid),
