@@ -19,7 +19,7 @@ procedural motion, Magnus), replay.py (EuRoC replay), sensor.py (IMU), mocap.py 
 asl.py (file format, atomic writes), world.py (`make_sequence`), __main__.py (CLI).
 """
 
-from gyrodenoise.testworld.mocap import MocapConfig
+from gyrodenoise.testworld.mocap import MOCAP_PRESETS, MocapConfig
 from gyrodenoise.testworld.motion import Kinematics, ProceduralMotion
 from gyrodenoise.testworld.replay import EurocReplay
 from gyrodenoise.testworld.sensor import Bandwidth
@@ -27,6 +27,7 @@ from gyrodenoise.testworld.spec import PRESETS, EffectSpecError
 from gyrodenoise.testworld.world import WorldSequence, make_motion, make_sequence
 
 __all__ = [
+    "MOCAP_PRESETS",
     "PRESETS",
     "Bandwidth",
     "EffectSpecError",

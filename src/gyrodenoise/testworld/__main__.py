@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from gyrodenoise.testworld.mocap import MocapConfig
+from gyrodenoise.testworld.mocap import MOCAP_PRESETS, MocapConfig
 from gyrodenoise.testworld.spec import PRESETS, EffectSpecError, describe
 from gyrodenoise.testworld.units import UnitError, to_si
 from gyrodenoise.testworld.world import make_sequence
@@ -39,25 +40,42 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--imu-rate", type=float, default=200.0, help="Hz")
     p.add_argument("--oversample", type=int, default=20, help="internal rate = oversample x IMU rate")
     p.add_argument("--imu-jitter", default="0us", help="std of the IMU stamp jitter (e.g. 20us)")
-    p.add_argument("--mocap-rate", type=float, default=100.0, help="Hz (EuRoC Vicon 100, TUM-VI 120)")
-    p.add_argument("--mocap-orientation-noise", default="0.2deg", help="per-axis std")
-    p.add_argument("--mocap-position-noise", default="1mm", help="per-axis std")
-    p.add_argument("--mocap-jitter", default="100us", help="std of the capture time about the stamp")
+    p.add_argument(
+        "--mocap",
+        default="vicon",
+        choices=list(MOCAP_PRESETS),
+        help="ground-truth preset (default vicon: 100 Hz, 0.2 deg, 1 mm, 100 us); the flags below override it",
+    )
+    p.add_argument("--mocap-rate", type=float, default=None, help="Hz (EuRoC Vicon 100, TUM-VI 120)")
+    p.add_argument("--mocap-orientation-noise", default=None, help="per-axis std, e.g. 0.2deg")
+    p.add_argument("--mocap-position-noise", default=None, help="per-axis std, e.g. 1mm")
+    p.add_argument("--mocap-jitter", default=None, help="std of the capture time about the stamp, e.g. 100us")
     p.add_argument("--euroc-root", type=Path, default=None, help="folder holding the EuRoC ASL sequences")
     p.add_argument("--smoothing", type=float, default=15.0, help="euroc: low-pass corner of the replay, Hz")
     p.add_argument("--overwrite", action="store_true")
     return p.parse_args(argv)
 
 
+def _mocap(args: argparse.Namespace) -> MocapConfig:
+    cfg = MOCAP_PRESETS[args.mocap]
+    changes = {}
+    if args.mocap_rate is not None:
+        changes["rate_hz"] = args.mocap_rate
+    for flag, field, quantity in (
+        ("mocap_orientation_noise", "orientation_noise_rad", "angle"),
+        ("mocap_position_noise", "position_noise_m", "length"),
+        ("mocap_jitter", "jitter_s", "time"),
+    ):
+        text = getattr(args, flag)
+        if text is not None:
+            changes[field] = float(to_si(text, quantity, "--" + flag.replace("_", "-"))[0])
+    return replace(cfg, **changes)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        mocap = MocapConfig(
-            rate_hz=args.mocap_rate,
-            orientation_noise_rad=float(to_si(args.mocap_orientation_noise, "angle", "--mocap-orientation-noise")[0]),
-            position_noise_m=float(to_si(args.mocap_position_noise, "length", "--mocap-position-noise")[0]),
-            jitter_s=float(to_si(args.mocap_jitter, "time", "--mocap-jitter")[0]),
-        )
+        mocap = _mocap(args)
         duration = args.duration
         if duration is None and args.trajectory == "procedural":
             duration = 60.0

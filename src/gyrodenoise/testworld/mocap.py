@@ -21,6 +21,17 @@ class MocapConfig:
     jitter_s: float = 1e-4  # std of (capture time - stamp)
 
 
+# "vicon": raw motion capture as in the EuRoC rooms; "euroc-gt": like the released EuRoC ground truth, a
+# 200 Hz batch estimate whose scatter about a 15 Hz smooth replay is ~0.01 deg / 0.03 mm; "tumvi": the
+# 120 Hz mocap of TUM-VI; "ideal": exact poses (isolates the trajectory reconstruction from noise)
+MOCAP_PRESETS: dict[str, MocapConfig] = {
+    "vicon": MocapConfig(),
+    "euroc-gt": MocapConfig(200.0, float(np.deg2rad(0.01)), 3e-5, 0.0),
+    "tumvi": MocapConfig(120.0, float(np.deg2rad(0.2)), 1e-3, 1e-4),
+    "ideal": MocapConfig(100.0, 0.0, 0.0, 0.0),
+}
+
+
 @dataclass
 class MocapPoses:
     t: np.ndarray  # (M,) true capture times, s (motion time)
