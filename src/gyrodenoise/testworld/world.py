@@ -56,7 +56,7 @@ def make_sequence(
     trajectory: str | MotionSource = "procedural",
     effects: str | Mapping[str, str] | None = None,
     preset: str = "null",
-    duration: float | None = 60.0,
+    duration: float | None = None,
     seed: int = 0,
     name: str | None = None,
     imu_rate_hz: float = 200.0,
@@ -71,8 +71,9 @@ def make_sequence(
     """Generate one sequence and write it as `<out>/<name>/mav0/...` plus `<out>/<name>/truth.json`.
 
     effects: "scale_factor=2000ppm,time_offset=1.5ms" (see `spec.describe()`), added to the preset's
-    effects ("null": constant bias + white noise; "none": nothing). duration: seconds of IMU data (euroc:
-    at most the recording). name: the folder name (default: the EuRoC sequence, or procedural_s<seed>)."""
+    effects ("null": constant bias + white noise; "none": nothing). duration: seconds of IMU data (default:
+    60 s procedural, the whole recording for euroc). name: the folder name (default: the EuRoC sequence,
+    or procedural_s<seed>)."""
     if preset not in PRESETS:
         raise EffectSpecError(f"unknown preset {preset!r}; presets: {', '.join(PRESETS)}")
     spec = merge(parse_effects(PRESETS[preset]), parse_effects(effects))
