@@ -44,18 +44,23 @@ def pooled_allan(residuals: list[np.ndarray], rate_hz: float, taus: np.ndarray) 
     return np.sqrt(np.where(w > 0, np.sum([a * b for a, b in zip(avs, ws, strict=True)], 0) / np.maximum(w, 1), np.nan))
 
 
-def fit_allan_noise(residuals: list[np.ndarray], rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_allan_noise(
+    residuals: list[np.ndarray], rate_hz: float, angle_noise: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fit AVAR(tau) = N^2 / tau + K^2 tau / 3 per axis (white noise + rate random walk).
 
     Weighted least squares, each tau weighted by the inverse of its variance's uncertainty
-    (relative std ~ sqrt(2 tau / T) for T s of data). Returns (N^2, K^2, std of K^2), each (3,).
+    (relative std ~ sqrt(2 tau / T) for T s of data). `angle_noise`: also a 3 Q^2 / tau^2 term, the
+    Allan variance of a rate that is the derivative of a noisy angle (quantisation noise in IEEE
+    terms; here a true rate reconstructed from a noisy ground truth), which otherwise leaks into K.
+    Returns (N^2, K^2, std of K^2), each (3,).
     """
     n_total = sum(len(r) for r in residuals)
     taus = allan_taus(min(len(r) for r in residuals), rate_hz, per_octave=2)
     av = pooled_allan(residuals, rate_hz, taus) ** 2
     T = n_total / rate_hz
     rel = np.sqrt(2 * taus / T + 1.0 / (n_total / 2))
-    A = np.stack([1 / taus, taus / 3], 1)
+    A = np.stack([1 / taus, taus / 3] + ([3 / taus**2] if angle_noise else []), 1)
     n2, k2, k2_se = np.zeros(3), np.zeros(3), np.zeros(3)
     for i in range(3):
         ok = np.isfinite(av[:, i])

@@ -13,7 +13,8 @@ Stated for every coefficient at +-m with random signs (E[lambda] = m^2 tr(S) / s
 least identifiable coefficient alone at m (lambda = m^2 / SE_max^2); `min_magnitude` is the m at
 which the first reaches the decision threshold. The magnitude m is the effect's `REFERENCE`
 (datasheet units in the report). An effect is identifiable at m when its expected delta BIC clears
-the threshold the selection applies to it.
+the threshold the selection applies to it; it is tried at all (`testable`) when it would be
+identifiable at the largest plausible magnitude (`PRIOR`).
 """
 
 from __future__ import annotations
@@ -40,7 +41,9 @@ class Identifiability:
     min_magnitude_datasheet: float
     se_min: float  # SI: standard errors of the coefficients, best and worst
     se_max: float
-    identifiable: bool
+    identifiable: bool  # at the reference magnitude
+    expected_delta_bic_at_prior: float  # every coefficient at the largest plausible magnitude (PRIOR)
+    testable: bool  # identifiable at the largest plausible magnitude: worth trying at all
 
     def as_dict(self) -> dict:
         return {k: (float(v) if isinstance(v, np.floating) else v) for k, v in asdict(self).items()}
@@ -93,6 +96,8 @@ def identifiability(
     need = threshold + pen - k
     m_min = float(np.sqrt(max(need, 0.0) * s2 / trace)) if trace > 0 else np.inf
     unit, factor = _datasheet_unit(e)
+    big = float(e.PRIOR[1]) / (np.sqrt(2) if e.name == "vibration" else 1.0)
+    at_prior = big**2 * trace / s2 + k - pen
     return Identifiability(
         effect=name,
         reference=float(ref),
@@ -108,6 +113,8 @@ def identifiability(
         se_min=float(se.min()),
         se_max=float(se.max()),
         identifiable=bool(expected >= threshold),
+        expected_delta_bic_at_prior=float(at_prior),
+        testable=bool(at_prior >= threshold and trace > 0),
     )
 
 

@@ -134,8 +134,8 @@ def score_step(
             ident[c] = idf.as_dict()
         if idf is None:  # no reference magnitude (per-sequence knots): identifiable when some direction is new
             ok = bool(np.isfinite(design.conditional_se(selected, c, s2)).any())
-        else:
-            ok = idf.identifiable
+        else:  # numbers at the reference magnitude are reported; tried if plausible magnitudes would show
+            ok = idf.testable
         if not ok:
             not_ident[c] = ident.get(c, {"degenerate": True})
             continue
@@ -437,7 +437,12 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     if "white_noise" not in sel.base and "white_noise" in sel.effects:
         sel.named.append("white_noise")
     if "bias_random_walk" in sel.selected:
-        p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
+        if nuisance_of(fcs) is None:
+            p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
+        else:
+            # a reconstructed true rate adds the derivative of a noisy angle, whose Allan variance
+            # swamps the walk's at the cluster times a flight offers: read K from the knots instead
+            p, s = _walk_from_knots(sel)
         sel.params["bias_random_walk"], sel.se["bias_random_walk"] = p, s
     if "quantization" in sel.effects and "quantization" not in sel.base:
         q, frac = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
@@ -465,6 +470,34 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     for name, p in sel.params.items():
         kw = {k: v for k, v in p.items() if k in EFFECTS[name].DEFAULTS}
         sel.fitted[name] = EFFECTS[name](**kw)
+
+
+def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
+    """Rate random walk K per axis from the fitted random-walk knots: the increments of the bias
+    path between knots h apart have variance K^2 h, less their estimation variance (from the fit's
+    covariance). Returns ({'density'}, {'density'} standard error)."""
+    e, design, res = sel.effects["bias_random_walk"], sel.design, sel.result
+    h = e.knot_spacing_s
+    cov = np.zeros((design.p, design.p))
+    cov[np.ix_(res.idx, res.idx)] = res.cov
+    k2, k2_se = np.zeros(3), np.zeros(3)
+    for a in range(3):
+        incs, noise = [], []
+        for cols in np.atleast_2d(design.cols["bias_random_walk"]):
+            nk = len(cols) // 3
+            c = cols[a * nk : (a + 1) * nk]
+            path = np.concatenate([[0.0], res.coef[c]])  # the first knot is the bias itself
+            D = np.zeros((nk, nk))  # increments as a linear map of the knot coefficients
+            D[np.arange(nk), np.arange(nk)] = 1.0
+            D[np.arange(1, nk), np.arange(nk - 1)] = -1.0
+            incs.append(np.diff(path))
+            noise.append(np.diag(D @ cov[np.ix_(c, c)] @ D.T))
+        d, v = np.concatenate(incs), np.concatenate(noise)
+        k2[a] = max(float(np.mean(d**2 - v)), 0.0) / h
+        k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.mean(d**2)) / h
+    k = np.sqrt(k2)
+    se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+    return {"density": k}, {"density": se}
 
 
 def _predict(

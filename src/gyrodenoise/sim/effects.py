@@ -579,8 +579,10 @@ class BiasRandomWalk(Effect):
             c[:, i, i * n_knots : (i + 1) * n_knots] = hats
         return c
 
-    def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
-        n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz)
+    def estimate(
+        self, fcs: list[FitContext], residuals: list[np.ndarray], angle_noise: bool = False
+    ) -> tuple[dict, dict]:
+        n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz, angle_noise)
         k = np.sqrt(np.clip(k2, 0.0, None))
         se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
         return {"density": k}, {"density": se}
