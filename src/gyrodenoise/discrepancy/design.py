@@ -271,12 +271,15 @@ def band_power(fc: FitContext, r: np.ndarray, sigma: np.ndarray) -> float:
     return float(np.mean((rows if w is None else rows * w) ** 2))
 
 
-def sensor_view(fc: FitContext, corner_hz: float | None) -> FitContext:
+def sensor_view(fc: FitContext, corner_hz: float | None, rate_only: bool = False) -> FitContext:
     """The sequence as seen through a sensor low-pass of corner `corner_hz` (`SensorBandwidth`):
     the true rate, its derivative and the specific force filtered (every regressor responds to
-    what reaches the sensor's output). None or inf: `fc` itself."""
+    what reaches the sensor's output). None or inf: `fc` itself. `rate_only`: filter the true rate
+    alone (enough for models whose columns use neither the derivative nor the specific force)."""
     if corner_hz is None or not np.isfinite(corner_hz):
         return fc
+    if rate_only:
+        return replace(fc, omega=SensorBandwidth.filter_rate(fc.omega, corner_hz, fc.rate_hz))
 
     def lp(x: np.ndarray) -> np.ndarray:
         return SensorBandwidth.filter_rate(x, corner_hz, fc.rate_hz)

@@ -91,8 +91,11 @@ def identifiability(
     se = np.sqrt(s2 * var)
     pen = (k + nonlinear) * np.log(n)
     trace = float(np.clip(w, 0, None)[ok].sum())
+    s2 = max(float(s2), 1e-300)
     expected = ref**2 * trace / s2 + k - pen
-    weakest = (ref / float(se.max())) ** 2 + k - pen if np.isfinite(se.max()) else k - pen
+    with np.errstate(divide="ignore", over="ignore"):
+        lam_weakest = np.float64(ref) ** 2 / np.float64(se.max()) ** 2 if np.isfinite(se.max()) else 0.0
+    weakest = float(lam_weakest) + k - pen
     need = threshold + pen - k
     m_min = float(np.sqrt(max(need, 0.0) * s2 / trace)) if trace > 0 else np.inf
     unit, factor = _datasheet_unit(e)

@@ -99,7 +99,7 @@ def null_distribution(
     if candidates is None:
         candidates = [n for n in EFFECTS if n not in base]
     candidates = [c for c in candidates if c not in base]
-    scorable = [c for c in candidates if not EFFECTS[c].stochastic or c == "sensor_bandwidth"]
+    scorable = [c for c in candidates if not EFFECTS[c]().stochastic or c == "sensor_bandwidth"]
     band_vibration = "white_noise" in base + candidates and "vibration" in scorable
     out = NullDistribution(draws, seed, {c: np.full(draws, -np.inf) for c in scorable})
     for d in range(draws):

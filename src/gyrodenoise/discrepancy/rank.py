@@ -44,7 +44,15 @@ from gyrodenoise.discrepancy.design import (
     set_saturation_mask,
 )
 from gyrodenoise.discrepancy.identifiability import identifiability
-from gyrodenoise.discrepancy.spectral import BAND_PARAMS, BandFit, FloorShapeFit, fit_band, fit_floor, fit_floor_shape
+from gyrodenoise.discrepancy.spectral import (
+    BAND_PARAMS,
+    BandFit,
+    FloorShapeFit,
+    FloorShapeProfile,
+    fit_band,
+    fit_floor,
+    fit_floor_shape,
+)
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import EFFECTS, Effect, Quantization, Saturation
 
@@ -168,18 +176,26 @@ def score_step(
         named_band = None
         if vib is not None and "vibration" in selected and vib.stochastic:
             named_band = (float(vib.params["frequency_hz"]), float(vib.params["bandwidth_hz"]))
-        floor = fit_floor_shape(resid, rate, row_masks(fcs), band_edges(fcs), named_band, nuisance_of(fcs))
+        rss_of: dict[float, float] = {}
+        rate_only = not {"time_offset", "g_sensitivity"} & set(selected)
+
+        def motion_gain(corner: float) -> float:
+            # the motion part of the low-pass (its delay and droop): the model seen through the
+            # filter, as a Gaussian log-likelihood gain on the regression's rows
+            view = [sensor_view(fc, corner, rate_only) for fc in raw]
+            rss_of[corner] = Design(view, {n: effects[n] for n in selected}, sigma).fit(selected).rss
+            return 0.5 * cur.n * np.log(cur.rss / rss_of[corner])
+
+        floor = fit_floor_shape(
+            resid, rate, row_masks(fcs), band_edges(fcs), named_band, nuisance_of(fcs), extra=motion_gain
+        )
         if floor is None:
             not_ident["sensor_bandwidth"] = {"reason": "the noise floor is not visible in the trusted band"}
         elif floor.corner_hz < CORNER_FLAT * rate:
-            # the motion part of the low-pass: the same model seen through the filter
-            view = [sensor_view(fc, floor.corner_hz) for fc in raw]
-            d_lp = Design(view, {n: effects[n] for n in selected}, sigma)
-            rss_lp = d_lp.fit(selected).rss
-            dbic = floor.delta_bic(cur.n) + cur.n * np.log(cur.rss / rss_lp)
+            rss_lp = rss_of.get(floor.corner_hz, cur.rss)
             gain = max(floor.explained(rate), 1 - rss_lp / cur.rss)
             scores.append(
-                {"effect": "sensor_bandwidth", "delta_bic": float(dbic), "gain": float(gain), "k": 1}
+                {"effect": "sensor_bandwidth", "delta_bic": float(floor.delta_bic(cur.n)), "gain": float(gain), "k": 1}
                 | {"corner_hz": floor.corner_hz}
             )
     # one score per effect: the better variant (the other one is kept for the report)
@@ -401,14 +417,13 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         dens = np.sqrt(c / 2)
         sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
     if corner is not None:
-        sel.floor_shape = fit_floor_shape(
-            resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs)
-        )
-        fs = sel.floor_shape
-        if fs is not None:
-            sel.effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(fs.corner_hz)
-        sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(sel.effects["sensor_bandwidth"].params["corner_hz"])}
-        sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(fs.corner_se_hz if fs is not None else np.nan)}
+        # the corner stays the selection's (spectrum and motion together); its standard error from
+        # the curvature of the floor's profile on the final residual
+        prof = FloorShapeProfile(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs))
+        sel.floor_shape = prof.fit(corner) if prof.ok else None
+        se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
+        sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}
+        sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(se)}
     if sel.band_vibration:
         # the band refitted on the final residual, with standard errors; the white-noise level is
         # its floor (the first-difference estimate above would include the band's power)

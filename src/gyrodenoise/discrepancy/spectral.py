@@ -523,15 +523,54 @@ class FloorShapeFit:
     loglik_flat: float
     f_hi_hz: float
     corner_se_hz: float = float("nan")
+    extra_loglik: float = 0.0  # log-likelihood gain of the corner outside the spectrum (the motion's delay)
 
     def delta_bic(self, n: int) -> float:
-        return 2 * (self.loglik - self.loglik_flat) - FLOOR_SHAPE_PARAMS * np.log(n)
+        return 2 * (self.loglik - self.loglik_flat + self.extra_loglik) - FLOOR_SHAPE_PARAMS * np.log(n)
 
     def explained(self, rate_hz: float) -> float:
         """Share of the in-band floor power the droop removes (what a flat floor would misplace)."""
         f = np.linspace(0.0, min(self.f_hi_hz, rate_hz / 2), 512)
         a = SensorBandwidth.floor_shape(f, self.corner_hz, rate_hz)
         return float(1.0 - np.trapezoid(a, f) / max(f[-1], 1e-300))
+
+
+class FloorShapeProfile:
+    """Whittle log-likelihood of the residual spectra with the floor shaped by a sensor low-pass of
+    a given corner (`SensorBandwidth.floor_shape`; with a named band-limited vibration `band` =
+    (f0, bw), its power refitted beside the floor). `ok` is False when the floor is known only
+    from outside the trusted band (the reconstruction error swamps it inside): its shape cannot
+    be read there."""
+
+    def __init__(
+        self,
+        residuals: list[np.ndarray],
+        rate_hz: float,
+        masks: list[np.ndarray] | None = None,
+        bands: list[float | None] | None = None,
+        band: tuple[float, float] | None = None,
+        nuisance: Nuisance | None = None,
+    ) -> None:
+        self.sp = spectra(residuals, rate_hz, masks, bands, nuisance)
+        self.band, self.rate_hz = band, rate_hz
+        self.ok = len(self.sp.f) >= 20 and self.sp.floor is None
+        self.ll_flat = _fit_levels(self.sp, band)[1] if self.ok else float("nan")
+        self.f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
+
+    def loglik(self, corner_hz: float) -> float:
+        return _fit_levels(self.sp.shaped(corner_hz), self.band)[1]
+
+    def fit(self, corner_hz: float) -> FloorShapeFit:
+        """The fit at `corner_hz`, with the standard error of the corner from the profile's curvature."""
+        theta, ll, _ = _fit_levels(self.sp.shaped(corner_hz), self.band)
+        u, h = np.log(corner_hz), 0.02
+        d2 = -(self.loglik(np.exp(u + h)) - 2 * ll + self.loglik(np.exp(u - h))) / h**2
+        se = float(corner_hz / np.sqrt(d2)) if d2 > 0 else float("nan")
+        return FloorShapeFit(float(corner_hz), theta[0], ll, self.ll_flat, self.f_hi, se)
+
+    def corner_grid(self) -> np.ndarray:
+        """Corners searched: 2 Hz to 50 x the rate (beyond it the floor is flat to 1e-3)."""
+        return np.geomspace(2.0, 50.0 * self.rate_hz, 9)
 
 
 def fit_floor_shape(
@@ -541,36 +580,30 @@ def fit_floor_shape(
     bands: list[float | None] | None = None,
     band: tuple[float, float] | None = None,
     nuisance: Nuisance | None = None,
+    extra: Callable[[float], float] | None = None,
 ) -> FloorShapeFit | None:
-    """Maximum-Whittle-likelihood corner of a first-order sensor low-pass from the residual spectra
-    (floor c_a A(f; corner) against the flat c_a; with a named band-limited vibration `band`
-    = (f0, bw), its power is refitted beside the floor in both). Corners from 2 Hz to 50 x the
-    rate (beyond that the floor is flat to 1e-3 in [0, rate/2])."""
-    sp = spectra(residuals, rate_hz, masks, bands, nuisance)
-    if len(sp.f) < 20 or sp.floor is not None:
-        # floor known only from outside the band (the reconstruction error swamps it inside):
-        # its shape cannot be read here
+    """Maximum-likelihood corner of a first-order sensor low-pass: the Whittle log-likelihood of
+    the floor's shape (`FloorShapeProfile`) plus `extra(corner)` (a log-likelihood gain of the same
+    corner elsewhere, e.g. what its delay of the motion explains), coarse grid then bounded search
+    in log corner. None: the floor's shape cannot be read in the trusted band."""
+    prof = FloorShapeProfile(residuals, rate_hz, masks, bands, band, nuisance)
+    if not prof.ok:
         return None
-    _, ll_flat, _ = _fit_levels(sp, band)
 
     def neg(u: float) -> float:
-        return -_fit_levels(sp.shaped(float(np.exp(u))), band)[1]
+        c = float(np.exp(u))
+        return -(prof.loglik(c) + (extra(c) if extra else 0.0))
 
-    lo, hi = np.log(2.0), np.log(50.0 * rate_hz)
-    grid = np.linspace(lo, hi, 13)  # coarse grid first: the profile can have a flat far end
+    grid = np.log(prof.corner_grid())
     vals = [neg(u) for u in grid]
     k = int(np.argmin(vals))
     res = optimize.minimize_scalar(
-        neg, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded", options={"xatol": 1e-3}
+        neg, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded", options={"xatol": 5e-3}
     )
     u = float(res.x) if res.fun < vals[k] else float(grid[k])
-    theta, ll, _ = _fit_levels(sp.shaped(float(np.exp(u))), band)
-    # curvature of the profile in log corner -> standard error of the corner
-    h = 0.02
-    d2 = (neg(u + h) - 2 * neg(u) + neg(u - h)) / h**2
-    se = float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
-    f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
-    return FloorShapeFit(float(np.exp(u)), theta[0], ll, ll_flat, f_hi, se)
+    fit = prof.fit(float(np.exp(u)))
+    fit.extra_loglik = float(extra(fit.corner_hz)) if extra else 0.0
+    return fit
 
 
 def fit_floor(

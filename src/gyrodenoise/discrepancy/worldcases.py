@@ -103,7 +103,7 @@ def make_world(
     duration_s: float = 50.0,
     bandwidth: str = "integrate",
     mocap: str = "vicon",
-    euroc_root: str | Path = "../shared/data/euroc",
+    euroc_root: str | Path | None = None,
     flights: tuple[str, str] = (FIT_FLIGHT, HOLDOUT_FLIGHT),
     smoothing_hz: float = 15.0,
 ) -> dict:
@@ -135,7 +135,7 @@ def run_world_case(
     duration_s: float = 50.0,
     null_draws: int = 20,
     mocap: str = "vicon",
-    euroc_root: str | Path = "../shared/data/euroc",
+    euroc_root: str | Path | None = None,
     smoothing_hz: float = 15.0,
 ) -> dict:
     """One scenario: 'none' (the null world), 'bandwidth' (null + a delaying sensor bandwidth) or a

@@ -16,6 +16,7 @@ Residual convention: r = measured gyro - true body rate. Stages give the order o
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any, ClassVar
 
 import numpy as np
@@ -469,6 +470,7 @@ class SensorBandwidth(Effect):
         return float(self.params["corner_hz"])
 
     @staticmethod
+    @lru_cache(maxsize=256)
     def _discrete(corner_hz: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
         # first-order hold: the exact response to a piecewise-linear input, so the delay is the
         # continuous filter's 1 / (2 pi corner) (a plain one-pole recursion is half a sample off)
@@ -481,7 +483,7 @@ class SensorBandwidth(Effect):
         """x (N, ...) through the low-pass, started in steady state."""
         if not np.isfinite(corner_hz):
             return x
-        b, a = cls._discrete(corner_hz, rate_hz)
+        b, a = cls._discrete(float(corner_hz), float(rate_hz))
         zi = signal.lfilter_zi(b, a)
         zi = zi.reshape(-1, *([1] * (x.ndim - 1))) * x[:1]
         return signal.lfilter(b, a, x, axis=0, zi=zi)[0]
