@@ -85,6 +85,15 @@ class ReconstructionBand:
         lost = np.stack([np.interp(f, self.f_hz, np.nan_to_num(self.lost_angle_psd[:, i])) for i in range(3)], 1)
         return self.noise_psd(f) + (2 * np.pi * f[:, None]) ** 2 * lost
 
+    def error_share(self, lo_hz: float, hi_hz: float) -> list[float]:
+        """Per axis, the median over [lo, hi] Hz of the estimated reconstruction error over the
+        measured residual's PSD: ~1 where the residual is the reconstruction's error."""
+        m = (self.f_hz >= lo_hz) & (self.f_hz <= hi_hz)
+        if not m.any():
+            return [float("nan")] * 3
+        r = self.error_psd(self.f_hz[m]) / np.maximum(self.residual_psd[m], 1e-300)
+        return np.median(r, axis=0).tolist()
+
     def summary(self) -> dict:
         return {
             "name": self.name,
@@ -96,6 +105,8 @@ class ReconstructionBand:
             "knot_spacing_s": self.knot_spacing_s,
             "spline_corner_hz": 1.0 / (2 * self.knot_spacing_s),
             "orientation_noise_mrad": (1e3 * self.orientation_noise_rad).tolist(),
+            # what the reconstruction error accounts for just above the band (up to 3 x its edge)
+            "error_share_above_band": self.error_share(self.f_max_hz, min(3 * self.f_max_hz, self.rate_hz / 2)),
         }
 
 
