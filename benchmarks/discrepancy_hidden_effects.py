@@ -14,8 +14,8 @@ held-out gap; then the null case (nothing hidden) over many seeds: the false-pos
 decision uses the null bootstrap (`--null-draws` re-simulations per run) and the practical minimum
 (1% of the in-band residual power on the held-out flight). Writes <out>/discrepancy_hidden_effects.{json,md}.
 
-    python benchmarks/discrepancy_hidden_effects.py [--world both] [--seeds 2] [--null-seeds 40] \\
-        [--own-null-seeds 20] [--duration 50] [--null-draws 20] [--out DIR]
+    python benchmarks/discrepancy_hidden_effects.py [--world both] [--seeds 2] [--own-seeds 1] \\
+        [--null-seeds 40] [--own-null-seeds 20] [--duration 50] [--null-draws 20] [--out DIR]
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def _own(args) -> dict:
     runs, nulls = [], []
     for name in CASES:
         for m in (0, 1):
-            for seed in range(args.seeds):
+            for seed in range(args.own_seeds):
                 with tempfile.TemporaryDirectory() as d:
                     r = run_case(d, name, m, 1000 + seed, duration_s=args.own_duration, null_draws=args.null_draws)
                 r["ok_named"] = r["named_labels"] == [name]
@@ -115,7 +115,8 @@ def _named_counts(runs: list[dict]) -> dict[str, dict[str, int]]:
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--world", choices=["own", "independent", "both"], default="both")
-    p.add_argument("--seeds", type=int, default=2)
+    p.add_argument("--seeds", type=int, default=2, help="independent world: seeds per effect and magnitude")
+    p.add_argument("--own-seeds", type=int, default=1, help="own simulator: seeds per effect and magnitude")
     p.add_argument("--null-seeds", type=int, default=40, help="independent world, Vicon-like ground truth")
     p.add_argument("--gt-null-seeds", type=int, default=10, help="independent world, EuRoC-like ground truth")
     p.add_argument("--own-null-seeds", type=int, default=20)
@@ -162,7 +163,7 @@ def main() -> None:
         lines += [
             "## Own simulator (exact ground truth)",
             "",
-            f"{args.seeds} seeds x 2 magnitudes per effect, 3 fit + 1 held-out hand-held sequences of "
+            f"{args.own_seeds} seed(s) x 2 magnitudes per effect, 3 fit + 1 held-out hand-held sequences of "
             f"{args.own_duration:g} s; {w['wall_time_s']:.0f} s.",
             "",
             f"**Null case: false-positive rate {100 * fpr:.1f}% over {n} seeds.**",

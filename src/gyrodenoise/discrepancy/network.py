@@ -63,7 +63,8 @@ def network_effects(model: str, fcs: list[FitContext], bic_threshold: float = 10
         )
     off = C - np.diag(np.diag(C))
     return {
-        "model": meta.get("path", model),
+        # the name the user gave (a shipped model's name, e.g. "euroc"), never this machine's path
+        "model": str(model),
         "model_dataset": meta.get("dataset"),
         "C_hat": C.tolist(),
         "C_hat_as_effects": {

@@ -14,9 +14,10 @@ regression's Gaussian likelihood:
 A candidate is named when its delta BIC clears its threshold (a null distribution's quantile,
 `null.py`, or the fixed `bic_threshold`) and it is practically meaningful: it closes at least
 `min_gain` of the residual power in the trusted band (of the held-out sequences, when given, for
-regression effects; of the fit sequences for stochastic ones). Effects whose expected delta BIC at
-their reference magnitude falls short of their threshold are not identifiable from this motion
-(`identifiability`) and are not tried.
+regression effects; of the fit sequences for stochastic ones). Effects whose expected delta BIC
+even at their largest plausible magnitude falls short of their threshold are not identifiable from
+this motion and are not tried; every effect's expected delta BIC at a stated reference magnitude is
+reported (`identifiability`).
 """
 
 from __future__ import annotations
@@ -121,8 +122,8 @@ def score_step(
 ) -> StepScores:
     """Prepare and score every candidate in `remaining` against the model `selected` on sequences
     `fcs` (already seen through a named sensor low-pass; `raw`: the same without it, for the
-    sensor-bandwidth candidate). Candidates whose expected delta BIC at their reference magnitude
-    is below their threshold are left out (`not_identifiable`)."""
+    sensor-bandwidth candidate). Candidates whose expected delta BIC at their largest plausible
+    magnitude is below their threshold are left out (`not_identifiable`)."""
     raw = fcs if raw is None else raw
     rate = fcs[0].rate_hz
     regress = [c for c in remaining if not effects[c].stochastic]
