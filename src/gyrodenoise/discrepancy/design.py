@@ -55,6 +55,15 @@ def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
             fc.extra["band"], fc.extra["band_hz"] = b, b.f_max_hz
 
 
+# what `set_reconstruction_model` keeps in a context's extra
+RECONSTRUCTION_KEYS = ("band", "band_hz", "row_weights", "nuisance_level", "sensor_floor")
+
+
+def without_reconstruction(extra: dict) -> dict:
+    """A context's extra without the reconstruction model (for a 'residual' that is no gyro - truth)."""
+    return {k: v for k, v in extra.items() if k not in RECONSTRUCTION_KEYS}
+
+
 def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rows a fit uses: weighted columns X (3N, k) and residual r (3N,) of sequence `fc`, samples
     outside `row_mask` left out. Where the reconstructed true rate is trusted only in a band

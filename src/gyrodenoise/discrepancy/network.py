@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from gyrodenoise.discrepancy.design import without_reconstruction
 from gyrodenoise.discrepancy.rank import select_effects
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import EFFECTS
@@ -39,7 +40,7 @@ def network_effects(model: str, fcs: list[FitContext], bic_threshold: float = 10
         imu = np.concatenate([fc.gyro, fc.extra["acc"]], axis=1)
         w_tilde = predict_gyro(net, imu).numpy() - fc.gyro @ C.T
         # residual := w_tilde (the FitContext residual is gyro - omega)
-        extra = {k: v for k, v in fc.extra.items() if k not in ("band", "band_hz")}
+        extra = without_reconstruction(fc.extra)
         wrapped.append(replace(fc, gyro=fc.omega + w_tilde, extra=extra))
     # w_tilde is a function of the IMU samples alone: no reconstruction error, the whole spectrum
     sel = select_effects(

@@ -380,7 +380,7 @@ class _Profile:
         self.best = (-np.inf, 0.0, 0.0, None, None)
 
     def __call__(self, u: np.ndarray) -> float:
-        f0, bw = _clip_band(float(u[0]), float(np.exp(u[1])), self.sp.rate_hz, float(self.sp.f[-1]))
+        f0, bw = _clip_band(float(u[0]), float(np.exp(min(u[1], 20.0))), self.sp.rate_hz, float(self.sp.f[-1]))
         theta, ll, info = _fit_levels(self.sp, (f0, bw), self.theta)
         if ll > self.best[0]:
             self.best = (ll, f0, bw, theta, info)
