@@ -242,6 +242,39 @@ def _holdout_gain(
     return float(1.0 - p1 / max(p0, 1e-300))
 
 
+def _holdout_band_share(
+    design: Design,
+    effects: dict[str, Effect],
+    names: list[str],
+    sigma: np.ndarray,
+    holdout: list[FitContext],
+    corner: float | None,
+    sat_limit: float | None,
+    band: BandFit,
+) -> float:
+    """Share of the held-out in-band residual power that a band-limited vibration of the fitted centre
+    and width carries when its level is refitted on the held-out spectra (0 when the band does not
+    raise their Whittle likelihood): whether the band the fit sequences show is a property of the
+    sensor that the held-out flights share."""
+    res = design.fit(names)
+    views = [sensor_view(h, corner) for h in holdout]
+    resid = [v.residual - _predict(design, res, effects, names, sigma, v, sat_limit) for v in views]
+    rate = holdout[0].rate_hz
+    fit = fit_band(
+        resid,
+        rate,
+        row_masks(views),
+        starts=[(band.frequency_hz, band.bandwidth_hz)],
+        bands=band_edges(views),
+        floor_corner_hz=corner,
+        nuisance=nuisance_of(views),
+        fixed_band=True,
+    )
+    if fit is None or fit.loglik <= fit.loglik_floor:
+        return 0.0
+    return fit.explained(sigma, rate)
+
+
 def select_effects(
     fcs: list[FitContext],
     base: list[str] = ("bias", "white_noise"),
@@ -330,7 +363,14 @@ def select_effects(
             sc["threshold"] = thr
             if sc["delta_bic"] < thr or sc["gain"] < min_gain:
                 continue
-            if holdout and not effects[sc["effect"]].stochastic and sc.get("variant") != "band-limited":
+            if holdout and sc.get("variant") == "band-limited":
+                # noise cannot be predicted: the band must be there in the held-out spectra too, at a
+                # practical share of their in-band power
+                hg = _holdout_band_share(design, effects, selected, sigma, holdout, corner, sat_limit, st.band)
+                sc["holdout_gain"] = hg
+                if hg < min_gain:
+                    continue
+            elif holdout and not effects[sc["effect"]].stochastic:
                 hg = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)
                 sc["holdout_gain"] = hg
                 if hg < min_gain:
@@ -390,6 +430,10 @@ def select_effects(
         thresholds={c: thresholds.get(c, bic_threshold) for c in scorable},
     )
     _fill_params(sel, view)
+    if sel.band is not None and sel.band.kappa is not None:
+        # the reconstruction error's level beside the named band: the base model's fit had to take
+        # the band's power into it (re-simulations draw the error at this level)
+        set_row_weights(fcs + list(holdout or []), fcs[0].extra["sensor_floor"], sel.band.kappa)
     return sel
 
 

@@ -195,18 +195,26 @@ def estimate_band(fc: FitContext, residual: np.ndarray, trust_ratio: float = TRU
 def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1) -> np.ndarray:
     """(3,) one-sided PSD of the sensor's noise floor: the median of the measured residual's PSD
     over the frequencies (>= MIN_BAND_HZ) where the estimated reconstruction error is below `share`
-    of it, pooled over sequences; where there are none, its FLOOR_QUANTILE quantile."""
+    of it, pooled over sequences: inside the compared band if there are enough such frequencies
+    there (the level the comparison needs), else anywhere (where the spline rejects the ground
+    truth's noise); where there are none at all, its FLOOR_QUANTILE quantile."""
     out = np.zeros(3)
     for a in range(3):
-        vals, low = [], []
+        inside, anywhere, low = [], [], []
         for b in bands:
             ok = (b.f_hz >= MIN_BAND_HZ) & (b.f_hz < b.rate_hz / 2)
             p = b.residual_psd[ok, a]
-            e = b.error_psd(b.f_hz[ok])[:, a]
-            vals.append(p[e < share * p])
+            clean = b.error_psd(b.f_hz[ok])[:, a] < share * p
+            inside.append(p[clean & (b.f_hz[ok] <= b.f_max_hz)])
+            anywhere.append(p[clean])
             low.append(p)
-        v = np.concatenate(vals)
-        out[a] = np.median(v) if len(v) >= 10 else np.quantile(np.concatenate(low), FLOOR_QUANTILE)
+        v_in, v_any = np.concatenate(inside), np.concatenate(anywhere)
+        if len(v_in) >= 10:
+            out[a] = np.median(v_in)
+        elif len(v_any) >= 10:
+            out[a] = np.median(v_any)
+        else:
+            out[a] = np.quantile(np.concatenate(low), FLOOR_QUANTILE)
     return out
 
 

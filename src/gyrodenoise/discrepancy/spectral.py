@@ -136,6 +136,7 @@ class BandFit:
     per_sequence: list[dict] = field(default_factory=list)
     f_hi_hz: float = float("inf")  # upper edge of the compared band (the trusted band)
     mean_psd: np.ndarray | None = None  # (3,) mean periodogram over the compared bins
+    kappa: np.ndarray | None = None  # (3,) level of the reconstruction-error nuisance fitted beside the band
 
     @property
     def amplitude(self) -> np.ndarray:
@@ -412,12 +413,13 @@ def fit_band(
     bands: list[float | None] | None = None,
     floor_corner_hz: float | None = None,
     nuisance: Nuisance | None = None,
+    fixed_band: bool = False,
 ) -> BandFit | None:
     """Maximum-Whittle-likelihood band-limited vibration (see the module docstring); None when the
     residuals show no excess to start from. `with_errors`: standard errors (a few more fits).
     `starts`: (f0, bw) to start from (default: `initial_guesses`). `bands`: trusted band per
     sequence (`spectra`). `floor_corner_hz`: the floor is shaped by a sensor low-pass of this
-    corner (`Spectra.shaped`)."""
+    corner (`Spectra.shaped`). `fixed_band`: keep the first start's centre and width, fit levels only."""
     f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
     starts = initial_guesses(residuals, rate_hz, f_max=f_hi) if starts is None else starts
     if not starts:
@@ -426,10 +428,16 @@ def fit_band(
     if len(sp.f) < 10 * BAND_PARAMS:
         return None
     _, ll0, _ = _fit_levels(sp, None)
+    if fixed_band:  # centre and width as given: only the levels are fitted
+        f0, bw = _clip_band(*starts[0], rate_hz, float(sp.f[-1]))
+        theta, ll, _ = _fit_levels(sp, (f0, bw))
+        mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
+        return BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
     prof = _maximise(sp, starts)
     ll, f0, bw, theta, info = prof.best
     mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
-    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
+    kappa = theta[2] if len(theta) > 2 else None
+    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd, kappa=kappa)
     if with_errors:
         _errors(fit, sp, info, prof)
     return fit
