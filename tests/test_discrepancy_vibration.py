@@ -19,7 +19,8 @@ from gyrodenoise.discrepancy.hidden import (
     run_case,
 )
 from gyrodenoise.discrepancy.spectral import fit_band
-from gyrodenoise.sim.effects import SignalContext, Vibration, WhiteNoise
+from gyrodenoise.sim.context import SignalContext
+from gyrodenoise.sim.effects import Vibration, WhiteNoise
 
 DURATION = 30.0
 RATE = 200.0
@@ -96,7 +97,24 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
     hidden = [Vibration(frequency_hz=30.0, bandwidth_hz=8.0, amplitude=[3e-3, 2e-3, 2e-3])]
     make_measured(tmp_path / "data", hidden, 3, 20.0, seed=3)
     out = tmp_path / "report"
-    assert main(["--root", str(tmp_path / "data"), "--fit", "s0", "s1", "--holdout", "s2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "--root",
+                str(tmp_path / "data"),
+                "--fit",
+                "s0",
+                "s1",
+                "--holdout",
+                "s2",
+                "--null-draws",
+                "8",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     rep = json.loads((out / "report.json").read_text())
     (vib,) = [e for e in rep["named_effects"] if e["name"] == "vibration"]
     assert vib["variant"] == "band-limited"

@@ -62,7 +62,21 @@ def test_unidentifiable_effects_reported_not_named(effect, hidden, trajectory, t
 def test_cli_writes_report(tmp_path):
     make_measured(tmp_path / "data", [TimeOffset(delta=0.005)], 3, 20.0, seed=1)
     out = tmp_path / "report"
-    rc = main(["--root", str(tmp_path / "data"), "--fit", "s0", "s1", "--holdout", "s2", "--out", str(out)])
+    rc = main(
+        [
+            "--root",
+            str(tmp_path / "data"),
+            "--fit",
+            "s0",
+            "s1",
+            "--holdout",
+            "s2",
+            "--null-draws",
+            "8",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     rep = json.loads((out / "report.json").read_text())
     assert [e["name"] for e in rep["named_effects"]] == ["time_offset"]

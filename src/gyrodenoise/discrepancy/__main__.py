@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 
 from gyrodenoise.discrepancy.compare import load_fit_context
+from gyrodenoise.discrepancy.null import DRAWS
+from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.paths import portable_command
@@ -98,9 +100,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--min-gain",
         type=float,
-        default=0.0,
+        default=MIN_GAIN,
         metavar="F",
-        help="fraction (0-1) of the remaining residual an effect must explain to be named (default: %(default)s)",
+        help="share (0-1) of the in-band residual power of the held-out sequences an effect must close to be "
+        "named (default: %(default)s)",
+    )
+    p.add_argument(
+        "--null-draws",
+        type=int,
+        default=DRAWS,
+        metavar="N",
+        help="re-simulations of the fitted base model for the null distribution of every candidate's delta BIC; "
+        "an effect is named above its 95th percentile (0: the fixed --bic-threshold alone; default: %(default)s)",
     )
     p.add_argument(
         "--network",
@@ -144,7 +155,9 @@ def main(argv: list[str] | None = None) -> int:
         return [load_fit_context(args.root, n, args.gt_files.get(n), args.knot_spacing) for n in names]
 
     fit, holdout = load(args.fit), load(args.holdout)
-    report, arrays = run(fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed)
+    report, arrays = run(
+        fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed, args.null_draws
+    )
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     if args.network:

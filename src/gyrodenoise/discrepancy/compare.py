@@ -9,9 +9,9 @@ import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_imu
+from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import sequence_folder
-from gyrodenoise.sim.effects import FitContext
+from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 from gyrodenoise.so3 import integrate_gyro
 
@@ -29,7 +29,9 @@ def load_fit_context(
     mav0 = sequence_folder(root, name)
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     imu = read_imu(mav0 / "imu0" / "data.csv")
-    traj = SmoothTrajectory.from_asl(gt_path, knot_spacing=knot_spacing)
+    gt = read_groundtruth(gt_path)
+    t_gt = (gt.t_ns - gt.t_ns[0]) * 1e-9
+    traj = SmoothTrajectory.fit(t_gt, gt.quat_xyzw, gt.pos, knot_spacing, t0_ns=int(gt.t_ns[0]), source=str(gt_path))
     t_imu = (imu.t_ns - traj.t0_ns) * 1e-9
     keep = (t_imu >= traj.t_start + margin_s) & (t_imu <= traj.t_end - margin_s)
     if keep.sum() < 100:
@@ -55,70 +57,20 @@ def load_fit_context(
             "gt_file": str(gt_path),
             # truth at other times (sequence time), for the time-offset regressor
             "kinematics_at": lambda tt, off=float(t_imu[0]): traj.evaluate(tt + off),
+            # the ground truth around its own fit, for the trusted band (`reconstruction.estimate_band`)
+            **gt_fit_residual(traj, t_gt, gt.quat_xyzw, margin_s),
+            "knot_spacing": knot_spacing,
         },
     )
 
 
-# ----------------------------------------------------------------------------- Allan deviation
-
-
-def allan_taus(n: int, rate_hz: float, per_octave: int = 4) -> np.ndarray:
-    m = np.unique(np.round(np.logspace(0, np.log10(max(n // 9, 2)), 1 + per_octave * 12)).astype(int))
-    return m / rate_hz
-
-
-def allan_variance(x: np.ndarray, rate_hz: float, taus: np.ndarray) -> np.ndarray:
-    """Overlapping Allan variance of rate samples x (N, ...) at the cluster times `taus` (s)."""
-    x = np.asarray(x, dtype=np.float64)
-    theta = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)]) / rate_hz
-    out = np.full((len(taus), *x.shape[1:]), np.nan)
-    n = len(x)
-    for i, tau in enumerate(taus):
-        m = int(round(tau * rate_hz))
-        if m < 1 or 2 * m >= n:
-            continue
-        d = theta[2 * m :] - 2 * theta[m:-m] + theta[: -2 * m]
-        out[i] = (d**2).mean(0) / (2 * tau**2)
-    return out
-
-
-def allan_deviation(x: np.ndarray, rate_hz: float, taus: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    taus = allan_taus(len(x), rate_hz) if taus is None else np.asarray(taus)
-    return taus, np.sqrt(allan_variance(x, rate_hz, taus))
-
-
-def pooled_allan(residuals: list[np.ndarray], rate_hz: float, taus: np.ndarray) -> np.ndarray:
-    """Allan deviation pooled over sequences (variances averaged with the sequence lengths)."""
-    avs, ws = [], []
-    for r in residuals:
-        av = allan_variance(r, rate_hz, taus)
-        avs.append(np.nan_to_num(av))
-        ws.append(np.where(np.isnan(av), 0.0, len(r)))
-    w = np.sum(ws, 0)
-    return np.sqrt(np.where(w > 0, np.sum([a * b for a, b in zip(avs, ws, strict=True)], 0) / np.maximum(w, 1), np.nan))
-
-
-def fit_allan_noise(residuals: list[np.ndarray], rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Fit AVAR(tau) = N^2 / tau + K^2 tau / 3 per axis (white noise + rate random walk).
-
-    Weighted least squares, each tau weighted by the inverse of its variance's uncertainty
-    (relative std ~ sqrt(2 tau / T) for T s of data). Returns (N^2, K^2, std of K^2), each (3,).
-    """
-    n_total = sum(len(r) for r in residuals)
-    taus = allan_taus(min(len(r) for r in residuals), rate_hz, per_octave=2)
-    av = pooled_allan(residuals, rate_hz, taus) ** 2
-    T = n_total / rate_hz
-    rel = np.sqrt(2 * taus / T + 1.0 / (n_total / 2))
-    A = np.stack([1 / taus, taus / 3], 1)
-    n2, k2, k2_se = np.zeros(3), np.zeros(3), np.zeros(3)
-    for i in range(3):
-        ok = np.isfinite(av[:, i])
-        w = 1.0 / (rel[ok] * av[ok, i])
-        Aw = A[ok] * w[:, None]
-        coef, *_ = np.linalg.lstsq(Aw, av[ok, i] * w, rcond=None)
-        cov = np.linalg.pinv(Aw.T @ Aw)
-        n2[i], k2[i], k2_se[i] = coef[0], coef[1], np.sqrt(cov[1, 1])
-    return n2, k2, k2_se
+def gt_fit_residual(traj: SmoothTrajectory, t: np.ndarray, quat_xyzw: np.ndarray, margin_s: float = 0.5) -> dict:
+    """Rotation vector of R_fit(t)^T R_gt(t) at the ground-truth samples inside the span (minus
+    `margin_s`): the ground truth's noise plus the motion the spline does not follow."""
+    keep = (t >= traj.t_start + margin_s) & (t <= traj.t_end - margin_s)
+    rot_fit = Rotation.from_matrix(traj.evaluate(t[keep]).rot)
+    res = (rot_fit.inv() * Rotation.from_quat(quat_xyzw[keep])).as_rotvec()
+    return {"gt_t": t[keep], "gt_rotvec_residual": res}
 
 
 # ----------------------------------------------------------------------------- spectra, correlation

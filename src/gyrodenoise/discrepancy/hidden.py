@@ -15,8 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.discrepancy.compare import load_fit_context
-from gyrodenoise.discrepancy.rank import select_effects
-from gyrodenoise.discrepancy.workflow import gap
+from gyrodenoise.discrepancy.workflow import decide, gap
 from gyrodenoise.sim.effects import (
     Bias,
     BiasRandomWalk,
@@ -140,6 +139,30 @@ def make_measured(
     return names
 
 
+def _delta_bic(sel, name: str) -> float:
+    step = next((s for s in sel.steps if s.get("added") == name), None)
+    cand = next((c for c in (step or {}).get("candidates", []) if c["effect"] == name), {})
+    return float(cand.get("delta_bic", np.nan))
+
+
+def _steps(sel) -> list[dict]:
+    """The selection steps in short: what was added, and the top candidates' delta BIC / threshold."""
+    out = []
+    for st in sel.steps:
+        if "candidates" not in st:
+            continue
+        out.append(
+            {
+                "added": st.get("added"),
+                "top": [
+                    {k: c.get(k) for k in ("effect", "variant", "delta_bic", "threshold", "gain", "holdout_gain")}
+                    for c in st["candidates"][:4]
+                ],
+            }
+        )
+    return out
+
+
 def run_case(
     root: str | Path,
     effect_name: str,
@@ -148,8 +171,10 @@ def run_case(
     n_fit: int = 3,
     duration_s: float = 50.0,
     trajectory: str = "handheld",
+    null_draws: int = 0,
 ) -> dict:
-    """Generate, run the selection on n_fit sequences and the gap on one held-out sequence."""
+    """Generate, run the selection on n_fit sequences (thresholds from `null_draws` null
+    re-simulations; 0: the fixed BIC threshold) and the gap on one held-out sequence."""
     if effect_name == "none":
         case = None
         hidden: list[Effect] = []
@@ -168,8 +193,7 @@ def run_case(
     )
     fcs = [load_fit_context(root, n) for n in names]
     fit, hold = fcs[:n_fit], fcs[n_fit:]
-    sel_base = select_effects(fit, base, candidates=[])
-    sel = select_effects(fit, base)
+    sel_base, sel, null = decide(fit, hold, base, null_draws=null_draws, seed=seed)
     out = {
         "effect": effect_name,
         "magnitude": magnitude,
@@ -177,7 +201,10 @@ def run_case(
         "named": list(sel.named),
         "named_labels": [label(sel.fitted[n]) if n in sel.fitted else n for n in sel.named],
         "not_identifiable": list(sel.not_identifiable),
+        "steps": _steps(sel),
     }
+    if null is not None:
+        out["null_p_values"] = {n: null.p_value(n, _delta_bic(sel, n)) for n in sel.named if n in null.delta_bic}
     if case is not None:
         name = case.effect.name
         true = np.asarray(case.effect.params[case.param])

@@ -12,8 +12,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from gyrodenoise.discrepancy.design import without_reconstruction
 from gyrodenoise.discrepancy.rank import select_effects
-from gyrodenoise.sim.effects import EFFECTS, FitContext
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS
 
 DETERMINISTIC = [
     "scale_factor",
@@ -38,8 +40,12 @@ def network_effects(model: str, fcs: list[FitContext], bic_threshold: float = 10
         imu = np.concatenate([fc.gyro, fc.extra["acc"]], axis=1)
         w_tilde = predict_gyro(net, imu).numpy() - fc.gyro @ C.T
         # residual := w_tilde (the FitContext residual is gyro - omega)
-        wrapped.append(replace(fc, gyro=fc.omega + w_tilde, extra=dict(fc.extra)))
-    sel = select_effects(wrapped, base=["bias"], candidates=DETERMINISTIC, bic_threshold=bic_threshold)
+        extra = without_reconstruction(fc.extra)
+        wrapped.append(replace(fc, gyro=fc.omega + w_tilde, extra=extra))
+    # w_tilde is a function of the IMU samples alone: no reconstruction error, the whole spectrum
+    sel = select_effects(
+        wrapped, base=["bias"], candidates=DETERMINISTIC, bic_threshold=bic_threshold, trusted_band=False
+    )
     learned = []
     for step in sel.steps:
         if "added" in step:

@@ -1,170 +1,69 @@
-"""Fit effects to the residual (measured - true rate), rank them by BIC, select greedily, and tell
-which effects the motion cannot identify.
+"""Rank candidate effects by BIC and select them greedily; tell what the motion cannot identify.
 
-All regression effects are linear in their coefficients once their nonlinear parameter (a
-frequency, a time constant, a range) is set by `Effect.prepare`. The weighted normal equations
-(Gram matrix) of all columns are built once per selection step; any subset is then a small solve.
-Rows are the three axes of every sample, weighted by 1/sigma_axis (white-noise level per axis).
+Each step (`score_step`) prepares every remaining candidate on the current residual and scores it:
+regression effects by the BIC gain of their columns (`design.Design`), stochastic ones by the
+Whittle likelihood of the residual's spectrum (`spectral`), which is on the scale of the
+regression's Gaussian likelihood:
 
-Vibration has two variants. The sinusoid is a regression effect like the others. The band-limited
-one is stochastic: it is scored by the Whittle likelihood of the residual's spectrum with and
-without a band term (`gyrodenoise.discrepancy.spectral`), which is on the scale of the regression's
-Gaussian likelihood, so both variants compete in the same step under the same BIC threshold; the
-better one is the vibration candidate's score. Once the band-limited variant is named it has no
-columns; it is refitted on the final residual, and the white-noise level then comes from the same
-spectral fit (first differences would count the band's power as white noise).
+- vibration has two variants, the sinusoid (regression) and band-limited noise (spectral); the
+  better one is the candidate's score. Once the band-limited variant is named it has no columns; it
+  is refitted on the final residual, and the white-noise level then comes from the same spectral fit.
+- sensor_bandwidth (a low-pass of the sensor) is scored by the shape of the noise floor plus what
+  the implied delay of the motion explains (`design.sensor_view`, no free coefficient).
+
+A candidate is named when its delta BIC clears its threshold (a null distribution's quantile,
+`null.py`, or the fixed `bic_threshold`) and it is practically meaningful: it closes at least
+`min_gain` of the residual power in the trusted band (of the held-out sequences, when given, for
+regression effects; of the fit sequences for stochastic ones). Effects whose expected delta BIC
+even at their largest plausible magnitude falls short of their threshold are not identifiable from
+this motion and are not tried; every effect's expected delta BIC at a stated reference magnitude is
+reported (`identifiability`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyrodenoise.discrepancy.spectral import BAND_PARAMS, BandFit, fit_band
-from gyrodenoise.sim.effects import EFFECTS, Effect, FitContext, Quantization, Saturation
+from gyrodenoise.discrepancy.design import (
+    Design,
+    FitResult,
+    band_edges,
+    band_limited,
+    band_power,
+    fit_rows,
+    noise_weights,
+    nuisance_of,
+    residuals_after,
+    row_masks,
+    sensor_view,
+    set_bands,
+    set_reconstruction_model,
+    set_row_weights,
+    set_saturation_mask,
+)
+from gyrodenoise.discrepancy.identifiability import identifiability
+from gyrodenoise.discrepancy.spectral import (
+    BAND_PARAMS,
+    BandFit,
+    FloorShapeFit,
+    FloorShapeProfile,
+    fit_band,
+    fit_floor,
+    fit_floor_shape,
+)
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS, Effect, Quantization, Saturation
 
 # nonlinear parameters searched by `prepare` (counted in the BIC penalty)
 NONLINEAR_PARAMS = {"vibration": 1, "warmup_bias": 1, "bias_random_walk": 1}
-COEF_SCALE: dict[str, float] = {}  # coefficient scale for identifiability, where not the prior's bound
-IDENTIFIABLE_SE_FRACTION = 0.1  # identifiable: SE below this fraction of the largest plausible value
 QUANT_LATTICE_FRACTION = 0.95
+MIN_GAIN = 0.01  # practical minimum: 1% of the residual power in the trusted band
+CORNER_FLAT = 50.0  # x rate: a fitted corner above this is no low-pass at all
 
-
-def row_mask(fc: FitContext) -> np.ndarray:
-    """(N, 3) bool: rows used in the fits (samples near a saturation limit are left out)."""
-    m = fc.extra.get("row_mask")
-    return np.ones((len(fc.t), 3), dtype=bool) if m is None else m
-
-
-def set_saturation_mask(fcs: list[FitContext], limit: float, sigma: np.ndarray, band: float = 15.0) -> None:
-    """Leave out samples whose true rate is beyond or within `band` noise stds of the limit: there
-    the output says only 'at least the limit', and clipped noise biases it. The band widens by the
-    change of rate over one sample (the output filter averages across the limit)."""
-    for fc in fcs:
-        near = np.abs(fc.omega) > limit - band * sigma - np.abs(fc.alpha) / fc.rate_hz
-        fc.extra["row_mask"] = ~near
-
-
-def row_masks(fcs: list[FitContext]) -> list[np.ndarray | None]:
-    return [fc.extra.get("row_mask") for fc in fcs]
-
-
-def noise_weights(residuals: list[np.ndarray]) -> np.ndarray:
-    """Per-axis white-noise std from first differences (insensitive to slow effects)."""
-    d = np.concatenate([np.diff(r, axis=0) for r in residuals])
-    return np.maximum(d.std(0) / np.sqrt(2), 1e-12)
-
-
-class Design:
-    """Weighted Gram matrix of every column of `effects` over the sequences `fcs`."""
-
-    def __init__(self, fcs: list[FitContext], effects: dict[str, Effect], sigma: np.ndarray) -> None:
-        self.fcs, self.effects, self.sigma = fcs, effects, sigma
-        self.cols: dict[str, np.ndarray] = {}  # effect -> global column indices ((S, k) if per sequence)
-        p = 0
-        self.k = {name: e.columns(fcs[0]).shape[2] if not e.stochastic else 0 for name, e in effects.items()}
-        for name, e in effects.items():
-            k = self.k[name]
-            if e.per_sequence and not e.stochastic:
-                # column counts may differ per sequence (random-walk knots): take the largest
-                k = max(e.columns(fc).shape[2] for fc in fcs)
-                self.k[name] = k
-                self.cols[name] = p + np.arange(len(fcs) * k).reshape(len(fcs), k)
-                p += len(fcs) * k
-            else:
-                self.cols[name] = p + np.arange(k)
-                p += k
-        self.p = p
-        self.G = np.zeros((p, p))
-        self.b = np.zeros(p)
-        self.rr = 0.0
-        self.n = 0
-        for s, fc in enumerate(fcs):
-            X, idx = self.local_columns(s, list(effects))
-            m = row_mask(fc).reshape(-1)
-            X, r = X[m], (fc.residual / sigma).reshape(-1)[m]
-            self.G[np.ix_(idx, idx)] += X.T @ X
-            self.b[idx] += X.T @ r
-            self.rr += float(r @ r)
-            self.n += len(r)
-
-    def local_columns(self, s: int, names: list[str], fc: FitContext | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted columns (3N, k) of sequence s for `names`, with their global indices."""
-        fc = fc or self.fcs[s]
-        blocks, idx = [], []
-        for name in names:
-            e = self.effects[name]
-            if e.stochastic:
-                continue
-            c = e.columns(fc) / self.sigma[None, :, None]
-            gi = self.cols[name][s] if e.per_sequence else self.cols[name]
-            if c.shape[2] < len(gi):  # fewer knots in this sequence: pad with empty columns
-                c = np.concatenate([c, np.zeros((*c.shape[:2], len(gi) - c.shape[2]))], 2)
-            blocks.append(c.reshape(-1, c.shape[2]))
-            idx.append(gi)
-        if not blocks:
-            return np.zeros((3 * len(fc.t), 0)), np.zeros(0, dtype=int)
-        return np.concatenate(blocks, 1), np.concatenate(idx)
-
-    def indices(self, names: list[str]) -> np.ndarray:
-        out = [self.cols[n].ravel() for n in names if not self.effects[n].stochastic]
-        return np.concatenate(out) if out else np.zeros(0, dtype=int)
-
-    def fit(self, names: list[str]) -> FitResult:
-        idx = self.indices(names)
-        coef = np.zeros(self.p)
-        if len(idx) == 0:
-            return FitResult(coef, self.rr, 0, np.zeros((0, 0)), idx, self.n)
-        G = self.G[np.ix_(idx, idx)]
-        w, V = np.linalg.eigh(G)
-        keep = w > 1e-10 * max(w.max(), 1e-300)
-        Ginv = (V[:, keep] / w[keep]) @ V[:, keep].T
-        c = Ginv @ self.b[idx]
-        coef[idx] = c
-        rss = max(self.rr - float(c @ self.b[idx]), 1e-300)
-        k = int(keep.sum())
-        s2 = rss / max(self.n - k, 1)
-        return FitResult(coef, rss, k, s2 * Ginv, idx, self.n)
-
-    def conditional_se(self, given: list[str], name: str, s2: float) -> np.ndarray:
-        """Standard errors of `name`'s coefficients when fitted together with `given` (inf when the
-        data cannot separate them: the columns lie in the span of the others)."""
-        o, c = self.indices(given), self.cols[name].ravel()
-        Gcc = self.G[np.ix_(c, c)]
-        if len(o):
-            Goo = self.G[np.ix_(o, o)]
-            Goc = self.G[np.ix_(o, c)]
-            S = Gcc - Goc.T @ np.linalg.pinv(Goo, rcond=1e-12, hermitian=True) @ Goc
-        else:
-            S = Gcc
-        S = (S + S.T) / 2
-        w, V = np.linalg.eigh(S)
-        scale = max(float(np.trace(Gcc)) / len(c), 1e-300)
-        w_safe = np.where(w > 1e-9 * scale, w, 0.0)
-        with np.errstate(divide="ignore"):
-            var = (V**2 / np.where(w_safe > 0, w_safe, np.nan)[None]).sum(1)
-        var = np.where(np.isnan(var), np.inf, var)
-        return np.sqrt(s2 * var)
-
-
-@dataclass
-class FitResult:
-    coef: np.ndarray
-    rss: float
-    k: int
-    cov: np.ndarray
-    idx: np.ndarray
-    n: int
-
-    @property
-    def bic(self) -> float:
-        return self.n * np.log(self.rss / self.n) + self.k * np.log(self.n)
-
-    def se(self) -> np.ndarray:
-        out = np.zeros_like(self.coef)
-        out[self.idx] = np.sqrt(np.clip(np.diag(self.cov), 0, None))
-        return out
+__all__ = ["Selection", "per_sequence_refit", "residuals_after", "score_step", "select_effects"]
 
 
 @dataclass
@@ -183,33 +82,197 @@ class Selection:
     design: Design | None = None
     result: FitResult | None = None
     band: BandFit | None = None  # band-limited vibration (spectral fit on the final residual)
+    floor_shape: FloorShapeFit | None = None  # named sensor low-pass
+    identifiability: dict[str, dict] = field(default_factory=dict)  # candidate -> numbers (first step)
+    thresholds: dict[str, float] = field(default_factory=dict)  # candidate -> delta BIC it had to clear
 
     @property
     def band_vibration(self) -> bool:
         """Whether the named vibration is the band-limited (stochastic) variant."""
         return "vibration" in self.selected and self.effects["vibration"].stochastic
 
-
-def residuals_after(design: Design, res: FitResult, names: list[str], fcs: list[FitContext] | None = None):
-    """Per-sequence residuals (unweighted) after removing the fitted columns of `names`."""
-    out = []
-    for s, fc in enumerate(fcs or design.fcs):
-        X, idx = design.local_columns(s, names, fc)
-        pred = (X @ res.coef[idx]).reshape(-1, 3) * design.sigma
-        out.append(fc.residual - pred)
-    return out
+    @property
+    def corner_hz(self) -> float | None:
+        """Corner of the named sensor low-pass (None: not named)."""
+        return float(self.effects["sensor_bandwidth"].params["corner_hz"]) if "sensor_bandwidth" in self.named else None
 
 
-def _identifiable(design: Design, given: list[str], name: str, s2: float) -> tuple[bool, float]:
-    e = design.effects[name]
-    se = design.conditional_se(given, name, s2)
-    if e.per_sequence:
-        # many nuisance columns (knots, phases): identifiable when some direction is new
-        best = float(np.min(se)) if len(se) else np.inf
-        return bool(np.isfinite(best)), best
-    scale = COEF_SCALE.get(name, e.PRIOR[1])
-    worst = float(np.max(se)) if len(se) else np.inf
-    return bool(worst < IDENTIFIABLE_SE_FRACTION * scale), worst
+@dataclass
+class StepScores:
+    design: Design
+    current: FitResult
+    residuals: list[np.ndarray]
+    scores: list[dict]  # one per candidate (the better variant), by delta BIC, largest first
+    not_identifiable: dict[str, dict]
+    identifiability: dict[str, dict]
+    band: BandFit | None = None
+    floor_shape: FloorShapeFit | None = None
+
+
+def score_step(
+    fcs: list[FitContext],
+    effects: dict[str, Effect],
+    selected: list[str],
+    remaining: list[str],
+    sigma: np.ndarray,
+    band_vibration: bool,
+    thresholds: Mapping[str, float] | None = None,
+    bic_threshold: float = 10.0,
+    raw: list[FitContext] | None = None,
+) -> StepScores:
+    """Prepare and score every candidate in `remaining` against the model `selected` on sequences
+    `fcs` (already seen through a named sensor low-pass; `raw`: the same without it, for the
+    sensor-bandwidth candidate). Candidates whose expected delta BIC at their largest plausible
+    magnitude is below their threshold are left out (`not_identifiable`)."""
+    raw = fcs if raw is None else raw
+    rate = fcs[0].rate_hz
+    regress = [c for c in remaining if not effects[c].stochastic]
+    design0 = Design(fcs, {n: effects[n] for n in selected}, sigma)
+    cur0 = design0.fit(selected)
+    resid = residuals_after(design0, cur0, selected)
+    for c in regress:
+        effects[c].prepare(fcs, resid)
+    design = Design(fcs, {n: effects[n] for n in selected + regress}, sigma)
+    cur = design.fit(selected)
+    s2 = cur.rss / max(cur.n - cur.k, 1)
+    scores, not_ident, ident = [], {}, {}
+    for c in regress:
+        thr = (thresholds or {}).get(c, bic_threshold)
+        idf = identifiability(design, selected, c, s2, thr, NONLINEAR_PARAMS.get(c, 0))
+        if idf is not None:
+            ident[c] = idf.as_dict()
+        if idf is None:  # no reference magnitude (per-sequence knots): identifiable when some direction is new
+            ok = bool(np.isfinite(design.conditional_se(selected, c, s2)).any())
+        else:  # numbers at the reference magnitude are reported; tried if plausible magnitudes would show
+            ok = idf.testable
+        if not ok:
+            not_ident[c] = ident.get(c, {"degenerate": True})
+            continue
+        res = design.fit(selected + [c])
+        dk = res.k - cur.k + NONLINEAR_PARAMS.get(c, 0)
+        dbic = cur.n * np.log(cur.rss / res.rss) - dk * np.log(cur.n)
+        score = {"effect": c, "delta_bic": float(dbic), "gain": float(1 - res.rss / cur.rss), "k": dk}
+        if c == "vibration":
+            score["variant"] = "sinusoid"
+        scores.append(score)
+    corner = _named_corner(effects, selected)
+    band = None
+    vib = effects.get("vibration")
+    if band_vibration and "vibration" in remaining:
+        band = fit_band(
+            resid, rate, row_masks(fcs), bands=band_edges(fcs), floor_corner_hz=corner, nuisance=nuisance_of(fcs)
+        )
+        if band is not None:
+            scores.append(
+                {
+                    "effect": "vibration",
+                    "variant": "band-limited",
+                    "delta_bic": band.delta_bic(cur.n),
+                    "gain": band.explained(sigma, rate),
+                    "k": BAND_PARAMS,
+                }
+            )
+    floor = None
+    if "sensor_bandwidth" in remaining:
+        named_band = None
+        if vib is not None and "vibration" in selected and vib.stochastic:
+            named_band = (float(vib.params["frequency_hz"]), float(vib.params["bandwidth_hz"]))
+        rss_of: dict[float, float] = {}
+        rate_only = not {"time_offset", "g_sensitivity"} & set(selected)
+
+        def motion_gain(corner: float) -> float:
+            # the motion part of the low-pass (its delay and droop): the model seen through the
+            # filter, as a Gaussian log-likelihood gain on the regression's rows
+            view = [sensor_view(fc, corner, rate_only) for fc in raw]
+            rss_of[corner] = Design(view, {n: effects[n] for n in selected}, sigma).fit(selected).rss
+            return 0.5 * cur.n * np.log(cur.rss / rss_of[corner])
+
+        floor = fit_floor_shape(
+            resid, rate, row_masks(fcs), band_edges(fcs), named_band, nuisance_of(fcs), extra=motion_gain
+        )
+        if floor is None:
+            not_ident["sensor_bandwidth"] = {"reason": "the noise floor is not visible in the trusted band"}
+        elif floor.corner_hz < CORNER_FLAT * rate:
+            rss_lp = rss_of.get(floor.corner_hz, cur.rss)
+            gain = max(floor.explained(rate), 1 - rss_lp / cur.rss)
+            scores.append(
+                {"effect": "sensor_bandwidth", "delta_bic": float(floor.delta_bic(cur.n)), "gain": float(gain), "k": 1}
+                | {"corner_hz": floor.corner_hz}
+            )
+    # one score per effect: the better variant (the other one is kept for the report)
+    best_of: dict[str, dict] = {}
+    for sc in scores:
+        if sc["effect"] not in best_of or sc["delta_bic"] > best_of[sc["effect"]]["delta_bic"]:
+            best_of[sc["effect"]] = sc
+    for sc in scores:
+        if sc is not best_of[sc["effect"]]:
+            best_of[sc["effect"]]["other_variant"] = {"variant": sc["variant"], "delta_bic": sc["delta_bic"]}
+    scores = sorted(best_of.values(), key=lambda d: -d["delta_bic"])
+    return StepScores(design, cur, resid, scores, not_ident, ident, band, floor)
+
+
+def _named_corner(effects: dict[str, Effect], selected: list[str]) -> float | None:
+    if "sensor_bandwidth" not in selected:
+        return None
+    return float(effects["sensor_bandwidth"].params["corner_hz"])
+
+
+def _holdout_gain(
+    design: Design,
+    effects: dict[str, Effect],
+    names: list[str],
+    extra: str,
+    sigma: np.ndarray,
+    holdout: list[FitContext],
+    corner: float | None,
+    sat_limit: float | None,
+) -> float:
+    """Share of the held-out residual power in the trusted band that `extra` closes: the model
+    `names` fitted with and without it on the fit sequences, per-sequence nuisances refitted on
+    each held-out sequence."""
+    with_c = design.fit(names + [extra])
+    without = design.fit(names)
+    p0 = p1 = 0.0
+    for h in holdout:
+        v = sensor_view(h, corner)
+        pred0 = _predict(design, without, effects, names, sigma, v, sat_limit)
+        pred1 = _predict(design, with_c, effects, names + [extra], sigma, v, sat_limit)
+        p0 += band_power(v, v.residual - pred0, sigma)
+        p1 += band_power(v, v.residual - pred1, sigma)
+    return float(1.0 - p1 / max(p0, 1e-300))
+
+
+def _holdout_band_share(
+    design: Design,
+    effects: dict[str, Effect],
+    names: list[str],
+    sigma: np.ndarray,
+    holdout: list[FitContext],
+    corner: float | None,
+    sat_limit: float | None,
+    band: BandFit,
+) -> float:
+    """Share of the held-out in-band residual power that a band-limited vibration of the fitted centre
+    and width carries when its level is refitted on the held-out spectra (0 when the band does not
+    raise their Whittle likelihood): whether the band the fit sequences show is a property of the
+    sensor that the held-out flights share."""
+    res = design.fit(names)
+    views = [sensor_view(h, corner) for h in holdout]
+    resid = [v.residual - _predict(design, res, effects, names, sigma, v, sat_limit) for v in views]
+    rate = holdout[0].rate_hz
+    fit = fit_band(
+        resid,
+        rate,
+        row_masks(views),
+        starts=[(band.frequency_hz, band.bandwidth_hz)],
+        bands=band_edges(views),
+        floor_corner_hz=corner,
+        nuisance=nuisance_of(views),
+        fixed_band=True,
+    )
+    if fit is None or fit.loglik <= fit.loglik_floor:
+        return 0.0
+    return fit.explained(sigma, rate)
 
 
 def select_effects(
@@ -217,19 +280,26 @@ def select_effects(
     base: list[str] = ("bias", "white_noise"),
     candidates: list[str] | None = None,
     bic_threshold: float = 10.0,
-    min_gain: float = 0.0,
+    min_gain: float = MIN_GAIN,
     max_added: int = 6,
     rw_knot_spacing_s: float = 10.0,
     band_vibration: bool | None = None,
+    trusted_band: bool = True,
+    thresholds: Mapping[str, float] | None = None,
+    holdout: list[FitContext] | None = None,
 ) -> Selection:
-    """Greedy forward selection: add the candidate with the largest BIC gain, refit, repeat, until no
-    candidate gains more than `bic_threshold` and explains at least `min_gain` of the remaining
-    weighted residual sum of squares.
+    """Greedy forward selection: add the candidate with the largest delta BIC that clears its
+    threshold (`thresholds[name]`, default `bic_threshold`) and closes at least `min_gain` of the
+    residual power in the trusted band (on `holdout` for regression effects, when given); refit;
+    repeat until none does.
 
     `band_vibration`: also try the band-limited variant of `vibration` (a stochastic term of the
     noise spectrum). Default: when white noise is part of the model (base or candidates), i.e. when
     the residual is modelled as noise at all; a fit of a deterministic signal (a network's
-    correction, `network.py`) leaves it out."""
+    correction, `network.py`) leaves it out.
+
+    `trusted_band`: compare only in the band where the reconstructed true rate is trusted
+    (`reconstruction.estimate_band`, from the base model's residual; kept in each context's extra)."""
     base = list(base)
     for n in base + list(candidates or []):
         if n not in EFFECTS:
@@ -240,11 +310,12 @@ def select_effects(
     effects = {n: EFFECTS[n]() for n in base + candidates}
     if "bias_random_walk" in effects:
         effects["bias_random_walk"].knot_spacing_s = rw_knot_spacing_s
-    regress = [c for c in candidates if not effects[c].stochastic]
+    scorable = [c for c in candidates if not effects[c].stochastic or c == "sensor_bandwidth"]
     selected = [b for b in base if not effects[b].stochastic]
     if band_vibration is None:
         band_vibration = "white_noise" in effects
-    band_vibration = band_vibration and "vibration" in regress
+    band_vibration = band_vibration and "vibration" in scorable
+    thresholds = dict(thresholds or {})
 
     # the white-noise level per axis weights the rows
     sigma = noise_weights([fc.residual for fc in fcs])
@@ -254,75 +325,73 @@ def select_effects(
         effects["saturation"].params["limit"] = np.asarray(saturation["limit"])
         if saturation["plateau_samples"] >= Saturation.MIN_PLATEAU:
             set_saturation_mask(fcs, saturation["limit"], sigma)
+    sat_limit = None
+    if saturation is not None and saturation["plateau_samples"] >= Saturation.MIN_PLATEAU:
+        sat_limit = float(saturation["limit"])
+    if trusted_band:
+        # the band where the reconstructed true rate can be trusted, from the base model's residual
+        d0 = Design(fcs, {n: effects[n] for n in selected}, sigma)
+        resid0 = residuals_after(d0, d0.fit(selected), selected)
+        # and the reconstruction error as a weighted nuisance; the rows' weights then come from the
+        # sensor's floor in the band, not from first differences (which read the reconstruction error)
+        sigma_band = set_reconstruction_model(fcs, resid0)
+        if sigma_band is not None:
+            sigma = sigma_band
+        for h in holdout or []:
+            if "band_hz" not in h.extra:
+                set_bands([h], [h.residual - h.residual.mean(0)])
+                kappa = fcs[0].extra.get("nuisance_level")
+                if kappa is not None:
+                    set_row_weights([h], fcs[0].extra["sensor_floor"], kappa)
     steps: list[dict] = []
-    not_ident: dict[str, float] = {}
+    first: StepScores | None = None
     while True:
-        design0 = Design(fcs, {n: effects[n] for n in selected}, sigma)
-        cur0 = design0.fit(selected)
-        resid = residuals_after(design0, cur0, selected)
-        for c in regress:
-            if c not in selected:
-                effects[c].prepare(fcs, resid)
-        remaining = [c for c in regress if c not in selected]
-        design = Design(fcs, {n: effects[n] for n in selected + remaining}, sigma)
-        cur = design.fit(selected)
-        s2 = cur.rss / max(cur.n - cur.k, 1)
-        scores = []
-        not_ident = {}
-        for c in remaining:
-            ok, worst = _identifiable(design, selected, c, s2)
-            if not ok:
-                not_ident[c] = worst
-                continue
-            res = design.fit(selected + [c])
-            dk = res.k - cur.k + NONLINEAR_PARAMS.get(c, 0)
-            dbic = cur.n * np.log(cur.rss / res.rss) - dk * np.log(cur.n)
-            score = {"effect": c, "delta_bic": float(dbic), "gain": float(1 - res.rss / cur.rss), "k": dk}
-            if c == "vibration":
-                score["variant"] = "sinusoid"
-            scores.append(score)
-        band = None
-        if band_vibration and "vibration" in remaining:
-            band = fit_band(resid, fcs[0].rate_hz, row_masks(fcs))
-            if band is not None:
-                scores.append(
-                    {
-                        "effect": "vibration",
-                        "variant": "band-limited",
-                        "delta_bic": band.delta_bic(cur.n),
-                        "gain": band.explained(sigma, fcs[0].rate_hz),
-                        "k": BAND_PARAMS,
-                    }
-                )
-        # one score per effect: the better variant (the other one is kept for the report)
-        best_of: dict[str, dict] = {}
-        for sc in scores:
-            if sc["effect"] not in best_of or sc["delta_bic"] > best_of[sc["effect"]]["delta_bic"]:
-                best_of[sc["effect"]] = sc
-        for sc in scores:
-            if sc is not best_of[sc["effect"]]:
-                best_of[sc["effect"]]["other_variant"] = {"variant": sc["variant"], "delta_bic": sc["delta_bic"]}
-        scores = list(best_of.values())
-        scores.sort(key=lambda d: -d["delta_bic"])
-        step = {"model": list(selected), "rss_weighted": cur.rss, "n": cur.n, "candidates": scores}
+        corner = _named_corner(effects, selected)
+        view = [sensor_view(fc, corner) for fc in fcs]
+        remaining = [c for c in scorable if c not in selected]
+        st = score_step(view, effects, selected, remaining, sigma, band_vibration, thresholds, bic_threshold, fcs)
+        first = first or st
+        design, cur = st.design, st.current
+        step = {"model": list(selected), "rss_weighted": cur.rss, "n": cur.n, "candidates": st.scores}
         steps.append(step)
         added = len(selected) - len([b for b in base if not effects[b].stochastic])
-        if not scores or added >= max_added:
+        if not st.scores or added >= max_added:
             break
-        best = scores[0]
-        if best["delta_bic"] < bic_threshold or best["gain"] < min_gain:
+        best = None
+        for sc in st.scores:
+            thr = thresholds.get(sc["effect"], bic_threshold)
+            sc["threshold"] = thr
+            if sc["delta_bic"] < thr or sc["gain"] < min_gain:
+                continue
+            if holdout and sc.get("variant") == "band-limited":
+                # noise cannot be predicted: the band must be there in the held-out spectra too, at a
+                # practical share of their in-band power
+                hg = _holdout_band_share(design, effects, selected, sigma, holdout, corner, sat_limit, st.band)
+                sc["holdout_gain"] = hg
+                if hg < min_gain:
+                    continue
+            elif holdout and not effects[sc["effect"]].stochastic:
+                hg = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)
+                sc["holdout_gain"] = hg
+                if hg < min_gain:
+                    continue
+            best = sc
+            break
+        if best is None:
             break
         step["added"] = best["effect"]
         if best.get("variant") == "band-limited":
             step["added_variant"] = "band-limited"
             # from now on a stochastic term of the noise model: no columns (refitted at the end)
             effects["vibration"].params.update(
-                frequency_hz=np.asarray(band.frequency_hz),
-                bandwidth_hz=np.asarray(band.bandwidth_hz),
-                amplitude=band.amplitude,
+                frequency_hz=np.asarray(st.band.frequency_hz),
+                bandwidth_hz=np.asarray(st.band.bandwidth_hz),
+                amplitude=st.band.amplitude,
             )
+        if best["effect"] == "sensor_bandwidth":
+            effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best["corner_hz"])
         selected.append(best["effect"])
-    final = design.fit(selected)
+    final = design.fit(selected)  # the last step added nothing: its design holds the model
     if band_vibration and "vibration" in selected and effects["vibration"].stochastic:
         # backward check: the band was scored on the residual of its step; once the effects added
         # after it are fitted, it must still clear the threshold (colour that a deterministic
@@ -330,29 +399,41 @@ def select_effects(
         v = effects["vibration"].params
         resid = residuals_after(design, final, selected)
         band = fit_band(
-            resid, fcs[0].rate_hz, row_masks(fcs), starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))]
+            resid,
+            fcs[0].rate_hz,
+            row_masks(fcs),
+            starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))],
+            bands=band_edges(fcs),
+            floor_corner_hz=corner,
+            nuisance=nuisance_of(fcs),
         )
         dbic = band.delta_bic(final.n) if band is not None else -np.inf
         gain = band.explained(sigma, fcs[0].rate_hz) if band is not None else 0.0
-        if dbic < bic_threshold or gain < min_gain:
+        if dbic < thresholds.get("vibration", bic_threshold) or gain < min_gain:
             selected.remove("vibration")
             v["bandwidth_hz"] = np.asarray(0.0)
             steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
-            design = Design(fcs, {n: effects[n] for n in selected}, sigma)
+            design = Design(view, {n: effects[n] for n in selected}, sigma)
             final = design.fit(selected)
     sel = Selection(
         base=base,
         selected=selected,
         named=[n for n in selected if n not in base],
         steps=steps,
-        not_identifiable=sorted(not_ident),
+        not_identifiable=sorted(st.not_identifiable),
         saturation=saturation,
         effects=effects,
         sigma=sigma,
         design=design,
         result=final,
+        identifiability=first.identifiability,
+        thresholds={c: thresholds.get(c, bic_threshold) for c in scorable},
     )
-    _fill_params(sel, fcs)
+    _fill_params(sel, view)
+    if sel.band is not None and sel.band.kappa is not None:
+        # the reconstruction error's level beside the named band: the base model's fit had to take
+        # the band's power into it (re-simulations draw the error at this level)
+        set_row_weights(fcs + list(holdout or []), fcs[0].extra["sensor_floor"], sel.band.kappa)
     return sel
 
 
@@ -373,12 +454,36 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     # stochastic effects: white noise always (base or named); random walk if selected; quantisation
     wn = EFFECTS["white_noise"]()
     sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
+    corner = sel.corner_hz
+    if band_limited(fcs) or corner is not None or nuisance_of(fcs) is not None:
+        # the level of the floor in the trusted band (at 0 Hz under a named low-pass): first
+        # differences would read the reconstruction error or the low-pass's droop instead
+        c, c_se = fit_floor(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), corner, nuisance_of(fcs))
+        dens = np.sqrt(c / 2)
+        sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
+    if corner is not None:
+        # the corner stays the selection's (spectrum and motion together); its standard error from
+        # the curvature of the floor's profile on the final residual
+        prof = FloorShapeProfile(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs))
+        sel.floor_shape = prof.fit(corner) if prof.ok else None
+        se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
+        sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}
+        sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(se)}
     if sel.band_vibration:
         # the band refitted on the final residual, with standard errors; the white-noise level is
         # its floor (the first-difference estimate above would include the band's power)
         v = sel.effects["vibration"].params  # the selection step's fit: the start
         start = [(float(v["frequency_hz"]), float(v["bandwidth_hz"]))]
-        band = fit_band(resid_all, fcs[0].rate_hz, row_masks(fcs), with_errors=True, starts=start)
+        band = fit_band(
+            resid_all,
+            fcs[0].rate_hz,
+            row_masks(fcs),
+            with_errors=True,
+            starts=start,
+            bands=band_edges(fcs),
+            floor_corner_hz=corner,
+            nuisance=nuisance_of(fcs),
+        )
         if band is not None:  # None: no excess left to start from; keep the selection step's fit
             sel.band = band
             sel.params["vibration"], sel.se["vibration"] = band.params()
@@ -392,7 +497,12 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     if "white_noise" not in sel.base and "white_noise" in sel.effects:
         sel.named.append("white_noise")
     if "bias_random_walk" in sel.selected:
-        p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
+        if nuisance_of(fcs) is None:
+            p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
+        else:
+            # a reconstructed true rate adds the derivative of a noisy angle, whose Allan variance
+            # swamps the walk's at the cluster times a flight offers: read K from the knots instead
+            p, s = _walk_from_knots(sel)
         sel.params["bias_random_walk"], sel.se["bias_random_walk"] = p, s
     if "quantization" in sel.effects and "quantization" not in sel.base:
         q, frac = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
@@ -422,36 +532,73 @@ def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         sel.fitted[name] = EFFECTS[name](**kw)
 
 
-def per_sequence_refit(
-    sel: Selection, fc: FitContext, names: list[str] | None = None
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Deterministic prediction of the residual on a sequence not used for fitting: the sensor's
-    constants stay as fitted; per-sequence nuisances (bias, random-walk knots, vibration phase)
-    are refitted on this sequence. Returns (prediction (N, 3), per-sequence coefficients)."""
-    names = sel.selected if names is None else names
-    design, res = sel.design, sel.result
-    glob = [n for n in names if not sel.effects[n].per_sequence and not sel.effects[n].stochastic]
-    local = [n for n in names if sel.effects[n].per_sequence and not sel.effects[n].stochastic]
+def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
+    """Rate random walk K per axis from the fitted random-walk knots: the increments of the bias
+    path between knots h apart have variance K^2 h, less their estimation variance (from the fit's
+    covariance). Returns ({'density'}, {'density'} standard error)."""
+    e, design, res = sel.effects["bias_random_walk"], sel.design, sel.result
+    h = e.knot_spacing_s
+    cov = np.zeros((design.p, design.p))
+    cov[np.ix_(res.idx, res.idx)] = res.cov
+    k2, k2_se = np.zeros(3), np.zeros(3)
+    for a in range(3):
+        incs, noise = [], []
+        for cols in np.atleast_2d(design.cols["bias_random_walk"]):
+            nk = len(cols) // 3
+            c = cols[a * nk : (a + 1) * nk]
+            path = np.concatenate([[0.0], res.coef[c]])  # the first knot is the bias itself
+            D = np.zeros((nk, nk))  # increments as a linear map of the knot coefficients
+            D[np.arange(nk), np.arange(nk)] = 1.0
+            D[np.arange(1, nk), np.arange(nk - 1)] = -1.0
+            incs.append(np.diff(path))
+            noise.append(np.diag(D @ cov[np.ix_(c, c)] @ D.T))
+        d, v = np.concatenate(incs), np.concatenate(noise)
+        k2[a] = max(float(np.mean(d**2 - v)), 0.0) / h
+        k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.mean(d**2)) / h
+    k = np.sqrt(k2)
+    se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+    return {"density": k}, {"density": se}
+
+
+def _predict(
+    design: Design,
+    res: FitResult,
+    effects: dict[str, Effect],
+    names: list[str],
+    sigma: np.ndarray,
+    fc: FitContext,
+    sat_limit: float | None = None,
+) -> np.ndarray:
+    """Deterministic prediction (N, 3) of the residual of a sequence not used for fitting: sensor
+    constants from `res`; per-sequence nuisances (bias, random-walk knots, vibration phase)
+    refitted on this sequence, in its trusted band (`fit_rows`)."""
+    glob = [n for n in names if not effects[n].per_sequence and not effects[n].stochastic]
+    local = [n for n in names if effects[n].per_sequence and not effects[n].stochastic]
     pred = np.zeros((len(fc.t), 3))
     for n in glob:
-        c = sel.effects[n].columns(fc)
-        pred += np.einsum("nik,k->ni", c, res.coef[design.cols[n]])
-    per_seq = {}
+        pred += np.einsum("nik,k->ni", effects[n].columns(fc), res.coef[design.cols[n]])
     if local:
-        cols = [sel.effects[n].columns(fc) for n in local]
-        X = np.concatenate(cols, 2) / sel.sigma[None, :, None]
-        X = X.reshape(-1, X.shape[2])
-        r = ((fc.residual - pred) / sel.sigma).reshape(-1)
-        if "saturation" in sel.params:
-            set_saturation_mask([fc], float(sel.params["saturation"]["limit"]), sel.sigma)
-        m = row_mask(fc).reshape(-1)
-        coef, *_ = np.linalg.lstsq(X[m], r[m], rcond=None)
-        pred += (X @ coef).reshape(-1, 3) * sel.sigma
-        k0 = 0
-        for n, c in zip(local, cols, strict=True):
-            per_seq[n] = coef[k0 : k0 + c.shape[2]]
-            k0 += c.shape[2]
-    if "saturation" in sel.params:  # the output cannot exceed the range
-        lim = float(sel.params["saturation"]["limit"])
-        pred = np.clip(fc.omega + pred, -lim, lim) - fc.omega
-    return pred, per_seq
+        cols = [effects[n].columns(fc) for n in local]
+        X = (np.concatenate(cols, 2) / sigma[None, :, None]).reshape(3 * len(fc.t), -1)
+        r = ((fc.residual - pred) / sigma).reshape(-1)
+        if sat_limit is not None:
+            set_saturation_mask([fc], sat_limit, sigma)
+        Xr, rr = fit_rows(fc, X, r)
+        coef, *_ = np.linalg.lstsq(Xr, rr, rcond=None)
+        pred += (X @ coef).reshape(-1, 3) * sigma
+    if sat_limit is not None:  # the output cannot exceed the range
+        pred = np.clip(fc.omega + pred, -sat_limit, sat_limit) - fc.omega
+    return pred
+
+
+def per_sequence_refit(sel: Selection, fc: FitContext, names: list[str] | None = None) -> np.ndarray:
+    """Deterministic prediction (N, 3) of the residual gyro - true rate of a sequence not used for
+    fitting (`_predict`), through the named sensor low-pass if any: the model's gyro is
+    fc.omega + prediction."""
+    names = sel.selected if names is None else names
+    sat = sel.params.get("saturation")
+    view = sensor_view(fc, sel.corner_hz)
+    pred = _predict(
+        sel.design, sel.result, sel.effects, names, sel.sigma, view, None if sat is None else float(sat["limit"])
+    )
+    return pred + (view.omega - fc.omega)

@@ -31,12 +31,13 @@ Welch PSD of the residual exceeds the floor by more than half of its peak excess
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize, signal
 
-from gyrodenoise.sim.effects import Vibration
+from gyrodenoise.sim.effects import SensorBandwidth, Vibration
 
 F_MIN_HZ = 1.0
 WELCH_NPERSEG = 512
@@ -44,6 +45,16 @@ BW_MIN_WELCH_BINS = 4.0  # Hann main lobe: a line is never wider than 4 Welch bi
 TAPER = 0.1  # Tukey taper of the periodograms (less leakage of strong low-frequency content)
 BAND_PARAMS = 5  # f0, bw, one amplitude per axis (the floor is the base model's white noise)
 X_SUPPORT = 6.0  # band-pass prototype variable beyond which the band's PSD is negligible
+
+
+@dataclass
+class Nuisance:
+    """The reconstruction error of the true rate as a nuisance term of the residual's spectrum
+    (`reconstruction`): per sequence its PSD, f -> (len f, 3) (None: exact ground truth), and the
+    sensor's floor when it is known from outside the band (None: fitted)."""
+
+    psd: list[Callable[[np.ndarray], np.ndarray] | None]
+    floor: np.ndarray | None = None
 
 
 @dataclass
@@ -56,16 +67,45 @@ class Spectra:
     seq: np.ndarray  # (M,) sequence index of each bin
     rate_hz: float
     n_seq: int
+    # floor shape A(f) the periodogram was divided by (a sensor low-pass); None: flat
+    shape: np.ndarray | None = None
+    # (M, 3) reconstruction-error PSD at each bin (`reconstruction`), a nuisance term with a fitted
+    # level; None: an exact ground truth
+    E: np.ndarray | None = None
+    # (3,) the sensor's floor when it is known from elsewhere (where the reconstruction error
+    # swamps it in the band, `reconstruction.sensor_floor`); fixed in the nuisance fits
+    floor: np.ndarray | None = None
     cum: np.ndarray = field(init=False, repr=False)  # (M + 1, 3) cumulative sums of I
 
     def __post_init__(self) -> None:
         order = np.argsort(self.f, kind="stable")
         self.f, self.I, self.seq = self.f[order], self.I[order], self.seq[order]
+        if self.shape is not None:
+            self.shape = self.shape[order]
+        if self.E is not None:
+            self.E = self.E[order]
         self.cum = np.concatenate([np.zeros((1, 3)), np.cumsum(self.I, 0)])
 
     def subset(self, s: int) -> Spectra:
         m = self.seq == s
-        return Spectra(self.f[m], self.I[m], np.zeros(int(m.sum()), dtype=int), self.rate_hz, 1)
+        shape = None if self.shape is None else self.shape[m]
+        E = None if self.E is None else self.E[m]
+        return Spectra(self.f[m], self.I[m], np.zeros(int(m.sum()), dtype=int), self.rate_hz, 1, shape, E, self.floor)
+
+    def shaped(self, corner_hz: float | None) -> Spectra:
+        """The periodogram divided by the floor shape of a sensor low-pass of corner `corner_hz`
+        (`SensorBandwidth.floor_shape`): a shaped floor becomes a flat one, and the Whittle
+        likelihood gains -sum log A (`_fit_levels`). None or inf: self."""
+        if corner_hz is None or not np.isfinite(corner_hz):
+            return self
+        a = SensorBandwidth.floor_shape(self.f, corner_hz, self.rate_hz)
+        E = None if self.E is None else self.E / a[:, None]
+        return Spectra(self.f, self.I / a[:, None], self.seq, self.rate_hz, self.n_seq, a, E, self.floor)
+
+    @property
+    def log_shape(self) -> float:
+        """sum over bins and axes of log A (0 for a flat floor)."""
+        return 0.0 if self.shape is None else 3.0 * float(np.log(self.shape).sum())
 
     def support(self, f0: float, bw: float) -> slice:
         """Bins where the band's PSD shape is above ~1e-14 of its peak (|x| < X_SUPPORT of the
@@ -94,6 +134,9 @@ class BandFit:
     bandwidth_se: float = float("nan")
     amplitude_se: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     per_sequence: list[dict] = field(default_factory=list)
+    f_hi_hz: float = float("inf")  # upper edge of the compared band (the trusted band)
+    mean_psd: np.ndarray | None = None  # (3,) mean periodogram over the compared bins
+    kappa: np.ndarray | None = None  # (3,) level of the reconstruction-error nuisance fitted beside the band
 
     @property
     def amplitude(self) -> np.ndarray:
@@ -111,7 +154,11 @@ class BandFit:
     def explained(self, sigma: np.ndarray, rate_hz: float) -> float:
         """Share of the (1/sigma^2-weighted) residual power that the band carries."""
         w = 1 / sigma**2
-        return float((w * self.power).sum() / (w * (self.power + self.floor * rate_hz / 2)).sum())
+        width = min(self.f_hi_hz, rate_hz / 2)
+        if self.mean_psd is not None:  # all the residual's power in the compared bins (floor, nuisance, band)
+            total = self.mean_psd * (width - F_MIN_HZ)
+            return float((w * self.power).sum() / (w * np.maximum(total, self.power)).sum())
+        return float((w * self.power).sum() / (w * (self.power + self.floor * width)).sum())
 
     def params(self) -> tuple[dict, dict]:
         p = {
@@ -127,10 +174,19 @@ class BandFit:
         return p, se
 
 
-def spectra(residuals: list[np.ndarray], rate_hz: float, masks: list[np.ndarray] | None = None) -> Spectra:
+def spectra(
+    residuals: list[np.ndarray],
+    rate_hz: float,
+    masks: list[np.ndarray] | None = None,
+    bands: list[float | None] | None = None,
+    nuisance: Nuisance | None = None,
+) -> Spectra:
     """Tapered periodograms of each residual (N, 3). Masked samples (False in `masks`, e.g. near a
-    saturation limit) are set to zero and the power rescaled by the fraction kept."""
-    fs, Is, seqs = [], [], []
+    saturation limit) are set to zero and the power rescaled by the fraction kept. `bands`: upper
+    edge per sequence of the band where the reconstructed rate is trusted (`reconstruction`); the
+    bins above it are left out. `nuisance`: the reconstruction error, carried as a nuisance term."""
+    fs, Is, seqs, Es = [], [], [], []
+    with_e = nuisance is not None and any(e is not None for e in nuisance.psd)
     for s, r in enumerate(residuals):
         m = np.ones(r.shape, dtype=bool) if masks is None or masks[s] is None else masks[s]
         keep = np.maximum(m.sum(0), 1)
@@ -140,11 +196,79 @@ def spectra(residuals: list[np.ndarray], rate_hz: float, masks: list[np.ndarray]
         X = np.fft.rfft(x * w[:, None], axis=0)
         f = np.fft.rfftfreq(n, 1 / rate_hz)
         I = 2 * np.abs(X) ** 2 / (rate_hz * np.sum(w**2)) * (n / keep)
-        ok = (f >= F_MIN_HZ) & (f < rate_hz / 2)
+        ok = (f >= F_MIN_HZ) & (f < rate_hz / 2) & (f <= _band_edge(bands, s, rate_hz))
         fs.append(f[ok])
         Is.append(I[ok])
         seqs.append(np.full(int(ok.sum()), s))
-    return Spectra(np.concatenate(fs), np.concatenate(Is), np.concatenate(seqs), rate_hz, len(residuals))
+        if with_e:
+            e = nuisance.psd[s]
+            Es.append(np.zeros((int(ok.sum()), 3)) if e is None else e(f[ok]))
+    E = np.concatenate(Es) if with_e else None
+    if E is not None and not np.any(E > 0):
+        E = None
+    floor = None if E is None else nuisance.floor
+    return Spectra(
+        np.concatenate(fs), np.concatenate(Is), np.concatenate(seqs), rate_hz, len(residuals), E=E, floor=floor
+    )
+
+
+def _fit_levels_nuisance(
+    sp: Spectra,
+    band: tuple[float, float] | None,
+    theta: np.ndarray | None = None,
+    iters: int = 60,
+    fixed_floor: np.ndarray | None = None,
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Whittle fit with the reconstruction error as a nuisance term: S = c + P g(f; band) + kappa E(f)
+    per axis, all levels >= 0 (projected Fisher scoring). Returns (theta (3, 3): rows c, P, kappa;
+    log L; Fisher information of (c, P) (3, 2, 2), the nuisance level profiled out)."""
+    I, E = sp.I, sp.E
+    G = np.zeros_like(I) if band is None else Vibration.band_psd(sp.f, band[0], band[1], sp.rate_hz)[:, None]
+    if band is not None and sp.shape is not None:
+        G = G / sp.shape[:, None]
+    G = np.broadcast_to(G, I.shape)
+    B = np.stack([np.ones_like(I), G, E], -1)  # (M, 3 axes, 3 levels)
+    floor = sp.floor if fixed_floor is None else fixed_floor
+    free = np.array([floor is None, band is not None, True])
+    if theta is None or theta.shape[0] < 3:
+        lo = sp.f <= np.quantile(sp.f, 0.2)  # where the error is smallest: a floor start
+        c = np.median(I[lo], axis=0) / np.log(2) if lo.any() else I.mean(0)
+        th = np.stack([c if floor is None else floor, np.zeros(3), np.full(3, 1.0)])
+    else:
+        th = theta.copy()
+        if floor is not None:
+            th[0] = floor
+    if band is None:
+        th[1] = 0.0
+    for _ in range(iters):
+        S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
+        W = 1 / S**2
+        score = np.einsum("mak,ma->ka", B, (I - S) * W)
+        info = np.einsum("mak,mal,ma->akl", B, B, W)
+        step = np.zeros_like(th)
+        for a in range(3):
+            act = free & ~((th[:, a] <= 0) & (score[:, a] < 0))  # on a bound with a pull outwards: fixed
+            if act.any():
+                Fa = info[a][np.ix_(act, act)] + 1e-12 * np.eye(int(act.sum())) * np.trace(info[a]) / 3
+                step[act, a] = np.linalg.solve(Fa, score[act, a])
+        new = th + step
+        new[0] = np.maximum(new[0], 0.2 * th[0])  # damped: the floor stays positive
+        new[2] = np.clip(new[2], 0.2 * th[2], 5.0 * th[2] + 1e-12)  # and so does the nuisance's level
+        new = np.maximum(new, 0.0)
+        done = np.all(np.abs(new - th) <= 1e-8 * (np.abs(th) + th[0:1] + 1e-300))
+        th = new
+        if done:
+            break
+    S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
+    ll = float(-(np.log(S) + I / S).sum()) - sp.log_shape
+    W = 1 / S**2
+    info = np.einsum("mak,mal,ma->akl", B, B, W)[:, :2, :2]
+    return th, ll, info
+
+
+def _band_edge(bands: list[float | None] | None, s: int, rate_hz: float) -> float:
+    b = None if bands is None else bands[s]
+    return rate_hz / 2 if b is None else min(float(b), rate_hz / 2)
 
 
 def _fit_levels(
@@ -153,15 +277,19 @@ def _fit_levels(
     """Whittle fit of (c_a, P_a >= 0) per axis for the PSD c + P g(f; band), band = (f0, bw) or None
     for the floor alone. Returns (theta (2, 3), log L, Fisher information (3, 2, 2)). Bins outside
     the band's support enter through their count and sum only."""
+    if sp.E is not None:
+        return _fit_levels_nuisance(sp, band, theta, iters)
     M = len(sp.f)
     if band is None:  # flat floor: closed form
         c = sp.I.mean(0)
         info = np.zeros((3, 2, 2))
         info[:, 0, 0] = M / c**2
-        return np.stack([c, np.zeros(3)]), float(-(M * (np.log(c) + 1)).sum()), info
+        return np.stack([c, np.zeros(3)]), float(-(M * (np.log(c) + 1)).sum()) - sp.log_shape, info
     sl = sp.support(*band)
     I = sp.I[sl]
     G = Vibration.band_psd(sp.f[sl], band[0], band[1], sp.rate_hz)[:, None]
+    if sp.shape is not None:  # the band is not low-passed by the sensor's floor shape: divide it too
+        G = G / sp.shape[sl, None]
     n_out = M - len(I)
     sum_out = sp.cum[-1] - (sp.cum[sl.stop] - sp.cum[sl.start])
     if theta is None:
@@ -190,7 +318,7 @@ def _fit_levels(
     W = 1 / S**2
     fcc, fcp, fpp = W.sum(0) + n_out / c**2, (G * W).sum(0), (G**2 * W).sum(0)
     info = np.stack([np.stack([fcc, fcp], -1), np.stack([fcp, fpp], -1)], 1)
-    ll = -(np.log(S) + I / S).sum() - (n_out * np.log(c) + sum_out / c).sum()
+    ll = -(np.log(S) + I / S).sum() - (n_out * np.log(c) + sum_out / c).sum() - sp.log_shape
     return np.stack([c, P]), float(ll), info
 
 
@@ -199,14 +327,18 @@ def _bounds(rate_hz: float) -> tuple[float, float, float]:
     return F_MIN_HZ / 2, 0.49 * rate_hz, BW_MIN_WELCH_BINS * rate_hz / WELCH_NPERSEG
 
 
-def _clip_band(f0: float, bw: float, rate_hz: float) -> tuple[float, float]:
+def _clip_band(f0: float, bw: float, rate_hz: float, f_hi: float | None = None) -> tuple[float, float]:
     lo_min, hi_max, bw_min = _bounds(rate_hz)
+    if f_hi is not None:  # a band beyond the compared bins would be fitted to nothing
+        hi_max = max(min(hi_max, f_hi), lo_min + bw_min)
     bw = float(np.clip(bw, bw_min, hi_max - lo_min))
     f0 = float(np.clip(f0, lo_min + bw / 2, hi_max - bw / 2))
     return f0, bw
 
 
-def initial_guesses(residuals: list[np.ndarray], rate_hz: float, n_peaks: int = 2) -> list[tuple[float, float]]:
+def initial_guesses(
+    residuals: list[np.ndarray], rate_hz: float, n_peaks: int = 2, f_max: float | None = None
+) -> list[tuple[float, float]]:
     """(f0, bw) starts: the band around each of the largest peaks of the Welch excess over the floor
     (summed over axes, relative to each axis's median level), where the excess is above half the
     peak's; f0 its centre, bw its width."""
@@ -217,7 +349,9 @@ def initial_guesses(residuals: list[np.ndarray], rate_hz: float, n_peaks: int = 
         P = P + p * len(r)
         n_tot += len(r)
     P = P / n_tot
-    ok = f >= F_MIN_HZ
+    ok = (f >= F_MIN_HZ) & (f <= (rate_hz / 2 if f_max is None else f_max))
+    if ok.sum() < 3:
+        return []
     floor = np.median(P[ok], axis=0)
     e = np.where(ok, (P / np.maximum(floor, 1e-300) - 1).sum(1), -np.inf)
     df = f[1] - f[0]
@@ -247,7 +381,7 @@ class _Profile:
         self.best = (-np.inf, 0.0, 0.0, None, None)
 
     def __call__(self, u: np.ndarray) -> float:
-        f0, bw = _clip_band(float(u[0]), float(np.exp(u[1])), self.sp.rate_hz)
+        f0, bw = _clip_band(float(u[0]), float(np.exp(min(u[1], 20.0))), self.sp.rate_hz, float(self.sp.f[-1]))
         theta, ll, info = _fit_levels(self.sp, (f0, bw), self.theta)
         if ll > self.best[0]:
             self.best = (ll, f0, bw, theta, info)
@@ -276,18 +410,34 @@ def fit_band(
     masks: list[np.ndarray] | None = None,
     with_errors: bool = False,
     starts: list[tuple[float, float]] | None = None,
+    bands: list[float | None] | None = None,
+    floor_corner_hz: float | None = None,
+    nuisance: Nuisance | None = None,
+    fixed_band: bool = False,
 ) -> BandFit | None:
     """Maximum-Whittle-likelihood band-limited vibration (see the module docstring); None when the
     residuals show no excess to start from. `with_errors`: standard errors (a few more fits).
-    `starts`: (f0, bw) to start from (default: `initial_guesses`)."""
-    starts = initial_guesses(residuals, rate_hz) if starts is None else starts
+    `starts`: (f0, bw) to start from (default: `initial_guesses`). `bands`: trusted band per
+    sequence (`spectra`). `floor_corner_hz`: the floor is shaped by a sensor low-pass of this
+    corner (`Spectra.shaped`). `fixed_band`: keep the first start's centre and width, fit levels only."""
+    f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
+    starts = initial_guesses(residuals, rate_hz, f_max=f_hi) if starts is None else starts
     if not starts:
         return None
-    sp = spectra(residuals, rate_hz, masks)
+    sp = spectra(residuals, rate_hz, masks, bands, nuisance).shaped(floor_corner_hz)
+    if len(sp.f) < 10 * BAND_PARAMS:
+        return None
     _, ll0, _ = _fit_levels(sp, None)
+    if fixed_band:  # centre and width as given: only the levels are fitted
+        f0, bw = _clip_band(*starts[0], rate_hz, float(sp.f[-1]))
+        theta, ll, _ = _fit_levels(sp, (f0, bw))
+        mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
+        return BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
     prof = _maximise(sp, starts)
     ll, f0, bw, theta, info = prof.best
-    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f))
+    mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
+    kappa = theta[2] if len(theta) > 2 else None
+    fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd, kappa=kappa)
     if with_errors:
         _errors(fit, sp, info, prof)
     return fit
@@ -331,11 +481,17 @@ def _errors(fit: BandFit, sp: Spectra, info: np.ndarray, prof: _Profile) -> None
     fit.frequency_se, fit.bandwidth_se, fit.amplitude_se = float(f_se), float(bw_se), a_se
 
 
-def psd_gap(measured: list[np.ndarray], simulated: list[np.ndarray], rate_hz: float, per_octave: int = 3) -> float:
+def psd_gap(
+    measured: list[np.ndarray],
+    simulated: list[np.ndarray],
+    rate_hz: float,
+    per_octave: int = 3,
+    f_max: float | None = None,
+) -> float:
     """Mean |log10(PSD measured / PSD simulated)| over axes and 1/`per_octave`-octave bands of
     [F_MIN_HZ, rate/2): Welch PSDs averaged over the sequences (weighted by their lengths), then
     over the Welch bins of each band (log-spaced like the Allan deviation's cluster times, and
-    with little estimation noise left)."""
+    with little estimation noise left). `f_max`: only up to this frequency (the trusted band)."""
 
     def welch(xs):
         acc, n = 0.0, 0
@@ -346,10 +502,11 @@ def psd_gap(measured: list[np.ndarray], simulated: list[np.ndarray], rate_hz: fl
 
     f, a = welch(measured)
     _, b = welch(simulated)
-    n_bands = max(int(np.ceil(per_octave * np.log2(rate_hz / 2 / F_MIN_HZ))), 1)
-    edges = np.geomspace(F_MIN_HZ, rate_hz / 2, n_bands + 1)
+    f_hi = rate_hz / 2 if f_max is None else min(f_max, rate_hz / 2)
+    n_bands = max(int(np.ceil(per_octave * np.log2(f_hi / F_MIN_HZ))), 1)
+    edges = np.geomspace(F_MIN_HZ, f_hi, n_bands + 1)
     k = np.searchsorted(edges, f, side="right") - 1
-    ok = (k >= 0) & (k < n_bands) & (f < rate_hz / 2)
+    ok = (k >= 0) & (k < n_bands) & (f < rate_hz / 2) & (f <= f_hi)
     out = []
     for j in np.unique(k[ok]):
         m = ok & (k == j)
@@ -357,3 +514,132 @@ def psd_gap(measured: list[np.ndarray], simulated: list[np.ndarray], rate_hz: fl
         good = (ra > 0) & (rb > 0)
         out.extend(np.abs(np.log10(ra[good] / rb[good])))
     return float(np.mean(out)) if out else float("nan")
+
+
+# ----------------------------------------------------------------------------- sensor bandwidth
+
+FLOOR_SHAPE_PARAMS = 1  # the corner frequency (the level is the base model's white noise)
+
+
+@dataclass
+class FloorShapeFit:
+    """A sensor low-pass read from the shape of the noise floor (`SensorBandwidth`)."""
+
+    corner_hz: float
+    floor: np.ndarray  # (3,) level at 0 Hz, one-sided (rad/s)^2/Hz
+    loglik: float
+    loglik_flat: float
+    f_hi_hz: float
+    corner_se_hz: float = float("nan")
+    extra_loglik: float = 0.0  # log-likelihood gain of the corner outside the spectrum (the motion's delay)
+
+    def delta_bic(self, n: int) -> float:
+        return 2 * (self.loglik - self.loglik_flat + self.extra_loglik) - FLOOR_SHAPE_PARAMS * np.log(n)
+
+    def explained(self, rate_hz: float) -> float:
+        """Share of the in-band floor power the droop removes (what a flat floor would misplace)."""
+        f = np.linspace(0.0, min(self.f_hi_hz, rate_hz / 2), 512)
+        a = SensorBandwidth.floor_shape(f, self.corner_hz, rate_hz)
+        return float(1.0 - np.trapezoid(a, f) / max(f[-1], 1e-300))
+
+
+class FloorShapeProfile:
+    """Whittle log-likelihood of the residual spectra with the floor shaped by a sensor low-pass of
+    a given corner (`SensorBandwidth.floor_shape`; with a named band-limited vibration `band` =
+    (f0, bw), its power refitted beside the floor). `ok` is False when the floor is known only
+    from outside the trusted band (the reconstruction error swamps it inside): its shape cannot
+    be read there."""
+
+    def __init__(
+        self,
+        residuals: list[np.ndarray],
+        rate_hz: float,
+        masks: list[np.ndarray] | None = None,
+        bands: list[float | None] | None = None,
+        band: tuple[float, float] | None = None,
+        nuisance: Nuisance | None = None,
+    ) -> None:
+        self.sp = spectra(residuals, rate_hz, masks, bands, nuisance)
+        self.band, self.rate_hz = band, rate_hz
+        self.ok = len(self.sp.f) >= 20 and self.sp.floor is None
+        self.ll_flat = _fit_levels(self.sp, band)[1] if self.ok else float("nan")
+        self.f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
+
+    def loglik(self, corner_hz: float) -> float:
+        return _fit_levels(self.sp.shaped(corner_hz), self.band)[1]
+
+    def fit(self, corner_hz: float) -> FloorShapeFit:
+        """The fit at `corner_hz`, with the standard error of the corner from the profile's curvature."""
+        theta, ll, _ = _fit_levels(self.sp.shaped(corner_hz), self.band)
+        u, h = np.log(corner_hz), 0.02
+        d2 = -(self.loglik(np.exp(u + h)) - 2 * ll + self.loglik(np.exp(u - h))) / h**2
+        se = float(corner_hz / np.sqrt(d2)) if d2 > 0 else float("nan")
+        return FloorShapeFit(float(corner_hz), theta[0], ll, self.ll_flat, self.f_hi, se)
+
+    def corner_grid(self) -> np.ndarray:
+        """Corners searched: 2 Hz to 50 x the rate (beyond it the floor is flat to 1e-3)."""
+        return np.geomspace(2.0, 50.0 * self.rate_hz, 9)
+
+
+def fit_floor_shape(
+    residuals: list[np.ndarray],
+    rate_hz: float,
+    masks: list[np.ndarray] | None = None,
+    bands: list[float | None] | None = None,
+    band: tuple[float, float] | None = None,
+    nuisance: Nuisance | None = None,
+    extra: Callable[[float], float] | None = None,
+) -> FloorShapeFit | None:
+    """Maximum-likelihood corner of a first-order sensor low-pass: the Whittle log-likelihood of
+    the floor's shape (`FloorShapeProfile`) plus `extra(corner)` (a log-likelihood gain of the same
+    corner elsewhere, e.g. what its delay of the motion explains), coarse grid then bounded search
+    in log corner. None: the floor's shape cannot be read in the trusted band."""
+    prof = FloorShapeProfile(residuals, rate_hz, masks, bands, band, nuisance)
+    if not prof.ok:
+        return None
+
+    def neg(u: float) -> float:
+        c = float(np.exp(u))
+        return -(prof.loglik(c) + (extra(c) if extra else 0.0))
+
+    grid = np.log(prof.corner_grid())
+    vals = [neg(u) for u in grid]
+    k = int(np.argmin(vals))
+    res = optimize.minimize_scalar(
+        neg, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded", options={"xatol": 5e-3}
+    )
+    u = float(res.x) if res.fun < vals[k] else float(grid[k])
+    fit = prof.fit(float(np.exp(u)))
+    fit.extra_loglik = float(extra(fit.corner_hz)) if extra else 0.0
+    return fit
+
+
+def fit_floor(
+    residuals: list[np.ndarray],
+    rate_hz: float,
+    masks: list[np.ndarray] | None = None,
+    bands: list[float | None] | None = None,
+    corner_hz: float | None = None,
+    nuisance: Nuisance | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whittle level (3,) of a flat floor (shaped by a low-pass of `corner_hz` if given: its level
+    at 0 Hz) over the trusted band, with its standard error: (one-sided PSD, SE)."""
+    sp = spectra(residuals, rate_hz, masks, bands, nuisance).shaped(corner_hz)
+    c = _fit_levels(sp, None)[0][0]
+    return c, c / np.sqrt(max(len(sp.f), 1))
+
+
+def fit_nuisance(
+    residuals: list[np.ndarray],
+    rate_hz: float,
+    masks: list[np.ndarray] | None,
+    bands: list[float | None] | None,
+    nuisance: Nuisance | None,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(c, kappa): the sensor's floor (one-sided PSD, (3,)) and the level (3,) of the reconstruction
+    error beside it, fitted to the residual spectra in the trusted band. None: no nuisance term."""
+    sp = spectra(residuals, rate_hz, masks, bands, nuisance)
+    if sp.E is None or len(sp.f) < 10:
+        return None
+    th, _, _ = _fit_levels(sp, None)
+    return th[0], th[2]

@@ -14,17 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrodenoise.discrepancy.compare import (
-    allan_taus,
-    cross_correlations,
-    drift_vs_truth_deg,
-    pooled_allan,
-    spectrum,
-    window_drift_deg,
-)
-from gyrodenoise.discrepancy.rank import Selection, per_sequence_refit, residuals_after, select_effects
+from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
+from gyrodenoise.discrepancy.design import band_power
+from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
+from gyrodenoise.discrepancy.rank import MIN_GAIN, Selection, per_sequence_refit, residuals_after, select_effects
+from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
-from gyrodenoise.sim.effects import EFFECTS, FitContext, Quantization, SignalContext, Vibration
+from gyrodenoise.sim.context import FitContext, SignalContext
+from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
 
 DRIFT_WINDOWS_S = (1.0, 10.0, 60.0)
 SIM_DRAWS = 4  # re-simulations per held-out sequence for the Allan and spectral gaps
@@ -42,12 +40,18 @@ def simulate_like(
     The white noise is drawn first, so two models simulated with generators of the same seed share
     its draws (common random numbers: their gaps differ by the models, not by the draws)."""
     if pred is None:
-        pred, _ = per_sequence_refit(sel, fc)
+        pred = per_sequence_refit(sel, fc)
     y = fc.omega + pred
     sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
     for name in ("white_noise", "bias_random_walk"):
         if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
-            y = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, y, rng)
+            noise = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, np.zeros_like(y), rng)
+            if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
+                noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
+            y = y + noise
+    err = draw_error(fc, rng)  # the reconstruction error, as the measured residual carries it
+    if err is not None:
+        y = y + err
     if sel.band_vibration:  # band-limited vibration: noise, drawn like the white noise
         y = Vibration(**sel.params["vibration"]).apply(sig, y, rng)
     if "saturation" in sel.params:
@@ -58,9 +62,23 @@ def simulate_like(
     return y, pred
 
 
-def allan_gap(meas_res: list[np.ndarray], sim_res: list[np.ndarray], rate_hz: float) -> float:
-    """Mean |log10(ADEV measured / ADEV simulated)| over cluster times and axes."""
+def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:
+    """White noise x (N, 3) given the PSD shape of a sensor low-pass (`SensorBandwidth.floor_shape`)."""
+    f = np.fft.rfftfreq(len(x), 1.0 / rate_hz)
+    gain = np.sqrt(SensorBandwidth.floor_shape(f, corner_hz, rate_hz))
+    return np.fft.irfft(np.fft.rfft(x, axis=0) * gain[:, None], len(x), axis=0)
+
+
+def allan_gap(
+    meas_res: list[np.ndarray], sim_res: list[np.ndarray], rate_hz: float, f_max: float | None = None
+) -> float:
+    """Mean |log10(ADEV measured / ADEV simulated)| over cluster times and axes. `f_max`: both are
+    limited to the trusted band [0, f_max] and compared at cluster times >= 1 / f_max."""
     taus = allan_taus(min(len(r) for r in meas_res), rate_hz, per_octave=2)
+    if f_max is not None and f_max < rate_hz / 2:
+        meas_res = [band_limit(r, rate_hz, f_max) for r in meas_res]
+        sim_res = [band_limit(r, rate_hz, f_max) for r in sim_res]
+        taus = taus[taus >= 1.0 / f_max]
     a = pooled_allan(meas_res, rate_hz, taus)
     b = pooled_allan(sim_res, rate_hz, taus)
     ok = np.isfinite(a) & np.isfinite(b) & (a > 0) & (b > 0)
@@ -75,14 +93,17 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
     draw)."""
     res, drifts, sims, meas, sim_noise = [], [], [], [], []
     per_seq = {}
+    ones = np.ones(3)
+    in_band = []
     for s, fc in enumerate(fcs):
-        pred, _ = per_sequence_refit(sel, fc)
+        pred = per_sequence_refit(sel, fc)
         for k in range(SIM_DRAWS):
             y_sim, _ = simulate_like(sel, fc, np.random.default_rng([seed, s, k]), pred)
             sims.append(y_sim - fc.omega)
             sim_noise.append(y_sim - fc.omega - pred)
         e = fc.residual - pred
         res.append(e)
+        in_band.append(band_power(fc, e, ones))
         d = window_drift_deg(fc.gyro, fc.omega + pred, 1.0 / fc.rate_hz, 10.0)
         drifts.append(d)
         meas.append(fc.residual)
@@ -92,12 +113,17 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
         }
     allres = np.concatenate(res)
     alld = np.concatenate(drifts)
+    f_hi = min(fc.extra.get("band_hz") or fc.rate_hz / 2 for fc in fcs)
+    weights = [len(fc.t) for fc in fcs]
     return {
         "residual_rms_rad_s": float(np.sqrt(np.mean(allres**2))),
+        # what the comparison can trust: the residual in the trusted band (Parseval), and that band
+        "residual_rms_in_band_rad_s": float(np.sqrt(np.average(in_band, weights=weights))),
+        "band_hz": f_hi,
         "residual_rms_per_axis_rad_s": np.sqrt(np.mean(allres**2, 0)).tolist(),
         "drift_10s_median_deg": float(np.median(alld)) if len(alld) else float("nan"),
-        "allan_gap_log10": allan_gap(meas, sims, fcs[0].rate_hz),
-        "psd_gap_log10": psd_gap(res, sim_noise, fcs[0].rate_hz),
+        "allan_gap_log10": allan_gap(meas, sims, fcs[0].rate_hz, f_hi),
+        "psd_gap_log10": psd_gap(res, sim_noise, fcs[0].rate_hz, f_max=f_hi),
         "per_sequence": per_seq,
     }
 
@@ -154,19 +180,48 @@ def comparisons(sel_base: Selection, sel: Selection, fcs: list[FitContext], seed
     return out
 
 
+def _tolist(x):
+    return None if x is None else np.asarray(x).tolist()
+
+
+def decide(
+    fit: list[FitContext],
+    holdout: list[FitContext],
+    base: list[str] = ("bias", "white_noise"),
+    candidates: list[str] | None = None,
+    bic_threshold: float = 10.0,
+    min_gain: float = MIN_GAIN,
+    null_draws: int = DRAWS,
+    seed: int = 0,
+) -> tuple[Selection, Selection, NullDistribution | None]:
+    """The base model, the null distribution of every candidate's delta BIC under it (`null.py`;
+    null_draws = 0: none, the fixed `bic_threshold` decides) and the greedy selection with those
+    thresholds and the practical minimum `min_gain` on the held-out sequences.
+    Returns (base selection, final selection, null distribution)."""
+    base = list(base)
+    sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold, holdout=holdout)
+    null = None
+    thresholds = None
+    if null_draws > 0:
+        null = null_distribution(sel_base, fit, candidates, null_draws, seed)
+        thresholds = null.thresholds(bic_threshold)
+    sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
+    return sel_base, sel, null
+
+
 def run(
     fit: list[FitContext],
     holdout: list[FitContext],
     base: list[str] = ("bias", "white_noise"),
     candidates: list[str] | None = None,
     bic_threshold: float = 10.0,
-    min_gain: float = 0.0,
+    min_gain: float = MIN_GAIN,
     seed: int = 0,
+    null_draws: int = DRAWS,
 ) -> tuple[dict, dict]:
     """Steps (1)-(5). Returns (report dict, arrays for the plots)."""
     base = list(base)
-    sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold)
-    sel = select_effects(fit, base, candidates, bic_threshold=bic_threshold, min_gain=min_gain)
+    sel_base, sel, null = decide(fit, holdout, base, candidates, bic_threshold, min_gain, null_draws, seed)
     gap_before = gap(sel_base, holdout, seed)
     gap_after = gap(sel, holdout, seed)
     named = []
@@ -189,6 +244,11 @@ def run(
             "datasheet": ds,
             "delta_bic": cand.get("delta_bic"),
             "explained_fraction": cand.get("gain"),
+            "holdout_gain": cand.get("holdout_gain"),
+            "threshold": cand.get("threshold"),
+            "null_p_value": None
+            if null is None or cand.get("delta_bic") is None
+            else null.p_value(name, cand["delta_bic"]),
         }
         if "variant" in cand:
             entry["variant"] = cand["variant"]
@@ -210,7 +270,22 @@ def run(
         "fit_sequences": [fc.name for fc in fit],
         "holdout_sequences": [fc.name for fc in holdout],
         "selection_steps": sel.steps,
-        "settings": {"bic_threshold": bic_threshold, "min_gain": min_gain, "seed": seed, "candidates": candidates},
+        "settings": {
+            "bic_threshold": bic_threshold,
+            "min_gain": min_gain,
+            "seed": seed,
+            "candidates": candidates,
+            "null_draws": null_draws,
+        },
+        "null": None if null is None else {"draws": null.draws, "per_candidate": null.summary(bic_threshold)},
+        "thresholds": sel.thresholds,
+        "identifiability": sel.identifiability,
+        "reconstruction": {
+            "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
+            "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],
+            "sensor_floor_psd": _tolist(fit[0].extra.get("sensor_floor")),
+            "nuisance_level": _tolist(fit[0].extra.get("nuisance_level")),
+        },
         "noise_sigma_per_axis_rad_s": sel.sigma.tolist(),
         "saturation_check": sel.saturation,
         "cross_correlation_fit_base_residual": cross_correlations(fit, fit_resid),

@@ -16,45 +16,18 @@ Residual convention: r = measured gyro - true body rate. Stages give the order o
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any, ClassVar
 
 import numpy as np
 from scipy import signal
 
+from gyrodenoise.allan import fit_allan_noise
+from gyrodenoise.sim.context import FitContext, SignalContext
+
 DEG = np.pi / 180.0
 G0 = 9.80665
 _MISALIGN_PAIRS = [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
-
-
-@dataclass
-class SignalContext:
-    """What an effect sees when it is applied (high internal rate)."""
-
-    t: np.ndarray  # (M,) s since power-on / sequence start
-    omega: np.ndarray  # (M, 3) true body rate
-    alpha: np.ndarray  # (M, 3) true body angular acceleration
-    f: np.ndarray  # (M, 3) true specific force
-    rate_hz: float
-    kinematics_at: Any = None  # callable t -> Kinematics, for the time offset
-
-
-@dataclass
-class FitContext:
-    """One measured sequence as the detector sees it (IMU rate)."""
-
-    name: str
-    t: np.ndarray  # (N,) s since the first IMU sample
-    gyro: np.ndarray  # (N, 3) measured
-    omega: np.ndarray  # (N, 3) true rate from the smooth ground-truth fit
-    alpha: np.ndarray
-    f: np.ndarray
-    rate_hz: float
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def residual(self) -> np.ndarray:
-        return self.gyro - self.omega
 
 
 EFFECTS: dict[str, type[Effect]] = {}
@@ -73,6 +46,9 @@ class Effect:
     DATASHEET: ClassVar[dict[str, tuple[str, float]]] = {}
     PRIOR: ClassVar[tuple[float, float]] = (0.0, np.inf)  # plausible |parameter| range, SI
     DEFAULTS: ClassVar[dict[str, Any]] = {}
+    # magnitude (SI, per coefficient) at which identifiability is stated (`discrepancy.identifiability`);
+    # None: no regression coefficients to state it for
+    REFERENCE: ClassVar[float | None] = None
 
     def __init__(self, **params: Any) -> None:
         unknown = set(params) - set(self.DEFAULTS)
@@ -174,6 +150,7 @@ class ScaleFactor(Effect):
     DATASHEET = {"scale": ("ppm", 1e6)}
     PRIOR = (1e-4, 0.05)
     DEFAULTS = {"scale": np.zeros(3)}
+    REFERENCE = 1e-3  # 1000 ppm
 
     def apply(self, sig, y, rng):
         return y + self.params["scale"] * sig.omega
@@ -194,6 +171,7 @@ class Misalignment(Effect):
     DATASHEET = {"angles": ("mrad", 1e3)}
     PRIOR = (1e-4, 0.05)
     DEFAULTS = {"angles": np.zeros(6)}
+    REFERENCE = 1e-3  # 1 mrad
 
     def matrix(self) -> np.ndarray:
         M = np.zeros((3, 3))
@@ -223,6 +201,7 @@ class GSensitivity(Effect):
     DATASHEET = {"matrix": ("deg/s/g", G0 / DEG)}
     PRIOR = (1e-5, 2e-3)
     DEFAULTS = {"matrix": np.zeros((3, 3))}
+    REFERENCE = 0.5 * DEG / G0  # 0.5 deg/s/g
 
     def apply(self, sig, y, rng):
         return y + sig.f @ self.params["matrix"].T
@@ -246,6 +225,7 @@ class TimeOffset(Effect):
     DATASHEET = {"delta": ("ms", 1e3)}
     PRIOR = (2e-4, 0.05)
     DEFAULTS = {"delta": 0.0}
+    REFERENCE = 1e-3  # 1 ms
     delta_ref: float = 0.0  # detector: shift at which the secant regressor is taken
 
     def apply(self, sig, y, rng):
@@ -287,6 +267,7 @@ class Nonlinearity(Effect):
     DATASHEET = {"k": ("ppm/(deg/s)", 1e6 * DEG)}
     PRIOR = (1e-5, 0.02)
     DEFAULTS = {"k": np.zeros(3)}
+    REFERENCE = 5e-4  # 8.7 ppm/(deg/s)
 
     def apply(self, sig, y, rng):
         return y + self.params["k"] * sig.omega * np.abs(sig.omega)
@@ -306,6 +287,7 @@ class WarmupBias(Effect):
     DATASHEET = {"amplitude": ("deg/s", 1 / DEG), "tau": ("s", 1.0)}
     PRIOR = (1e-4, 0.2)
     DEFAULTS = {"amplitude": np.zeros(3), "tau": 30.0}
+    REFERENCE = 5e-3  # 0.29 deg/s
     TAU_GRID = np.geomspace(2.0, 300.0, 40)
 
     def apply(self, sig, y, rng):
@@ -348,6 +330,7 @@ class Vibration(Effect):
     DATASHEET = {"frequency_hz": ("Hz", 1.0), "amplitude": ("deg/s", 1 / DEG), "bandwidth_hz": ("Hz", 1.0)}
     PRIOR = (1e-4, 0.5)
     DEFAULTS = {"frequency_hz": 30.0, "amplitude": np.zeros(3), "bandwidth_hz": 0.0}
+    REFERENCE = 1e-3 / np.sqrt(2)  # amplitude 1e-3 rad/s (0.057 deg/s) as sin and cos parts
     BUTTER_ORDER = 4
 
     @property
@@ -394,13 +377,17 @@ class Vibration(Effect):
         # strongest spectral line of the residuals (summed periodograms), refined by zero padding
         best_f, best_p = float(self.params["frequency_hz"]), -np.inf
         rate = fcs[0].rate_hz
-        for r in residuals:
+        for fc, r in zip(fcs, residuals, strict=True):
             x = r - r.mean(0)
             n = len(x)
             nfft = 1 << int(np.ceil(np.log2(4 * n)))
             p = (np.abs(np.fft.rfft(x * np.hanning(n)[:, None], nfft, axis=0)) ** 2).sum(1)
             fr = np.fft.rfftfreq(nfft, 1.0 / rate)
-            ok = (fr > 0.5) & (fr < 0.48 * rate)
+            # only where the reconstructed true rate is trusted (`discrepancy.reconstruction`)
+            hi = min(0.48 * rate, fc.extra.get("band_hz") or np.inf)
+            ok = (fr > 0.5) & (fr < hi)
+            if not ok.any():
+                continue
             k = int(np.argmax(np.where(ok, p, -np.inf)))
             # peak relative to the median level: sequences vote by prominence
             prom = p[k] / np.median(p[ok])
@@ -457,6 +444,66 @@ class Saturation(Effect):
         plateau = sum(int((np.abs(fc.gyro) >= lim - tol).sum()) for fc in fcs)
         beyond = sum(int((np.abs(fc.omega) > lim + 5 * sigma).sum()) for fc in fcs)
         return {"limit": lim, "plateau_samples": plateau, "beyond_samples": beyond}
+
+
+@register
+class SensorBandwidth(Effect):
+    """The sensor's own bandwidth: a first-order low-pass of corner `corner_hz` on the rate before
+    it is sampled (front end, stage 3; the simulator then averages over the sample interval).
+
+    It does two things a detector sees: it delays and attenuates the motion (at low frequencies a
+    delay of 1 / (2 pi corner), i.e. what a time offset also does), and it shapes the noise floor
+    (`floor_shape`: a flat floor droops towards the Nyquist frequency). Detection is spectral:
+    the Whittle likelihood of the residual's spectrum with the shaped floor against the flat one
+    (`gyrodenoise.discrepancy.spectral.fit_floor_shape`); the motion part is then `filter_rate`,
+    with no free coefficient. corner_hz = inf: no filter."""
+
+    name = "sensor_bandwidth"
+    stage = 3
+    stochastic = True
+    DATASHEET = {"corner_hz": ("Hz", 1.0)}
+    PRIOR = (5.0, 5000.0)
+    DEFAULTS = {"corner_hz": np.inf}
+    ALIASES = 8  # spectral images folded into [0, rate/2] by the sampling (floor_shape)
+
+    def magnitude(self) -> float:
+        return float(self.params["corner_hz"])
+
+    @staticmethod
+    @lru_cache(maxsize=256)
+    def _discrete(corner_hz: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+        # first-order hold: the exact response to a piecewise-linear input, so the delay is the
+        # continuous filter's 1 / (2 pi corner) (a plain one-pole recursion is half a sample off)
+        tau = 1.0 / (2 * np.pi * corner_hz)
+        b, a, _ = signal.cont2discrete(([1.0], [tau, 1.0]), 1.0 / rate_hz, method="foh")
+        return np.ravel(b), np.ravel(a)
+
+    @classmethod
+    def filter_rate(cls, x: np.ndarray, corner_hz: float, rate_hz: float) -> np.ndarray:
+        """x (N, ...) through the low-pass, started in steady state."""
+        if not np.isfinite(corner_hz):
+            return x
+        b, a = cls._discrete(float(corner_hz), float(rate_hz))
+        zi = signal.lfilter_zi(b, a)
+        zi = zi.reshape(-1, *([1] * (x.ndim - 1))) * x[:1]
+        return signal.lfilter(b, a, x, axis=0, zi=zi)[0]
+
+    def apply(self, sig, y, rng):
+        return self.filter_rate(y, float(self.params["corner_hz"]), sig.rate_hz)
+
+    @classmethod
+    def floor_shape(cls, f: np.ndarray, corner_hz: float, rate_hz: float) -> np.ndarray:
+        """PSD of white noise after the low-pass, the average over the sample interval and the
+        sampling, relative to its level at 0 Hz: sum over images k of |G(f + k rate)|^2
+        sinc^2((f + k rate) / rate). Flat (1) for corner_hz = inf."""
+        f = np.asarray(f, dtype=np.float64)
+        if not np.isfinite(corner_hz):
+            return np.ones_like(f)
+        out = np.zeros_like(f)
+        for k in range(-cls.ALIASES, cls.ALIASES + 1):
+            fk = f + k * rate_hz
+            out += np.sinc(fk / rate_hz) ** 2 / (1.0 + (fk / corner_hz) ** 2)
+        return out
 
 
 # ===================================================================== stochastic effects
@@ -534,10 +581,10 @@ class BiasRandomWalk(Effect):
             c[:, i, i * n_knots : (i + 1) * n_knots] = hats
         return c
 
-    def estimate(self, fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
-        from gyrodenoise.discrepancy.compare import fit_allan_noise  # detector-side statistics
-
-        n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz)
+    def estimate(
+        self, fcs: list[FitContext], residuals: list[np.ndarray], angle_noise: bool = False
+    ) -> tuple[dict, dict]:
+        n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz, angle_noise)
         k = np.sqrt(np.clip(k2, 0.0, None))
         se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
         return {"density": k}, {"density": se}

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.sim.effects import Effect, SignalContext, WhiteNoise
+from gyrodenoise.sim.context import SignalContext
+from gyrodenoise.sim.effects import Effect, WhiteNoise
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 
 IMU_HEADER = (

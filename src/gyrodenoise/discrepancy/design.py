@@ -1,0 +1,305 @@
+"""The regression machinery of the discrepancy workflow: which rows a fit uses, the weighted Gram
+matrix of all candidate columns, and least-squares fits of any subset of effects.
+
+All regression effects are linear in their coefficients once their nonlinear parameter (a
+frequency, a time constant, a range) is set by `Effect.prepare`. The weighted normal equations
+(Gram matrix) of all columns are built once per selection step; any subset is then a small solve.
+Rows are the three axes of every sample, weighted by 1/sigma_axis (noise level per axis); where
+the reconstructed true rate is trusted only in a band (`reconstruction`), the rows are the
+Fourier coefficients in that band (`fit_rows`). A named sensor low-pass changes what the sensor
+sees of the motion (`sensor_view`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
+
+import numpy as np
+
+from gyrodenoise.discrepancy.reconstruction import band_rows, estimate_band, row_frequencies, sensor_floor
+from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, spectra
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import Effect, SensorBandwidth
+
+
+def row_mask(fc: FitContext) -> np.ndarray:
+    """(N, 3) bool: rows used in the fits (samples near a saturation limit are left out)."""
+    m = fc.extra.get("row_mask")
+    return np.ones((len(fc.t), 3), dtype=bool) if m is None else m
+
+
+def set_saturation_mask(fcs: list[FitContext], limit: float, sigma: np.ndarray, band: float = 15.0) -> None:
+    """Leave out samples whose true rate is beyond or within `band` noise stds of the limit: there
+    the output says only 'at least the limit', and clipped noise biases it. The band widens by the
+    change of rate over one sample (the output filter averages across the limit)."""
+    for fc in fcs:
+        near = np.abs(fc.omega) > limit - band * sigma - np.abs(fc.alpha) / fc.rate_hz
+        fc.extra["row_mask"] = ~near
+
+
+def row_masks(fcs: list[FitContext]) -> list[np.ndarray | None]:
+    return [fc.extra.get("row_mask") for fc in fcs]
+
+
+def band_edges(fcs: list[FitContext]) -> list[float | None]:
+    """Upper edge of each sequence's trusted band (None: the whole spectrum)."""
+    return [fc.extra.get("band_hz") for fc in fcs]
+
+
+def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
+    """Estimate each sequence's trusted band from its base-model residual (once; kept in extra)."""
+    for fc, r in zip(fcs, residuals, strict=True):
+        if "band_hz" not in fc.extra:
+            b = estimate_band(fc, r)
+            fc.extra["band"], fc.extra["band_hz"] = b, b.f_max_hz
+
+
+# what `set_reconstruction_model` keeps in a context's extra
+RECONSTRUCTION_KEYS = ("band", "band_hz", "row_weights", "nuisance_level", "sensor_floor")
+
+
+def without_reconstruction(extra: dict) -> dict:
+    """A context's extra without the reconstruction model (for a 'residual' that is no gyro - truth)."""
+    return {k: v for k, v in extra.items() if k not in RECONSTRUCTION_KEYS}
+
+
+def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows a fit uses: weighted columns X (3N, k) and residual r (3N,) of sequence `fc`, samples
+    outside `row_mask` left out. Where the reconstructed true rate is trusted only in a band
+    (`fc.extra['band_hz']`) or carries an error of its own (`fc.extra['row_weights']`, see
+    `reconstruction`), the rows are the Fourier coefficients in the band, each weighted by
+    1 / sqrt(noise + reconstruction-error PSD) relative to the noise floor: generalised least squares."""
+    m = row_mask(fc).reshape(-1)
+    f_max = fc.extra.get("band_hz")
+    w = fc.extra.get("row_weights")
+    if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
+        return X[m], r[m]
+    n, k = len(fc.t), X.shape[1]
+    Xb = band_rows(np.where(m[:, None], X, 0.0).reshape(n, 3 * k), fc.rate_hz, f_max, force=True)
+    rb = band_rows(np.where(m, r, 0.0).reshape(n, 3), fc.rate_hz, f_max, force=True)
+    if w is not None:
+        Xb = (Xb.reshape(-1, 3, k) * w[:, :, None]).reshape(-1, 3 * k)
+        rb = rb * w
+    return Xb.reshape(-1, k), rb.reshape(-1)
+
+
+def nuisance_of(fcs: list[FitContext]) -> Nuisance | None:
+    """The reconstruction error of `fcs` as a spectral nuisance term (None: exact ground truth)."""
+    psd = []
+    for fc in fcs:
+        b = fc.extra.get("band")
+        psd.append(None if b is None or b.exact else b.error_psd)
+    if all(p is None for p in psd):
+        return None
+    return Nuisance(psd, fcs[0].extra.get("sensor_floor"))
+
+
+def set_row_weights(fcs: list[FitContext], floor: np.ndarray, kappa: np.ndarray) -> None:
+    """GLS weights of each sequence's Fourier rows: sqrt(c / (c + kappa E(f))) per axis, c the
+    sensor's floor and kappa E the fitted reconstruction error (`spectral.fit_nuisance`)."""
+    for fc in fcs:
+        b = fc.extra.get("band")
+        if b is None or b.exact:
+            continue
+        f = row_frequencies(len(fc.t), fc.rate_hz, fc.extra.get("band_hz"))
+        fc.extra["row_weights"] = np.sqrt(floor / (floor + kappa * b.error_psd(f)))
+        fc.extra["nuisance_level"] = kappa
+
+
+def set_reconstruction_model(fcs: list[FitContext], residuals: list[np.ndarray]) -> np.ndarray | None:
+    """Bands (`set_bands`), then the sensor floor and the reconstruction error's level fitted on the
+    base residuals, and the rows' GLS weights. Returns the per-axis noise std the floor implies at
+    the IMU rate (the rows' weights), or None when nothing is band-limited or carries an error."""
+    set_bands(fcs, residuals)
+    nu = nuisance_of(fcs)
+    if nu is None:
+        return band_noise_weights(fcs, residuals) if band_limited(fcs) else None
+    # the sensor's floor where the reconstruction error does not reach (inside the band it may
+    # swamp it), then the error's level beside it in the band
+    floor = sensor_floor([fc.extra["band"] for fc in fcs])
+    for fc in fcs:
+        fc.extra["sensor_floor"] = floor
+    nu.floor = floor
+    fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nu)
+    if fit is None:
+        return band_noise_weights(fcs, residuals)
+    floor, kappa = fit
+    set_row_weights(fcs, floor, kappa)
+    return np.maximum(np.sqrt(floor * fcs[0].rate_hz / 2), 1e-12)
+
+
+def noise_weights(residuals: list[np.ndarray]) -> np.ndarray:
+    """Per-axis white-noise std from first differences (insensitive to slow effects)."""
+    d = np.concatenate([np.diff(r, axis=0) for r in residuals])
+    return np.maximum(d.std(0) / np.sqrt(2), 1e-12)
+
+
+class Design:
+    """Weighted Gram matrix of every column of `effects` over the sequences `fcs`."""
+
+    def __init__(self, fcs: list[FitContext], effects: dict[str, Effect], sigma: np.ndarray) -> None:
+        self.fcs, self.effects, self.sigma = fcs, effects, sigma
+        self.cols: dict[str, np.ndarray] = {}  # effect -> global column indices ((S, k) if per sequence)
+        p = 0
+        self.k = {name: e.columns(fcs[0]).shape[2] if not e.stochastic else 0 for name, e in effects.items()}
+        for name, e in effects.items():
+            k = self.k[name]
+            if e.per_sequence and not e.stochastic:
+                # column counts may differ per sequence (random-walk knots): take the largest
+                k = max(e.columns(fc).shape[2] for fc in fcs)
+                self.k[name] = k
+                self.cols[name] = p + np.arange(len(fcs) * k).reshape(len(fcs), k)
+                p += len(fcs) * k
+            else:
+                self.cols[name] = p + np.arange(k)
+                p += k
+        self.p = p
+        self.G = np.zeros((p, p))
+        self.b = np.zeros(p)
+        self.rr = 0.0
+        self.n = 0
+        for s, fc in enumerate(fcs):
+            X, idx = self.local_columns(s, list(effects))
+            X, r = fit_rows(fc, X, (fc.residual / sigma).reshape(-1))
+            self.G[np.ix_(idx, idx)] += X.T @ X
+            self.b[idx] += X.T @ r
+            self.rr += float(r @ r)
+            self.n += len(r)
+
+    def local_columns(self, s: int, names: list[str], fc: FitContext | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted columns (3N, k) of sequence s for `names`, with their global indices."""
+        fc = fc or self.fcs[s]
+        blocks, idx = [], []
+        for name in names:
+            e = self.effects[name]
+            if e.stochastic:
+                continue
+            c = e.columns(fc) / self.sigma[None, :, None]
+            gi = self.cols[name][s] if e.per_sequence else self.cols[name]
+            if c.shape[2] < len(gi):  # fewer knots in this sequence: pad with empty columns
+                c = np.concatenate([c, np.zeros((*c.shape[:2], len(gi) - c.shape[2]))], 2)
+            blocks.append(c.reshape(-1, c.shape[2]))
+            idx.append(gi)
+        if not blocks:
+            return np.zeros((3 * len(fc.t), 0)), np.zeros(0, dtype=int)
+        return np.concatenate(blocks, 1), np.concatenate(idx)
+
+    def indices(self, names: list[str]) -> np.ndarray:
+        out = [self.cols[n].ravel() for n in names if n in self.effects and not self.effects[n].stochastic]
+        return np.concatenate(out) if out else np.zeros(0, dtype=int)
+
+    def fit(self, names: list[str]) -> FitResult:
+        idx = self.indices(names)
+        coef = np.zeros(self.p)
+        if len(idx) == 0:
+            return FitResult(coef, self.rr, 0, np.zeros((0, 0)), idx, self.n)
+        G = self.G[np.ix_(idx, idx)]
+        w, V = np.linalg.eigh(G)
+        keep = w > 1e-10 * max(w.max(), 1e-300)
+        Ginv = (V[:, keep] / w[keep]) @ V[:, keep].T
+        c = Ginv @ self.b[idx]
+        coef[idx] = c
+        rss = max(self.rr - float(c @ self.b[idx]), 1e-300)
+        k = int(keep.sum())
+        s2 = rss / max(self.n - k, 1)
+        return FitResult(coef, rss, k, s2 * Ginv, idx, self.n)
+
+    def conditional_se(self, given: list[str], name: str, s2: float) -> np.ndarray:
+        """Standard errors of `name`'s coefficients when fitted together with `given` (inf when the
+        data cannot separate them: the columns lie in the span of the others)."""
+        o, c = self.indices(given), self.cols[name].ravel()
+        Gcc = self.G[np.ix_(c, c)]
+        if len(o):
+            Goo = self.G[np.ix_(o, o)]
+            Goc = self.G[np.ix_(o, c)]
+            S = Gcc - Goc.T @ np.linalg.pinv(Goo, rcond=1e-12, hermitian=True) @ Goc
+        else:
+            S = Gcc
+        S = (S + S.T) / 2
+        w, V = np.linalg.eigh(S)
+        scale = max(float(np.trace(Gcc)) / len(c), 1e-300)
+        w_safe = np.where(w > 1e-9 * scale, w, 0.0)
+        with np.errstate(divide="ignore"):
+            var = (V**2 / np.where(w_safe > 0, w_safe, np.nan)[None]).sum(1)
+        var = np.where(np.isnan(var), np.inf, var)
+        return np.sqrt(s2 * var)
+
+
+@dataclass
+class FitResult:
+    coef: np.ndarray
+    rss: float
+    k: int
+    cov: np.ndarray
+    idx: np.ndarray
+    n: int
+
+    @property
+    def bic(self) -> float:
+        return self.n * np.log(self.rss / self.n) + self.k * np.log(self.n)
+
+    def se(self) -> np.ndarray:
+        out = np.zeros_like(self.coef)
+        out[self.idx] = np.sqrt(np.clip(np.diag(self.cov), 0, None))
+        return out
+
+
+def residuals_after(design: Design, res: FitResult, names: list[str], fcs: list[FitContext] | None = None):
+    """Per-sequence residuals (unweighted) after removing the fitted columns of `names`."""
+    out = []
+    for s, fc in enumerate(fcs or design.fcs):
+        X, idx = design.local_columns(s, names, fc)
+        pred = (X @ res.coef[idx]).reshape(-1, 3) * design.sigma
+        out.append(fc.residual - pred)
+    return out
+
+
+def band_limited(fcs: list[FitContext]) -> bool:
+    """Whether any sequence is compared in a band narrower than the whole spectrum."""
+    return any(fc.extra.get("band_hz") is not None and fc.extra["band_hz"] < fc.rate_hz / 2 for fc in fcs)
+
+
+def band_noise_weights(fcs: list[FitContext], residuals: list[np.ndarray]) -> np.ndarray:
+    """Per-axis noise std from the trusted band's periodograms (median bin / ln 2: the level of a
+    flat floor, robust to a few strong lines), as a per-sample std at the IMU rate."""
+    sp = spectra(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs))
+    c = np.median(sp.I, axis=0) / np.log(2)
+    return np.maximum(np.sqrt(c * fcs[0].rate_hz / 2), 1e-12)
+
+
+def band_power(fc: FitContext, r: np.ndarray, sigma: np.ndarray) -> float:
+    """Weighted power of residual r (N, 3) of sequence `fc` in its trusted band (mean square of
+    the rows a fit would use)."""
+    m = row_mask(fc)
+    x = np.where(m, r / sigma, 0.0)
+    f_max, w = fc.extra.get("band_hz"), fc.extra.get("row_weights")
+    if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
+        return float(np.mean(x[m] ** 2))
+    rows = band_rows(x, fc.rate_hz, f_max, force=True)
+    return float(np.mean((rows if w is None else rows * w) ** 2))
+
+
+def sensor_view(fc: FitContext, corner_hz: float | None, rate_only: bool = False) -> FitContext:
+    """The sequence as seen through a sensor low-pass of corner `corner_hz` (`SensorBandwidth`):
+    the true rate, its derivative and the specific force filtered (every regressor responds to
+    what reaches the sensor's output). None or inf: `fc` itself. `rate_only`: filter the true rate
+    alone (enough for models whose columns use neither the derivative nor the specific force)."""
+    if corner_hz is None or not np.isfinite(corner_hz):
+        return fc
+    if rate_only:
+        return replace(fc, omega=SensorBandwidth.filter_rate(fc.omega, corner_hz, fc.rate_hz))
+
+    def lp(x: np.ndarray) -> np.ndarray:
+        return SensorBandwidth.filter_rate(x, corner_hz, fc.rate_hz)
+
+    extra = dict(fc.extra)
+    kin_at = fc.extra.get("kinematics_at")
+    if kin_at is not None:
+
+        def filtered(tt: np.ndarray) -> SimpleNamespace:
+            k = kin_at(tt)
+            return SimpleNamespace(omega=lp(k.omega), alpha=lp(k.alpha), specific_force=lp(k.specific_force))
+
+        extra["kinematics_at"] = filtered
+    return replace(fc, omega=lp(fc.omega), alpha=lp(fc.alpha), f=lp(fc.f), extra=extra)

@@ -1,0 +1,109 @@
+"""Issue 11, points 3-5: the sensor bandwidth as a library effect, calibrated decisions (null
+bootstrap) and identifiability as a number. Own-simulator data (exact ground truth): fast."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from gyrodenoise.discrepancy.compare import load_fit_context
+from gyrodenoise.discrepancy.hidden import make_measured
+from gyrodenoise.discrepancy.null import null_distribution
+from gyrodenoise.discrepancy.rank import select_effects
+from gyrodenoise.discrepancy.workflow import decide
+from gyrodenoise.sim.context import SignalContext
+from gyrodenoise.sim.effects import GSensitivity, SensorBandwidth, WhiteNoise
+
+DURATION = 25.0
+
+
+def _contexts(root, hidden, n, seed, trajectory="handheld"):
+    names = make_measured(root, hidden, n, DURATION, seed=seed, trajectory=trajectory)
+    return [load_fit_context(root, name) for name in names]
+
+
+# ----------------------------------------------------------------------------- 3: sensor bandwidth
+
+
+def test_floor_shape_is_the_simulated_low_passed_noise():
+    rate, m, n = 200.0, 10, 200 * 10 * 120
+    sig = SignalContext(t=np.arange(n) / (rate * m), omega=np.zeros((n, 3)), alpha=None, f=None, rate_hz=rate * m)
+    rng = np.random.default_rng(0)
+    y = WhiteNoise(density=np.full(3, 1e-4)).apply(sig, np.zeros((n, 3)), rng)
+    y = SensorBandwidth(corner_hz=40.0).apply(sig, y, rng).reshape(-1, m, 3).mean(1)
+    f, p = signal.welch(y, fs=rate, nperseg=256, axis=0)
+    model = 2e-8 * SensorBandwidth.floor_shape(f, 40.0, rate)
+    ok = (f > 2) & (f < 98)
+    assert np.allclose(p[ok].mean(1), model[ok], rtol=0.15)
+    assert SensorBandwidth.floor_shape(np.array([100.0]), 40.0, rate)[0] < 0.3  # a real droop
+    # the motion part: a delay of 1 / (2 pi corner) at low frequencies
+    t = np.arange(4000) / rate
+    x = np.sin(2 * np.pi * 1.0 * t)[:, None]
+    lag = np.argmax(np.correlate(SensorBandwidth.filter_rate(x, 40.0, rate)[:, 0], x[:, 0], "full")) - 3999
+    assert abs(lag / rate - 1 / (2 * np.pi * 40.0)) < 1 / rate
+
+
+def test_low_passed_sensor_is_named_bandwidth_not_vibration_nor_time_offset(tmp_path):
+    fcs = _contexts(tmp_path, [SensorBandwidth(corner_hz=40.0)], 3, seed=4)
+    _, sel, _ = decide(fcs[:2], fcs[2:], null_draws=0)
+    assert sel.named == ["sensor_bandwidth"], sel.steps[0]["candidates"][:3]
+    assert float(sel.params["sensor_bandwidth"]["corner_hz"]) == pytest.approx(40.0, rel=0.05)
+    assert float(sel.se["sensor_bandwidth"]["corner_hz"]) > 0
+    # the floor under the low-pass is the white noise's level at 0 Hz
+    assert np.allclose(sel.params["white_noise"]["density"], 1.7e-4, rtol=0.05)
+
+
+# ----------------------------------------------------------------------------- 4: null bootstrap
+
+
+def test_null_distribution_calibrates_thresholds_with_common_random_numbers(tmp_path):
+    fcs = _contexts(tmp_path, [], 2, seed=6)
+    base = select_effects(fcs, candidates=[])
+    cands = ["scale_factor", "time_offset", "vibration"]
+    null = null_distribution(base, fcs, cands, draws=4, seed=3)
+    again = null_distribution(base, fcs, cands, draws=4, seed=3)
+    for c in cands:
+        v = null.delta_bic[c]
+        assert v.shape == (4,) and np.isfinite(v).all()
+        assert np.array_equal(v, again.delta_bic[c])  # same seed, same worlds
+        assert null.threshold(c, 10.0) >= max(10.0, float(np.quantile(v, 0.95, method="higher")))
+        assert null.p_value(c, 1e9) == pytest.approx(1 / 5)
+        assert null.p_value(c, -1e9) == pytest.approx(1.0)
+    # nothing is hidden: the null's delta BIC of a linear effect sits near chi2 - k log n
+    assert np.median(null.delta_bic["scale_factor"]) < 0
+
+
+def test_decision_reports_thresholds_and_rank(tmp_path):
+    fcs = _contexts(tmp_path, [GSensitivity(matrix=np.diag([4e-4, -3e-4, 5e-4]))], 3, seed=7)
+    _, sel, null = decide(fcs[:2], fcs[2:], candidates=["g_sensitivity", "scale_factor"], null_draws=5)
+    assert sel.named == ["g_sensitivity"]
+    step = sel.steps[0]["candidates"][0]
+    assert step["effect"] == "g_sensitivity" and step["delta_bic"] > step["threshold"] >= 10.0
+    assert step["holdout_gain"] >= 0.01  # closes more than the practical minimum on the held-out flight
+    assert null.p_value("g_sensitivity", step["delta_bic"]) == pytest.approx(1 / 6)
+
+
+# ----------------------------------------------------------------------------- 5: identifiability
+
+
+def test_identifiability_is_a_number_that_predicts_detection(tmp_path):
+    null = _contexts(tmp_path / "null", [], 2, seed=8)
+    idf = select_effects(null, candidates=["g_sensitivity"]).identifiability["g_sensitivity"]
+    assert idf["reference_datasheet"] == pytest.approx(0.5) and idf["unit"] == "deg/s/g"
+    assert idf["identifiable"] and 0 < idf["min_magnitude_datasheet"] < 0.5  # hand-held motion: rich
+    assert idf["expected_delta_bic"] > idf["threshold"]
+    m = idf["min_magnitude"]  # SI: where the expected delta BIC reaches the threshold
+    signs = np.random.default_rng(1).choice([-1.0, 1.0], (3, 3))
+    for factor, named in ((4.0, True), (0.25, False)):
+        fcs = _contexts(tmp_path / str(factor), [GSensitivity(matrix=factor * m * signs)], 2, seed=8)
+        sel = select_effects(fcs, candidates=["g_sensitivity"], min_gain=0.0)
+        assert ("g_sensitivity" in sel.named) is named, (factor, sel.steps[0]["candidates"])
+
+
+def test_g_sensitivity_on_a_turntable_is_not_identifiable_with_the_numbers(tmp_path):
+    fcs = _contexts(tmp_path, [], 2, seed=9, trajectory="yaw_only")
+    sel = select_effects(fcs, candidates=["g_sensitivity"])
+    assert "g_sensitivity" in sel.not_identifiable and sel.named == []
+    idf = sel.identifiability["g_sensitivity"]
+    assert not idf["testable"] and idf["expected_delta_bic_at_prior"] < 10.0
