@@ -26,7 +26,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
-from gyrodenoise.models.denoiser import build_model, count_parameters, predict_gyro  # noqa: E402
+from gyrodenoise.models.build import build_model  # noqa: E402
+from gyrodenoise.models.denoiser import count_parameters, predict_gyro  # noqa: E402
 from gyrodenoise.paths import portable_command  # noqa: E402
 from gyrodenoise.pretrained import available_models, load_model  # noqa: E402
 from gyrodenoise.streaming import StreamingCorrector  # noqa: E402

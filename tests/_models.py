@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from gyrodenoise.models.denoiser import GyroCorrection, build_model
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import GyroCorrection
 
 
 def random_model(seed: int = 0, **kwargs) -> GyroCorrection:

@@ -19,7 +19,8 @@ from gyrodenoise.correct import main as correct_main
 from gyrodenoise.data.readers import read_imu
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.evaluate import load_checked
-from gyrodenoise.models.denoiser import CalibratedImu, build_model, predict_gyro
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import CalibratedImu, predict_gyro
 from gyrodenoise.models.ensemble import EnsembleCorrection, predict_with_spread
 from gyrodenoise.pretrained import ModelQualityWarning, available_models, load_model, not_better_warning, save_model
 from gyrodenoise.so3 import integrate_gyro

@@ -8,7 +8,7 @@ import torch
 from _models import random_imu, random_model
 
 from gyrodenoise.export import INPUT_NAME, export_onnx, export_pt2, main
-from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.models.build import build_model
 from gyrodenoise.pretrained import save_model
 
 TINY = {"channels": (8, 16), "kernel_size": 5, "dilations": (1, 4), "act": "gelu", "dropout": 0.1}

@@ -4,7 +4,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.losses import IncrementLoss
-from gyrodenoise.models.denoiser import build_model, count_parameters, predict_gyro
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import count_parameters, predict_gyro
 
 
 def test_default_network_has_paper_parameter_count():

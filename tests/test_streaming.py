@@ -8,7 +8,8 @@ import torch
 from _models import random_imu, random_model
 
 from gyrodenoise.data.readers import read_imu
-from gyrodenoise.models.denoiser import build_model, predict_gyro
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import available_models, load_model
 from gyrodenoise.streaming import StreamingCorrector
 

@@ -99,7 +99,7 @@ def _split_sweep(values: str) -> list[str]:
 
 def _build(cfg) -> None:
     from gyrodenoise.losses import IncrementLoss
-    from gyrodenoise.models.denoiser import build_model
+    from gyrodenoise.models.build import build_model
 
     build_model(**OmegaConf.to_container(cfg.model, resolve=True))
     IncrementLoss(**OmegaConf.to_container(cfg.loss, resolve=True))

@@ -28,265 +28,36 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import json
 import math
 import statistics
 import sys
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 
-import yaml
-
+from gyrodenoise.ablation_runs import (  # noqa: F401  (re-exported: the public API of this module)
+    IGNORED_KEYS,
+    METRICS,
+    MISSING,
+    SEED_KEY,
+    Run,
+    Setting,
+    _fmt_value,
+    _norm,
+    _parse_override,
+    _pm,
+    _read_overrides,
+    _with_ext,
+    ablated_keys,
+    canonical,
+    find_runs,
+    group,
+    load_run,
+    load_summary_file,
+    parse_where,
+    same_value,
+)
 from gyrodenoise.atomic import write_bytes, write_text
 from gyrodenoise.paths import portable_path
-
-SEED_KEY = "seed"
-IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, never a setting
-# val: the validation figure of the run's protocol (a held-out training flight with dataset.cv_fold, else
-# the end of the training flights); val_tail: the end of the training flights in a cv_fold run
-METRICS = {"val": "val/aoe_deg", "test": "test/aoe_deg", "val_tail": "val_tail/aoe_deg"}
-MISSING = "-"  # the value of a key a run neither overrides nor has in its config
-
-
-@dataclass
-class Run:
-    path: Path  # the Hydra run folder, or the summary JSON file
-    overrides: dict[str, str]  # key (without +/++ prefix) -> value as written
-    config: dict
-    summary: dict
-    spelled: dict[str, str] = field(default_factory=dict)  # key -> as written on the command line (+model/shape)
-
-    @property
-    def seed(self) -> object:
-        if SEED_KEY in self.overrides:
-            return self.overrides[SEED_KEY]
-        if self.summary.get(SEED_KEY) is not None:
-            return self.summary[SEED_KEY]
-        return self.config.get(SEED_KEY)
-
-    def value(self, key: str) -> str:
-        """The run's value of `key`: its override if any, else its resolved config value."""
-        if key in self.overrides:
-            return self.overrides[key]
-        if "/" in key:  # a config-group choice: the resolved config holds the group's content, not its name
-            return MISSING
-        node: object = self.config
-        for part in key.split("."):
-            if not isinstance(node, dict) or part not in node:
-                return MISSING
-            node = node[part]
-        return _fmt_value(node)
-
-    def curve(self) -> list[tuple[int, float]]:
-        """(epoch, val AOE) of the validations during fitting, from the CSV log when there is one.
-
-        The last val row of the log is the post-fit validation of the best checkpoint: left out.
-        """
-        path = self.path / "csv" / "metrics.csv"
-        if not path.is_file():
-            return []
-        with open(path, newline="") as fh:
-            rows = [r for r in csv.DictReader(fh) if r.get(METRICS["val"])]
-        return [(int(float(r["epoch"])) + 1, float(r[METRICS["val"]])) for r in rows[:-1]]
-
-    def metric(self, split: str) -> float:
-        """'val' / 'test': AOE (deg) of the best checkpoint; 'val_last': the last validation AOE of the
-        fit (overfitting shows as val_last > val); 'best_epoch': the epoch of the best validation."""
-        if split in ("val_last", "best_epoch"):
-            curve = self.curve()
-            if not curve:
-                return math.nan
-            return curve[-1][1] if split == "val_last" else float(min(curve, key=lambda p: p[1])[0])
-        table = self.summary.get("test" if split == "test" else "val") or {}
-        v = table.get(METRICS[split])
-        return float(v) if v is not None else math.nan
-
-
-@dataclass
-class Setting:
-    values: tuple[str, ...]
-    runs: list[Run] = field(default_factory=list)
-
-    def stats(self, split: str) -> tuple[float, float, int]:
-        xs = [r.metric(split) for r in self.runs]
-        xs = [x for x in xs if math.isfinite(x)]
-        if not xs:
-            return math.nan, math.nan, 0
-        sd = statistics.stdev(xs) if len(xs) > 1 else math.nan
-        return statistics.fmean(xs), sd, len(xs)
-
-    def wall_s(self) -> float:
-        ts = [float(r.summary.get("train_wall_time_s", math.nan)) for r in self.runs]
-        return statistics.fmean(ts) if ts else math.nan
-
-
-def _fmt_value(v: object) -> str:
-    if v is None:
-        return "null"
-    if isinstance(v, list | tuple):
-        return "[" + ",".join(_fmt_value(x) for x in v) + "]"
-    if isinstance(v, bool):
-        return str(v).lower()
-    return str(v)
-
-
-def _parse_override(line: str) -> tuple[str, str] | None:
-    line = line.strip()
-    if not line or line.startswith("~") or "=" not in line:
-        return None
-    key, value = line.split("=", 1)
-    return key.lstrip("+"), _norm(value)
-
-
-def _norm(value: str) -> str:
-    """One spelling per value: Hydra writes swept booleans as True/False and configs true/false, a null
-    may read None or null, and a list may have spaces after its commas."""
-    value = value.strip().strip("'\"")
-    if value.lower() in ("true", "false"):
-        return value.lower()
-    if value in ("None", "null", "~"):
-        return "null"
-    if value.startswith("[") and value.endswith("]"):
-        return value.replace(" ", "")
-    return value
-
-
-def canonical(value: str) -> str:
-    """The grouping key of a value: numbers compare as numbers (0 and 0.0 are one setting)."""
-    try:
-        return repr(float(value))
-    except ValueError:
-        return _norm(value)
-
-
-def same_value(a: str, b: str) -> bool:
-    return canonical(a) == canonical(b)
-
-
-def _read_overrides(lines: Iterable[object]) -> tuple[dict[str, str], dict[str, str]]:
-    """(key -> value, key -> key as written) of task overrides; hydra.* and deletions (~key) left out."""
-    overrides, spelled = {}, {}
-    for line in lines:
-        parsed = _parse_override(str(line))
-        if parsed and not parsed[0].startswith("hydra."):
-            overrides[parsed[0]] = parsed[1]
-            spelled[parsed[0]] = str(line).strip().split("=", 1)[0]
-    return overrides, spelled
-
-
-def load_summary_file(path: Path) -> Run:
-    """A committed summary JSON (what gyrodenoise.train writes as summary.json, copied anywhere).
-
-    Needs `overrides` (list of KEY=VALUE strings; `queue.overrides` of benchmarks/run_queue.py is
-    accepted too), `val` and `test` (dicts of metrics with val/aoe_deg and test/aoe_deg) and a seed
-    (`seed`, a seed= override or config.seed); `config` (the resolved config) is optional but needed to
-    tell settings apart by keys a run does not override.
-    """
-    path = Path(path)
-    try:
-        summary = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not valid JSON ({e})") from e
-    if not isinstance(summary, dict):
-        raise ValueError(f"{path}: a summary is a JSON object, got {type(summary).__name__}")
-    lines = summary.get("overrides")
-    if lines is None and isinstance(summary.get("queue"), dict):
-        lines = summary["queue"].get("overrides")
-    if not isinstance(lines, list) or not all(isinstance(x, str) for x in lines):
-        raise ValueError(f"{path}: field 'overrides' must be a list of KEY=VALUE strings, got {lines!r}")
-    config = summary.get("config") or {}
-    if not isinstance(config, dict):
-        raise ValueError(f"{path}: field 'config' must be a JSON object (the resolved Hydra config)")
-    for split in ("val", "test"):
-        table = summary.get(split)
-        if not isinstance(table, dict) or not isinstance(table.get(METRICS[split]), int | float):
-            raise ValueError(f"{path}: field '{split}' must be an object with a number '{METRICS[split]}'")
-    overrides, spelled = _read_overrides(lines)
-    run = Run(path, overrides, config, summary, spelled)
-    if run.seed is None:
-        raise ValueError(f"{path}: no seed (field 'seed', a seed= override or config.seed): runs pair by seed")
-    return run
-
-
-def load_run(run_dir: Path) -> Run:
-    hydra_dir = run_dir / ".hydra"
-    overrides_file = hydra_dir / "overrides.yaml"
-    if not overrides_file.is_file():
-        raise FileNotFoundError(f"{run_dir}: no .hydra/overrides.yaml; is this a Hydra run folder?")
-    overrides, spelled = _read_overrides(yaml.safe_load(overrides_file.read_text()) or [])
-    config_file = hydra_dir / "config.yaml"
-    config = (yaml.safe_load(config_file.read_text()) or {}) if config_file.is_file() else {}
-    summary = json.loads((run_dir / "summary.json").read_text())
-    return Run(run_dir, overrides, config, summary, spelled)
-
-
-def find_runs(roots: Iterable[Path]) -> tuple[list[Run], list[Path]]:
-    """Finished runs under the given folders / JSON files, and unfinished Hydra run folders.
-
-    In a folder: every Hydra run folder (.hydra/ + summary.json) and every other *.json file, each a
-    summary (a malformed one is an error naming the file and field).
-    """
-    runs, unfinished = [], []
-    for root in roots:
-        root = Path(root)
-        if root.is_file():
-            runs.append(load_summary_file(root))
-            continue
-        if not root.is_dir():
-            raise FileNotFoundError(f"{root}: no such folder or file")
-        run_dirs = set()
-        for hydra_dir in sorted(root.rglob(".hydra")):
-            run_dir = hydra_dir.parent
-            run_dirs.add(run_dir)
-            if (run_dir / "summary.json").is_file():
-                runs.append(load_run(run_dir))
-            elif (hydra_dir / "overrides.yaml").is_file() and run_dir != root:
-                unfinished.append(run_dir)
-        for path in sorted(root.rglob("*.json")):
-            inside_run = any(parent in run_dirs for parent in path.parents)
-            hidden = any(part.startswith(".") for part in path.relative_to(root).parts)  # temp files, .hydra
-            if not inside_run and not hidden:
-                runs.append(load_summary_file(path))
-    return runs, unfinished
-
-
-def ablated_keys(runs: Sequence[Run]) -> list[str]:
-    """Overridden keys (not the seed) whose value differs between runs, in first-seen order."""
-    keys: list[str] = []
-    for r in runs:
-        for k in r.overrides:
-            if k not in keys and k != SEED_KEY and k not in IGNORED_KEYS:
-                keys.append(k)
-    return [k for k in keys if len({canonical(r.value(k)) for r in runs}) > 1]
-
-
-def parse_where(items: Sequence[str]) -> list[tuple[str, str]]:
-    out = []
-    for item in items:
-        if "=" not in item:
-            raise ValueError(f"--where {item!r}: expected KEY=VALUE")
-        k, v = item.split("=", 1)
-        out.append((k.lstrip("+"), v))
-    return out
-
-
-def group(runs: Sequence[Run], keys: Sequence[str], defaults: dict[str, str] | None = None) -> list[Setting]:
-    """Runs grouped by their values of `keys`, in first-seen order. A key a run does not have (a
-    config-group choice left at its default, e.g. no +model/shape) takes its value from `defaults`."""
-    defaults = defaults or {}
-    settings: dict[tuple[str, ...], Setting] = {}
-    for r in runs:
-        values = tuple(defaults.get(k, MISSING) if r.value(k) == MISSING else r.value(k) for k in keys)
-        settings.setdefault(tuple(canonical(v) for v in values), Setting(values)).runs.append(r)
-    return list(settings.values())
-
-
-def _pm(mean: float, sd: float, digits: int = 2) -> str:
-    if not math.isfinite(mean):
-        return "-"
-    return f"{mean:.{digits}f}" if not math.isfinite(sd) else f"{mean:.{digits}f} ± {sd:.{digits}f}"
-
 
 COLUMNS = [  # (split, header, csv name, digits)
     ("val", "val AOE (deg)", "val_aoe", 2),
@@ -330,10 +101,6 @@ def csv_text(settings: Sequence[Setting], keys: Sequence[str]) -> str:
             ]
         )
     return buf.getvalue()
-
-
-def _with_ext(prefix: Path, ext: str) -> Path:
-    return prefix.parent / (prefix.name + ext)
 
 
 def mean_curve(setting: Setting) -> tuple[list[int], list[float]]:

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gyrodenoise.ablation import (
+from gyrodenoise.ablation_runs import (
     IGNORED_KEYS,
     MISSING,
     SEED_KEY,

@@ -18,7 +18,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from gyrodenoise import plots
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.metrics import aoe_torch
-from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.models.build import build_model
 from gyrodenoise.so3 import integrate_gyro_torch
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import torch
 
 from gyrodenoise.atomic import atomic_path
-from gyrodenoise.models.denoiser import build_model
+from gyrodenoise.models.build import build_model
 from gyrodenoise.models.ensemble import CorrectionModel
 from gyrodenoise.paths import portable_path
 

@@ -1,4 +1,5 @@
-from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, GyroCorrection, build_model
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, GyroCorrection
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
 __all__ = [

@@ -135,27 +135,6 @@ class CalibratedImu(GyroCorrection):
         return self.bias.expand(*imu.shape[:-1], 3)
 
 
-def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
-    """Build a model from plain config values (what checkpoints and shipped weights store).
-
-    name="ensemble" takes `members`, a list of such configs (see models/ensemble.py).
-    """
-    if name == "ensemble":
-        from gyrodenoise.models.ensemble import EnsembleCorrection  # it imports this module
-
-        members = kwargs.pop("members", None)
-        if kwargs or not members:
-            raise ValueError(f"the ensemble model takes only a non-empty `members` list, got {sorted(kwargs)}")
-        return EnsembleCorrection([build_model(**dict(cfg)) for cfg in members])
-    if name == "denoiser":
-        return DilatedCNNDenoiser(**kwargs)
-    if name == "calibrated":
-        if kwargs:
-            raise ValueError(f"the calibrated model takes no options, got {sorted(kwargs)}")
-        return CalibratedImu()
-    raise ValueError(f"model.name={name!r}; choose 'denoiser', 'calibrated' or 'ensemble'")
-
-
 @torch.no_grad()
 def predict_gyro(model: nn.Module, imu) -> torch.Tensor:
     """Corrected gyro (N, 3) float64 for one whole sequence (N, 6), in eval mode (an ensemble: the mean)."""

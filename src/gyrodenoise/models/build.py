@@ -1,0 +1,28 @@
+"""Models from plain config values: the one place that knows every model kind (single networks in
+denoiser.py, ensembles of them in ensemble.py), so that neither of those imports the other back."""
+
+from __future__ import annotations
+
+from torch import nn
+
+from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.ensemble import EnsembleCorrection
+
+
+def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
+    """Build a model from plain config values (what checkpoints and shipped weights store).
+
+    name="ensemble" takes `members`, a list of such configs (see models/ensemble.py).
+    """
+    if name == "ensemble":
+        members = kwargs.pop("members", None)
+        if kwargs or not members:
+            raise ValueError(f"the ensemble model takes only a non-empty `members` list, got {sorted(kwargs)}")
+        return EnsembleCorrection([build_model(**dict(cfg)) for cfg in members])
+    if name == "denoiser":
+        return DilatedCNNDenoiser(**kwargs)
+    if name == "calibrated":
+        if kwargs:
+            raise ValueError(f"the calibrated model takes no options, got {sorted(kwargs)}")
+        return CalibratedImu()
+    raise ValueError(f"model.name={name!r}; choose 'denoiser', 'calibrated' or 'ensemble'")
