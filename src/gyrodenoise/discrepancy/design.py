@@ -84,6 +84,14 @@ def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, 
     return Xb.reshape(-1, k), rb.reshape(-1)
 
 
+def n_rows(fc: FitContext) -> int:
+    """How many rows a fit of sequence `fc` uses (`fit_rows`)."""
+    f_max, w = fc.extra.get("band_hz"), fc.extra.get("row_weights")
+    if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
+        return int(row_mask(fc).sum())
+    return 3 * len(row_frequencies(len(fc.t), fc.rate_hz, f_max))
+
+
 def nuisance_of(fcs: list[FitContext]) -> Nuisance | None:
     """The reconstruction error of `fcs` as a spectral nuisance term (None: exact ground truth)."""
     psd = []

@@ -34,6 +34,7 @@ from gyrodenoise.discrepancy.design import (
     band_limited,
     band_power,
     fit_rows,
+    n_rows,
     noise_weights,
     nuisance_of,
     residuals_after,
@@ -229,17 +230,21 @@ def _holdout_gain(
 ) -> float:
     """Share of the held-out residual power in the trusted band that `extra` closes: the model
     `names` fitted with and without it on the fit sequences, per-sequence nuisances refitted on
-    each held-out sequence."""
+    each held-out sequence. A per-sequence effect is refitted there too, which closes k / n of the
+    power by chance (k its columns per sequence, n the rows): that share is taken off."""
     with_c = design.fit(names + [extra])
     without = design.fit(names)
     p0 = p1 = 0.0
+    chance = []
     for h in holdout:
         v = sensor_view(h, corner)
         pred0 = _predict(design, without, effects, names, sigma, v, sat_limit)
         pred1 = _predict(design, with_c, effects, names + [extra], sigma, v, sat_limit)
         p0 += band_power(v, v.residual - pred0, sigma)
         p1 += band_power(v, v.residual - pred1, sigma)
-    return float(1.0 - p1 / max(p0, 1e-300))
+        if effects[extra].per_sequence:
+            chance.append(design.k[extra] / n_rows(v))
+    return float(1.0 - p1 / max(p0, 1e-300) - (np.mean(chance) if chance else 0.0))
 
 
 def _holdout_band_share(
