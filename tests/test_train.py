@@ -113,3 +113,17 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     assert len(ev.Scalars("train/loss")) == 4
     assert {"val/orientation", "val/gyro_correction"} <= set(tags["images"]), tags["images"]
     assert "_hparams_/session_start_info" in ev.summary_metadata
+
+
+def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):
+    """callbacks=ema ships the averaged weights; test_other_rule also tests the final optimiser weights of
+    the same run (a paired comparison), read back from the last checkpoint."""
+    cfg = config(root, tmp_path / "ema", "callbacks=ema", "test_other_rule=true", "calibrated_baseline=false")
+    cfg.callbacks.last_checkpoint.every_n_epochs = 1
+    s = train(cfg)
+    raw, ema = s["test_raw_final"]["test/aoe_deg"], s["test"]["test/aoe_deg"]
+    assert raw > 0 and ema > 0 and raw != ema  # two different weight sets, both tested
+    ckpt = torch.load(tmp_path / "ema" / "checkpoints" / "last.ckpt", weights_only=True)
+    shipped = torch.load(tmp_path / "ema" / "model.pt", weights_only=True)["state_dict"]
+    for k, v in shipped.items():  # the shipped model is the average, not the raw weights
+        torch.testing.assert_close(v, ckpt["state_dict"][f"model.{k}"])

@@ -21,7 +21,7 @@ import hydra
 import lightning.pytorch as L
 import torch
 from hydra.core.hydra_config import HydraConfig
-from lightning.pytorch.callbacks import LearningRateMonitor
+from lightning.pytorch.callbacks import LearningRateMonitor, WeightAveraging
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
@@ -105,6 +105,23 @@ def calibrated_baseline(cfg: DictConfig, dm, module: DenoiserModule, out_dir: Pa
     return out
 
 
+def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserModule | None:
+    """With a weight-averaging callback (callbacks=ema), `module` ends fit with the averaged weights; the
+    final optimiser weights are in the last checkpoint's `current_model_state` (Lightning keeps them
+    there). None without averaging or without a last checkpoint of the final epoch."""
+    if not any(isinstance(c, WeightAveraging) for c in trainer.callbacks):
+        return None
+    last = next((c.last_model_path or c.best_model_path for c in trainer.checkpoint_callbacks if not c.monitor), "")
+    if not last:
+        return None
+    ckpt = torch.load(last, map_location="cpu", weights_only=True)
+    if "current_model_state" not in ckpt or ckpt.get("epoch") != trainer.current_epoch - 1:
+        return None
+    raw = DenoiserModule(**module.hparams)
+    raw.load_state_dict(ckpt["current_model_state"])
+    return raw
+
+
 def train(cfg: DictConfig) -> dict:
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
@@ -127,6 +144,7 @@ def train(cfg: DictConfig) -> dict:
     start = time.time()
     trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
     wall_s = time.time() - start
+    raw_final = _raw_final_weights(trainer, module)  # averaged weights (callbacks=ema): the weights before
 
     # the model is chosen by a rule fixed before any test: the final weights (`select: last`, the end
     # of a cosine cycle) or the best validation checkpoint (`select: best_val`)
@@ -140,11 +158,13 @@ def train(cfg: DictConfig) -> dict:
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
-    test, test_other = {}, {}
+    test, test_other, test_raw_final = {}, {}, {}
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
         if alternative is not None and cfg.get("test_other_rule"):
             test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
+        if raw_final is not None and cfg.get("test_other_rule"):  # paired: same run, averaging vs none
+            test_raw_final = trainer.test(raw_final, datamodule=dm, verbose=False)[0]
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
 
@@ -167,6 +187,8 @@ def train(cfg: DictConfig) -> dict:
         summary["calibrated_baseline"] = safety
     if test_other:
         summary["test_other_rule"] = {"rule": "best_val" if cfg.select == "last" else "last", **test_other}
+    if test_raw_final:
+        summary["test_raw_final"] = test_raw_final  # the final weights without the weight averaging
     save_model(
         module.model,
         OmegaConf.to_container(cfg.model, resolve=True),
