@@ -123,6 +123,7 @@ def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):
     s = train(cfg)
     raw, ema = s["test_raw_final"]["test/aoe_deg"], s["test"]["test/aoe_deg"]
     assert raw > 0 and ema > 0 and raw != ema  # two different weight sets, both tested
+    assert s["val_raw_final"]["val/aoe_deg"] != s["val"]["val/aoe_deg"]
     ckpt = torch.load(tmp_path / "ema" / "checkpoints" / "last.ckpt", weights_only=True)
     shipped = torch.load(tmp_path / "ema" / "model.pt", weights_only=True)["state_dict"]
     for k, v in shipped.items():  # the shipped model is the average, not the raw weights

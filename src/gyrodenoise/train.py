@@ -159,6 +159,9 @@ def train(cfg: DictConfig) -> dict:
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
     test, test_other, test_raw_final = {}, {}, {}
+    val_raw_final = {}
+    if raw_final is not None and cfg.get("test_other_rule"):
+        val_raw_final = (trainer.validate(raw_final, datamodule=dm, verbose=False) or [{}])[0]
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
         if alternative is not None and cfg.get("test_other_rule"):
@@ -187,8 +190,8 @@ def train(cfg: DictConfig) -> dict:
         summary["calibrated_baseline"] = safety
     if test_other:
         summary["test_other_rule"] = {"rule": "best_val" if cfg.select == "last" else "last", **test_other}
-    if test_raw_final:
-        summary["test_raw_final"] = test_raw_final  # the final weights without the weight averaging
+    if val_raw_final or test_raw_final:  # the final weights without the weight averaging
+        summary["val_raw_final"], summary["test_raw_final"] = val_raw_final, test_raw_final
     save_model(
         module.model,
         OmegaConf.to_container(cfg.model, resolve=True),
