@@ -161,13 +161,17 @@ def train(cfg: DictConfig) -> dict:
     test, test_other, test_raw_final = {}, {}, {}
     val_raw_final = {}
     if raw_final is not None and cfg.get("test_other_rule"):
-        val_raw_final = (trainer.validate(raw_final, datamodule=dm, verbose=False) or [{}])[0]
+        # a trainer without callbacks: the averaging callback would swap its weights in during validation
+        plain: L.Trainer = hydra.utils.instantiate(
+            cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
+        )
+        val_raw_final = (plain.validate(raw_final, datamodule=dm, verbose=False) or [{}])[0]
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
         if alternative is not None and cfg.get("test_other_rule"):
             test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
         if raw_final is not None and cfg.get("test_other_rule"):  # paired: same run, averaging vs none
-            test_raw_final = trainer.test(raw_final, datamodule=dm, verbose=False)[0]
+            test_raw_final = plain.test(raw_final, datamodule=dm, verbose=False)[0]
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
 
