@@ -107,3 +107,25 @@ def test_g_sensitivity_on_a_turntable_is_not_identifiable_with_the_numbers(tmp_p
     assert "g_sensitivity" in sel.not_identifiable and sel.named == []
     idf = sel.identifiability["g_sensitivity"]
     assert not idf["testable"] and idf["expected_delta_bic_at_prior"] < 10.0
+
+
+# ------------------------------------------------------------------ time offset or sensor bandwidth
+
+
+def test_delay_or_lowpass_separability_grows_with_the_delay(tmp_path):
+    """A low-pass of corner 1 / (2 pi delay) is that delay plus a droop ~ (f / corner)^2 / 2: the
+    expected delta BIC between the two explanations grows with the delay (~ delay^4) and is a
+    number, stated with the equivalent corner."""
+    from gyrodenoise.discrepancy.design import Design, noise_weights
+    from gyrodenoise.discrepancy.identifiability import delay_or_lowpass
+    from gyrodenoise.sim.effects import Bias, TimeOffset
+
+    fcs = _contexts(tmp_path, [], 1, seed=5)
+    sigma = noise_weights([fc.residual for fc in fcs])
+    design = Design(fcs, {"bias": Bias(), "time_offset": TimeOffset()}, sigma)
+    small = delay_or_lowpass(design, ["bias", "time_offset"], 1.0, 0.002, 10.0)
+    big = delay_or_lowpass(design, ["bias", "time_offset"], 1.0, 0.02, 10.0)
+    assert small.corner_hz == pytest.approx(1 / (2 * np.pi * 0.002))
+    assert big.expected_delta_bic > 1000 * small.expected_delta_bic  # ~ 10^4 for a 10x delay
+    assert big.separable
+    assert "equivalent delay" in small.sentence() or small.separable

@@ -61,3 +61,57 @@ def test_band_rows_are_the_band_limited_signal():
     b_rows = np.linalg.lstsq(rows, band_rows(y, 200.0, 10.0)[:, 0], rcond=None)[0]
     b_lp = np.linalg.lstsq(lp, band_limit(y, 200.0, 10.0)[:, 0], rcond=None)[0]
     assert np.allclose(b_rows, b_lp)
+
+
+def _blue_context(n=4000, rate=200.0, f_max=6.0, mask=None, corner_hz=None):
+    from gyrodenoise.discrepancy.reconstruction import row_frequencies
+    from gyrodenoise.sim.context import FitContext
+
+    t = np.arange(n) / rate
+    z = np.zeros((n, 3))
+    f = row_frequencies(n, rate, f_max)
+    # GLS weights sqrt(c / (c + E(f))): a flat sensor floor, a reconstruction error ~ f^2 above corner_hz
+    w = np.ones((len(f), 3)) if corner_hz is None else np.repeat(np.sqrt(1 / (1 + (f / corner_hz) ** 2))[:, None], 3, 1)
+    extra = {"band_hz": f_max, "row_weights": w}
+    if mask is not None:
+        extra["row_mask"] = mask
+    return FitContext("blue", t, z, z, z, z, rate, extra)
+
+
+def test_edge_impulses_of_the_reconstruction_error_are_projected_out():
+    """The reconstructed rate's error is the derivative of an angle error: over a record its Fourier
+    sum holds the angle error's jump between the ends, the same in every bin. At low frequencies,
+    where its own spectrum ~ f^2 is small and the GLS rows weigh most, uncorrected that jump is
+    fitted by slow regressors (a warm-up exponential here); projected out, they see noise only."""
+    from gyrodenoise.discrepancy.design import band_power, fit_rows
+
+    rng = np.random.default_rng(0)
+    n, rate, s_w, s_th = 4000, 200.0, 2.4e-3, 1e-3
+    fc = _blue_context(n, rate, corner_hz=s_w / s_th / (2 * np.pi))  # where the two spectra cross
+    w = fc.extra["row_weights"][:, 0]
+    col = np.zeros((n, 3, 1))
+    col[:, 0, 0] = np.exp(-fc.t / 2.0)
+    X = col.reshape(-1, 1)
+    Xb = band_rows(col[:, :, 0], rate, 6.0, force=True)[:, 0] * w
+    coefs, raw = [], []
+    for _ in range(60):
+        theta = s_th * rng.standard_normal((n + 1, 3))
+        r = np.diff(theta, axis=0) * rate + s_w * rng.standard_normal((n, 3))  # blue + the sensor's white
+        Xr, rr = fit_rows(fc, X, r.reshape(-1))
+        coefs.append(np.linalg.lstsq(Xr, rr, rcond=None)[0][0])
+        rb = band_rows(r, rate, 6.0, force=True)[:, 0] * w
+        raw.append(Xb @ rb / (Xb @ Xb))
+    # the edge jump would be fitted as a warm-up; without it the spread is several times smaller
+    assert np.std(raw) > 3 * np.std(coefs)
+    assert abs(np.mean(coefs)) < 3 * np.std(coefs) / np.sqrt(len(coefs))
+    # an impulse at the record's start, or at the edges of a gap of left-out samples, is no signal
+    mask = np.ones((n, 3), dtype=bool)
+    mask[1000:1040] = False
+    fcm = _blue_context(n, rate, mask=mask)
+    for pos in (0, 1000, 1040):
+        r = np.zeros((n, 3))
+        r[pos] = 1.0
+        assert band_power(fcm, r, np.ones(3)) < 1e-20
+    r = np.zeros((n, 3))
+    r[2000] = 1.0  # inside the record: kept
+    assert band_power(fcm, r, np.ones(3)) > 1e-6

@@ -16,8 +16,16 @@ from dataclasses import dataclass, replace
 from types import SimpleNamespace
 
 import numpy as np
+from scipy.linalg import orth
 
-from gyrodenoise.discrepancy.reconstruction import band_rows, estimate_band, row_frequencies, sensor_floor
+from gyrodenoise.discrepancy.reconstruction import (
+    band_rows,
+    edge_positions,
+    edge_rows,
+    estimate_band,
+    row_frequencies,
+    sensor_floor,
+)
 from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, spectra
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect, SensorBandwidth
@@ -81,7 +89,23 @@ def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, 
     if w is not None:
         Xb = (Xb.reshape(-1, 3, k) * w[:, :, None]).reshape(-1, 3 * k)
         rb = rb * w
+        Xb, rb = without_edges(fc, Xb.reshape(-1, 3, k), rb, w)
     return Xb.reshape(-1, k), rb.reshape(-1)
+
+
+def without_edges(fc: FitContext, Xb: np.ndarray, rb: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted Fourier rows Xb (M, 3, k) and rb (M, 3) of sequence `fc` with the reconstruction
+    error's edge impulses projected out, per axis (`reconstruction.edge_rows`: the angle error's
+    jumps at the record's ends and at every gap of left-out samples; nuisance columns of every
+    model, so they cost every model the same)."""
+    n, m = len(fc.t), row_mask(fc)
+    Xb, rb = Xb.copy(), rb.copy()
+    for a in range(3):
+        U = edge_rows(n, fc.rate_hz, fc.extra.get("band_hz"), edge_positions(m[:, a])) * w[:, a, None]
+        Q = orth(U, rcond=1e-9)
+        Xb[:, a, :] -= Q @ (Q.T @ Xb[:, a, :])
+        rb[:, a] -= Q @ (Q.T @ rb[:, a])
+    return Xb, rb
 
 
 def n_rows(fc: FitContext) -> int:
@@ -285,7 +309,9 @@ def band_power(fc: FitContext, r: np.ndarray, sigma: np.ndarray) -> float:
     if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
         return float(np.mean(x[m] ** 2))
     rows = band_rows(x, fc.rate_hz, f_max, force=True)
-    return float(np.mean((rows if w is None else rows * w) ** 2))
+    if w is not None:
+        rows = without_edges(fc, np.zeros((len(rows), 3, 0)), rows * w, w)[1]
+    return float(np.mean(rows**2))
 
 
 def sensor_view(fc: FitContext, corner_hz: float | None, rate_only: bool = False) -> FitContext:

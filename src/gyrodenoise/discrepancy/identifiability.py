@@ -23,7 +23,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from gyrodenoise.discrepancy.design import Design
+from gyrodenoise.discrepancy.design import Design, fit_rows
+from gyrodenoise.sim.effects import SensorBandwidth
 
 
 @dataclass
@@ -129,3 +130,57 @@ def _datasheet_unit(e) -> tuple[str, float]:
         return unit, factor * np.sqrt(2)
     key = next(iter(e.DEFAULTS))
     return e.DATASHEET.get(key, ("SI", 1.0))
+
+
+@dataclass
+class DelayOrLowpass:
+    """Whether a time offset and a sensor low-pass of the same delay can be told apart on this motion."""
+
+    delay_s: float  # the fitted delay (time offset, IMU stamps late)
+    corner_hz: float  # the first-order low-pass with that delay: 1 / (2 pi delay)
+    expected_delta_bic: float  # between the two one-parameter explanations, if the low-pass were true
+    threshold: float
+    separable: bool
+    band_hz: float | None  # upper edge of the compared band
+
+    def as_dict(self) -> dict:
+        return {k: (float(v) if isinstance(v, np.floating) else v) for k, v in asdict(self).items()}
+
+    def sentence(self) -> str:
+        if self.separable:
+            return (
+                f"time offset and sensor bandwidth separable here (expected delta BIC {self.expected_delta_bic:.1f} "
+                f">= {self.threshold:.1f})"
+            )
+        return (
+            f"time offset or sensor bandwidth: not separable in this band (0-{self.band_hz or float('nan'):.1f} Hz; "
+            f"expected delta BIC between them {self.expected_delta_bic:.2f} < {self.threshold:.1f}): equivalent "
+            f"delay {1e3 * self.delay_s:.2f} ms = first-order corner {self.corner_hz:.1f} Hz"
+        )
+
+
+def delay_or_lowpass(design: Design, given: list[str], s2: float, delay_s: float, threshold: float) -> DelayOrLowpass:
+    """Expected delta BIC between a time offset and a first-order sensor low-pass of corner
+    1 / (2 pi delay) (`SensorBandwidth`, the same delay at low frequencies): the motion seen through
+    the low-pass minus the motion, less its best fit by the time-offset regressor and the other
+    columns `given`, in the fit's weighted rows, over s2. At low frequencies the low-pass is a
+    delay plus a magnitude droop of (f / corner)^2 / 2; what is left is that droop (and the phase's
+    cubic term), so this is the noncentrality of the low-pass against the delay on this motion and
+    band: both have one parameter, so it is their expected delta BIC. A second-order Bessel of the
+    same delay droops by a third of it: separable for a first-order low-pass is necessary for it."""
+    corner = 1.0 / (2 * np.pi * max(delay_s, 1e-9))
+    names = [n for n in given if n != "time_offset"] + ["time_offset"]
+    rows_d, rows_o = [], []
+    for s, fc in enumerate(design.fcs):
+        X, _ = design.local_columns(s, names)
+        lp = SensorBandwidth.filter_rate(fc.omega, corner, fc.rate_hz) - fc.omega
+        d = (lp / design.sigma[None, :]).reshape(-1)
+        Xr, dr = fit_rows(fc, X, d)
+        rows_o.append(Xr)
+        rows_d.append(dr)
+    X, d = np.concatenate(rows_o), np.concatenate(rows_d)
+    coef, *_ = np.linalg.lstsq(X, d, rcond=None)
+    lam = float(np.sum((d - X @ coef) ** 2) / max(s2, 1e-300))
+    edges = [fc.extra.get("band_hz") for fc in design.fcs]
+    band = min(edges) if all(e is not None for e in edges) else None
+    return DelayOrLowpass(float(delay_s), float(corner), lam, float(threshold), bool(lam >= threshold), band)

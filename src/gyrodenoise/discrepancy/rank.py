@@ -45,7 +45,7 @@ from gyrodenoise.discrepancy.design import (
     set_row_weights,
     set_saturation_mask,
 )
-from gyrodenoise.discrepancy.identifiability import identifiability
+from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiability
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
     BandFit,
@@ -86,6 +86,15 @@ class Selection:
     floor_shape: FloorShapeFit | None = None  # named sensor low-pass
     identifiability: dict[str, dict] = field(default_factory=dict)  # candidate -> numbers (first step)
     thresholds: dict[str, float] = field(default_factory=dict)  # candidate -> delta BIC it had to clear
+    # a named time offset against a sensor low-pass of the same delay (`identifiability.delay_or_lowpass`):
+    # separable or not, and which one the data preferred when separable
+    delay_or_lowpass: dict | None = None
+
+    @property
+    def equivalences(self) -> list[str]:
+        """Named effects that this motion cannot tell from another (sentences for the report)."""
+        d = self.delay_or_lowpass
+        return [d["sentence"]] if d is not None and not d["separable"] else []
 
     @property
     def band_vibration(self) -> bool:
@@ -420,6 +429,11 @@ def select_effects(
             steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
             design = Design(view, {n: effects[n] for n in selected}, sigma)
             final = design.fit(selected)
+    delay_lp = None
+    if "time_offset" in selected and "sensor_bandwidth" in scorable and "sensor_bandwidth" not in selected:
+        design, final, view, delay_lp = _delay_or_lowpass(
+            design, final, effects, selected, sigma, fcs, thresholds.get("sensor_bandwidth", bic_threshold)
+        )
     sel = Selection(
         base=base,
         selected=selected,
@@ -433,6 +447,7 @@ def select_effects(
         result=final,
         identifiability=first.identifiability,
         thresholds={c: thresholds.get(c, bic_threshold) for c in scorable},
+        delay_or_lowpass=delay_lp,
     )
     _fill_params(sel, view)
     if sel.band is not None and sel.band.kappa is not None:
@@ -440,6 +455,49 @@ def select_effects(
         # the band's power into it (re-simulations draw the error at this level)
         set_row_weights(fcs + list(holdout or []), fcs[0].extra["sensor_floor"], sel.band.kappa)
     return sel
+
+
+def _delay_or_lowpass(
+    design: Design,
+    final: FitResult,
+    effects: dict[str, Effect],
+    selected: list[str],
+    sigma: np.ndarray,
+    fcs: list[FitContext],
+    threshold: float,
+) -> tuple[Design, FitResult, list[FitContext], dict | None]:
+    """A named time offset that delays (IMU stamps late) is also what a sensor low-pass does at low
+    frequencies. The expected delta BIC between the two on this motion (`delay_or_lowpass`) says
+    whether the data can tell them apart; if not, the selection keeps the time offset and reports
+    the equivalence (delay and equivalent corner). If so, both are fitted (the low-pass's corner
+    searched, no time offset) and the better one by BIC (by at least `threshold`) is kept.
+    Returns the (possibly new) design, fit, sensor view of `fcs` and the numbers."""
+    delta = float(final.coef[design.cols["time_offset"]][0])
+    view = design.fcs
+    if delta <= 0:
+        return design, final, view, None
+    s2 = final.rss / max(final.n - final.k, 1)
+    dol = delay_or_lowpass(design, selected, s2, delta, threshold)
+    out = dol.as_dict() | {"sentence": dol.sentence(), "kept": "time_offset"}
+    if not dol.separable:
+        return design, final, view, out
+    others = [n for n in selected if n != "time_offset"]
+    best = (np.inf, None, None)
+    for c in dol.corner_hz * np.geomspace(0.25, 4.0, 17):
+        v = [sensor_view(fc, float(c)) for fc in fcs]
+        d = Design(v, {n: effects[n] for n in others}, sigma)
+        r = d.fit(others)
+        if r.rss < best[0]:
+            best = (r.rss, float(c), (d, r, v))
+    dbic = final.n * np.log(final.rss / best[0])
+    out |= {"delta_bic_lowpass_vs_offset": float(dbic), "lowpass_corner_hz": best[1]}
+    if dbic < threshold:
+        return design, final, view, out
+    selected.remove("time_offset")
+    selected.append("sensor_bandwidth")
+    effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
+    d, r, v = best[2]
+    return d, r, v, out | {"kept": "sensor_bandwidth"}
 
 
 def _fill_params(sel: Selection, fcs: list[FitContext]) -> None:

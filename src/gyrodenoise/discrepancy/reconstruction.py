@@ -245,6 +245,35 @@ def band_rows(x: np.ndarray, rate_hz: float, f_max_hz: float | None, force: bool
     return np.concatenate([X.real, X[1 : m - 1 if nyq else m].imag], axis=0)
 
 
+def edge_positions(mask: np.ndarray) -> np.ndarray:
+    """Sample indices where a record of used samples `mask` (N,) starts or stops: 0 (where the
+    Fourier transform wraps the record around) and every change of the mask."""
+    m = np.asarray(mask, dtype=bool)
+    return np.concatenate([[0], 1 + np.flatnonzero(m[1:] != m[:-1])])
+
+
+def edge_rows(n: int, rate_hz: float, f_max_hz: float | None, positions: np.ndarray) -> np.ndarray:
+    """(rows, q) `band_rows` of unit impulses at sample `positions` of an n-sample record.
+
+    Why they matter: the reconstructed rate's error is the derivative of the spline's angle error,
+    a blue process. Over an interval [a, b) its Fourier sum is the angle error's jump
+    theta(b) e^{-i w b} - theta(a) e^{-i w a} plus i w times the angle error's transform; the
+    jump is the same size in every bin (an impulse at the edge), so at low frequencies, where the
+    error's own spectrum ~ f^2 is small and the rows weigh most, it dominates the rows. Every
+    place where the compared record starts or stops (its ends, every gap of left-out samples) adds
+    one such impulse of unknown size: nuisance columns, projected out of every fit (`design.fit_rows`).
+    """
+    f = band_bins(n, rate_hz, f_max_hz)
+    m = len(f)
+    k = np.arange(m)[:, None]
+    X = np.exp(-2j * np.pi * k * np.asarray(positions)[None, :] / n) * np.sqrt(2.0 / n)
+    X[0] /= np.sqrt(2.0)
+    nyq = n % 2 == 0 and m == n // 2 + 1
+    if nyq:
+        X[-1] /= np.sqrt(2.0)
+    return np.concatenate([X.real, X[1 : m - 1 if nyq else m].imag], axis=0)
+
+
 def row_frequencies(n: int, rate_hz: float, f_max_hz: float | None) -> np.ndarray:
     """Frequency of each row of `band_rows` (real parts, then imaginary parts)."""
     f = band_bins(n, rate_hz, f_max_hz)

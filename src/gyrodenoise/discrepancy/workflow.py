@@ -257,6 +257,8 @@ def run(
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)
+    if sel.equivalences:
+        verdict += " (" + "; ".join(sel.equivalences) + ")"
     fit_resid = residuals_after(sel_base.design, sel_base.result, sel_base.selected)
     report = {
         "verdict": verdict,
@@ -280,6 +282,8 @@ def run(
         "null": None if null is None else {"draws": null.draws, "per_candidate": null.summary(bic_threshold)},
         "thresholds": sel.thresholds,
         "identifiability": sel.identifiability,
+        "delay_or_lowpass": sel.delay_or_lowpass,
+        "equivalences": sel.equivalences,
         "reconstruction": {
             "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
             "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],
