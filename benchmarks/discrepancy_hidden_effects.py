@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 
 from gyrodenoise.discrepancy.hidden import CASES, run_case  # noqa: E402
 from gyrodenoise.discrepancy.worldcases import WORLD_CASES, run_world_case  # noqa: E402
-from gyrodenoise.paths import portable_command  # noqa: E402
+from gyrodenoise.paths import portable_command, portable_path  # noqa: E402
 
 OUT = Path(__file__).parent / "results"
 EUROC = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc"
@@ -139,7 +139,9 @@ def main() -> None:
     result: dict = {
         "command": "python " + portable_command(sys.argv),
         "machine": f"{platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} CPU threads)",
-        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items() if k != "euroc_root"},
+        "settings": {
+            k: portable_path(v) if isinstance(v, Path) else v for k, v in vars(args).items() if k != "euroc_root"
+        },
         "worlds": {},
     }
     if args.world in ("own", "both"):

@@ -36,3 +36,12 @@ def portable_command(args: Iterable[str]) -> str:
         key, sep, value = a.rpartition("=") if "=" in a and not a.startswith("/") else ("", "", a)
         out.append(key + sep + portable_path(value) if value.startswith("/") else a)
     return " ".join(out)
+
+
+def portable_tree(obj):
+    """`obj` (nested dicts / lists, e.g. a resolved config) with every absolute path string made portable."""
+    if isinstance(obj, dict):
+        return {k: portable_tree(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [portable_tree(v) for v in obj]
+    return portable_path(obj) if isinstance(obj, str) and obj.startswith("/") else obj

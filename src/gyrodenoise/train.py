@@ -29,7 +29,7 @@ from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
-from gyrodenoise.paths import portable_command, portable_path
+from gyrodenoise.paths import portable_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
 
 
@@ -178,7 +178,7 @@ def train(cfg: DictConfig) -> dict:
     summary = {
         "command": Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:]),
         "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
-        "config": OmegaConf.to_container(cfg, resolve=True),
+        "config": portable_tree(OmegaConf.to_container(cfg, resolve=True)),
         "seed": cfg.get("seed"),
         "dataset": cfg.dataset.name,
         "model": OmegaConf.to_container(cfg.model, resolve=True),
