@@ -9,7 +9,7 @@ from pathlib import Path
 
 from conftest import REPO
 
-from gyrodenoise.paths import portable_command, portable_path
+from gyrodenoise.paths import portable_command, portable_path, portable_tree
 from gyrodenoise.pretrained import load_model, model_name, shipped_dir
 
 # home folders and this project's development root; a leading '~', '.' or word character means a relative path
@@ -62,6 +62,8 @@ def test_paths_written_portably(tmp_path, monkeypatch):
     assert portable_command(["--root", str(work / "d"), f"dataset.root={tmp_path / 'shared'}", "x=[a,b]"]) == (
         "--root d dataset.root=../shared x=[a,b]"
     )
+    cfg = {"paths": {"output_dir": str(work / "runs" / "a")}, "cbs": [{"dirpath": str(work / "c")}], "lr": 0.01}
+    assert portable_tree(cfg) == {"paths": {"output_dir": "runs/a"}, "cbs": [{"dirpath": "c"}], "lr": 0.01}
     assert model_name(shipped_dir() / "euroc.pt") == "euroc"
     if (shipped_dir() / "euroc.pt").is_file():
         assert load_model("euroc")[1]["name"] == "euroc"
