@@ -10,7 +10,7 @@ from scipy import signal
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import make_measured
 from gyrodenoise.discrepancy.null import null_distribution
-from gyrodenoise.discrepancy.rank import select_effects
+from gyrodenoise.discrepancy.rank import practical, select_effects
 from gyrodenoise.discrepancy.workflow import decide
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import GSensitivity, SensorBandwidth, WhiteNoise
@@ -82,6 +82,20 @@ def test_decision_reports_thresholds_and_rank(tmp_path):
     assert step["effect"] == "g_sensitivity" and step["delta_bic"] > step["threshold"] >= 10.0
     assert step["holdout_gain"] >= 0.01  # closes more than the practical minimum on the held-out flight
     assert null.p_value("g_sensitivity", step["delta_bic"]) == pytest.approx(1 / 6)
+
+
+def test_practical_minimum_is_power_share_or_ten_second_drift(tmp_path):
+    assert practical(0.02, None) and practical(0.005, 0.15) and practical(0.02, -0.3)
+    assert not practical(0.005, 0.05) and not practical(0.005, None)
+    # a sensor-constant effect: with the power share set between what it closes on the fit sequences
+    # (22%) and on the held-out one (20%), the drift alternative alone names it
+    fcs = _contexts(tmp_path, [GSensitivity(matrix=np.diag([4e-4, -3e-4, 5e-4]))], 3, seed=7)
+    kw = {"candidates": ["g_sensitivity"], "min_gain": 0.21, "holdout": fcs[2:]}
+    sel = select_effects(fcs[:2], min_drift_deg=0.1, **kw)
+    assert sel.named == ["g_sensitivity"], sel.steps[0]["candidates"]
+    step = sel.steps[0]["candidates"][0]
+    assert step["gain"] >= 0.21 > step["holdout_gain"] and step["holdout_drift_reduction_deg"] >= 0.1
+    assert select_effects(fcs[:2], min_drift_deg=np.inf, **kw).named == []
 
 
 # ----------------------------------------------------------------------------- 5: identifiability

@@ -155,7 +155,18 @@ def _steps(sel) -> list[dict]:
             {
                 "added": st.get("added"),
                 "top": [
-                    {k: c.get(k) for k in ("effect", "variant", "delta_bic", "threshold", "gain", "holdout_gain")}
+                    {
+                        k: c.get(k)
+                        for k in (
+                            "effect",
+                            "variant",
+                            "delta_bic",
+                            "threshold",
+                            "gain",
+                            "holdout_gain",
+                            "holdout_drift_reduction_deg",
+                        )
+                    }
                     for c in st["candidates"][:4]
                 ],
             }

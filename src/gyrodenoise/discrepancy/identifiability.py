@@ -184,3 +184,56 @@ def delay_or_lowpass(design: Design, given: list[str], s2: float, delay_s: float
     edges = [fc.extra.get("band_hz") for fc in design.fcs]
     band = min(edges) if all(e is not None for e in edges) else None
     return DelayOrLowpass(float(delay_s), float(corner), lam, float(threshold), bool(lam >= threshold), band)
+
+
+def random_walk_identifiability(
+    fcs: list,
+    sigma: np.ndarray,
+    given: dict,
+    s2: float,
+    density: float | np.ndarray,
+    threshold: float,
+    nonlinear: int = 1,
+) -> dict:
+    """Expected delta BIC of a rate random walk of `density` (rad/s/sqrt(s), per axis or one value)
+    on these sequences, as the selection detects it: piecewise-linear bias columns on knots
+    (`BiasRandomWalk.columns`), fitted beside the effects `given` (name -> Effect, e.g. the per-sequence
+    bias). The knot values of a walk are random, b(t_j) - b(0) with covariance K^2 min(t_i, t_j), so
+    E[lambda] = tr(S Sigma) / s2 (S the Schur information of the knot columns, `schur_information`);
+    E[delta BIC] = E[lambda] + k - (k + nonlinear) log n. The best of the knot spacings the selection
+    tries (`BiasRandomWalk.SPACINGS`) is reported. An approximation: what the walk does between knots
+    is not counted (the knots cannot fit it either)."""
+    from gyrodenoise.sim.effects import BiasRandomWalk
+
+    K2 = np.broadcast_to(np.asarray(density, dtype=float) ** 2, (3,))
+    best: dict | None = None
+    for h in BiasRandomWalk.SPACINGS:
+        rw = BiasRandomWalk()
+        rw.knot_spacing_s = h
+        design = Design(fcs, {**given, "bias_random_walk": rw}, sigma)
+        S = schur_information(design, list(given), "bias_random_walk")
+        cols = design.cols["bias_random_walk"]
+        p = cols.size
+        Sigma = np.zeros((p, p))
+        k = 0
+        for s, fc in enumerate(fcs):
+            t = fc.t - fc.t[0]
+            nk = rw.columns(fc).shape[2] // 3
+            knots = np.linspace(0.0, t[-1], nk + 1)[1:]
+            base = s * cols.shape[1]
+            for a in range(3):
+                i = base + a * nk + np.arange(nk)
+                Sigma[np.ix_(i, i)] = K2[a] * np.minimum(knots[:, None], knots[None, :])
+            k += 3 * nk
+        lam = float(np.trace(S @ Sigma)) / max(float(s2), 1e-300)
+        expected = float(lam + k - (k + nonlinear) * np.log(design.n))
+        if best is None or expected > best["expected_delta_bic"]:
+            best = {"knot_spacing_s": h, "k": k, "n": design.n, "noncentrality": lam, "expected_delta_bic": expected}
+    assert best is not None
+    unit, factor = BiasRandomWalk.DATASHEET["density"]
+    return best | {
+        "density_datasheet": float(np.max(np.sqrt(K2)) * factor),
+        "unit": unit,
+        "threshold": float(threshold),
+        "detectable": bool(best["expected_delta_bic"] >= threshold),
+    }

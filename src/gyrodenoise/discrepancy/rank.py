@@ -14,10 +14,13 @@ regression's Gaussian likelihood:
 A candidate is named when its delta BIC clears its threshold (a null distribution's quantile,
 `null.py`, or the fixed `bic_threshold`) and it is practically meaningful: it closes at least
 `min_gain` of the residual power in the trusted band (of the held-out sequences, when given, for
-regression effects; of the fit sequences for stochastic ones). Effects whose expected delta BIC
-even at their largest plausible magnitude falls short of their threshold are not identifiable from
-this motion and are not tried; every effect's expected delta BIC at a stated reference magnitude is
-reported (`identifiability`).
+regression effects; of the fit sequences for stochastic ones). For a regression effect whose
+coefficients are sensor constants (not refitted per sequence), closing `min_drift_deg` of the
+held-out median 10-s attitude drift of the model gyro against the measured gyro is the alternative
+practical minimum (`_holdout_gain`): an effect can matter for attitude while carrying little power.
+Effects whose expected delta BIC even at their largest plausible magnitude falls short of their
+threshold are not identifiable from this motion and are not tried; every effect's expected delta
+BIC at a stated reference magnitude is reported (`identifiability`).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gyrodenoise.discrepancy.compare import window_drift_deg
 from gyrodenoise.discrepancy.design import (
     Design,
     FitResult,
@@ -62,6 +66,8 @@ from gyrodenoise.sim.effects import EFFECTS, Effect, Quantization, Saturation
 NONLINEAR_PARAMS = {"vibration": 1, "warmup_bias": 1, "bias_random_walk": 1}
 QUANT_LATTICE_FRACTION = 0.95
 MIN_GAIN = 0.01  # practical minimum: 1% of the residual power in the trusted band
+MIN_DRIFT_DEG = 0.1  # or (sensor-constant regression effects): 0.1 deg of held-out median 10-s drift
+DRIFT_WINDOW_S = 10.0
 CORNER_FLAT = 50.0  # x rate: a fitted corner above this is no low-pass at all
 
 __all__ = ["Selection", "per_sequence_refit", "residuals_after", "score_step", "select_effects"]
@@ -236,24 +242,48 @@ def _holdout_gain(
     holdout: list[FitContext],
     corner: float | None,
     sat_limit: float | None,
-) -> float:
-    """Share of the held-out residual power in the trusted band that `extra` closes: the model
-    `names` fitted with and without it on the fit sequences, per-sequence nuisances refitted on
-    each held-out sequence. A per-sequence effect is refitted there too, which closes k / n of the
-    power by chance (k its columns per sequence, n the rows): that share is taken off."""
+) -> tuple[float, float | None]:
+    """What `extra` closes on the held-out sequences, the model `names` fitted with and without it
+    on the fit sequences, per-sequence nuisances refitted on each held-out sequence:
+
+    - the share of the held-out residual power in the trusted band. A per-sequence effect is
+      refitted there too, which closes k / n of the power by chance (k its columns per sequence,
+      n the rows): that share is taken off;
+    - the reduction (deg) of the median DRIFT_WINDOW_S attitude drift of the model gyro (true rate +
+      prediction) against the measured gyro (`compare.window_drift_deg`, windows of all held-out
+      sequences pooled). None for a per-sequence effect: refitted on the held-out sequence itself,
+      its knots or offsets would absorb the drift of the noise there by construction."""
     with_c = design.fit(names + [extra])
     without = design.fit(names)
     p0 = p1 = 0.0
     chance = []
+    d0, d1 = [], []
+    per_seq = effects[extra].per_sequence
     for h in holdout:
         v = sensor_view(h, corner)
         pred0 = _predict(design, without, effects, names, sigma, v, sat_limit)
         pred1 = _predict(design, with_c, effects, names + [extra], sigma, v, sat_limit)
         p0 += band_power(v, v.residual - pred0, sigma)
         p1 += band_power(v, v.residual - pred1, sigma)
-        if effects[extra].per_sequence:
+        if per_seq:
             chance.append(design.k[extra] / n_rows(v))
-    return float(1.0 - p1 / max(p0, 1e-300) - (np.mean(chance) if chance else 0.0))
+        else:
+            dt = 1.0 / v.rate_hz
+            d0.append(window_drift_deg(v.gyro, v.omega + pred0, dt, DRIFT_WINDOW_S))
+            d1.append(window_drift_deg(v.gyro, v.omega + pred1, dt, DRIFT_WINDOW_S))
+    gain = float(1.0 - p1 / max(p0, 1e-300) - (np.mean(chance) if chance else 0.0))
+    drift = None
+    if d0 and len(np.concatenate(d0)):
+        drift = float(np.median(np.concatenate(d0)) - np.median(np.concatenate(d1)))
+    return gain, drift
+
+
+def practical(
+    gain: float, drift_deg: float | None, min_gain: float = MIN_GAIN, min_drift_deg: float = MIN_DRIFT_DEG
+) -> bool:
+    """The practical minimum on the held-out sequences: at least `min_gain` of the in-band residual
+    power closed, or at least `min_drift_deg` of the median 10-s drift (when it is defined)."""
+    return gain >= min_gain or (drift_deg is not None and drift_deg >= min_drift_deg)
 
 
 def _holdout_band_share(
@@ -295,6 +325,7 @@ def select_effects(
     candidates: list[str] | None = None,
     bic_threshold: float = 10.0,
     min_gain: float = MIN_GAIN,
+    min_drift_deg: float = MIN_DRIFT_DEG,
     max_added: int = 6,
     rw_knot_spacing_s: float = 10.0,
     band_vibration: bool | None = None,
@@ -304,8 +335,9 @@ def select_effects(
 ) -> Selection:
     """Greedy forward selection: add the candidate with the largest delta BIC that clears its
     threshold (`thresholds[name]`, default `bic_threshold`) and closes at least `min_gain` of the
-    residual power in the trusted band (on `holdout` for regression effects, when given); refit;
-    repeat until none does.
+    residual power in the trusted band (on `holdout` for regression effects, when given; there, for
+    a sensor-constant effect, reducing the median 10-s drift by `min_drift_deg` also counts:
+    `practical`); refit; repeat until none does.
 
     `band_vibration`: also try the band-limited variant of `vibration` (a stochastic term of the
     noise spectrum). Default: when white noise is part of the model (base or candidates), i.e. when
@@ -385,9 +417,10 @@ def select_effects(
                 if hg < min_gain:
                     continue
             elif holdout and not effects[sc["effect"]].stochastic:
-                hg = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)
+                hg, hd = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)
                 sc["holdout_gain"] = hg
-                if hg < min_gain:
+                sc["holdout_drift_reduction_deg"] = hd
+                if not practical(hg, hd, min_gain, min_drift_deg):
                     continue
             best = sc
             break

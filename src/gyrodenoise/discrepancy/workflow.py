@@ -18,7 +18,14 @@ from gyrodenoise.allan import allan_taus, pooled_allan
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
 from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
-from gyrodenoise.discrepancy.rank import MIN_GAIN, Selection, per_sequence_refit, residuals_after, select_effects
+from gyrodenoise.discrepancy.rank import (
+    MIN_DRIFT_DEG,
+    MIN_GAIN,
+    Selection,
+    per_sequence_refit,
+    residuals_after,
+    select_effects,
+)
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.sim.context import FitContext, SignalContext
@@ -245,6 +252,7 @@ def run(
             "delta_bic": cand.get("delta_bic"),
             "explained_fraction": cand.get("gain"),
             "holdout_gain": cand.get("holdout_gain"),
+            "holdout_drift_reduction_deg": cand.get("holdout_drift_reduction_deg"),
             "threshold": cand.get("threshold"),
             "null_p_value": None
             if null is None or cand.get("delta_bic") is None
@@ -275,6 +283,7 @@ def run(
         "settings": {
             "bic_threshold": bic_threshold,
             "min_gain": min_gain,
+            "min_drift_deg": MIN_DRIFT_DEG,
             "seed": seed,
             "candidates": candidates,
             "null_draws": null_draws,

@@ -18,6 +18,7 @@ import numpy as np
 
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import _steps
+from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
 from gyrodenoise.discrepancy.workflow import decide, gap
 from gyrodenoise.testworld import MocapConfig, make_sequence
 from gyrodenoise.testworld.mocap import MOCAP_PRESETS
@@ -189,6 +190,20 @@ def run_world_case(
             err = float(np.linalg.norm(e - t) / max(np.linalg.norm(t), 1e-300))
         out["rel_error"] = err
         out["ok_param"] = err is not None and err < case.tol
+        if effect == "bias_random_walk":
+            # is the hidden walk detectable at all against this ground truth? (expected delta BIC)
+            thr = float(null.thresholds(10.0).get(effect, 10.0)) if null is not None else 10.0
+            res = sel_base.result
+            out["identifiability_hidden"] = random_walk_identifiability(
+                fit,
+                sel_base.sigma,
+                {n: sel_base.effects[n] for n in sel_base.selected},
+                res.rss / max(res.n - res.k, 1),
+                np.asarray(true, dtype=float),
+                thr,
+            )
+            obs = [c["delta_bic"] for c in sel.steps[0].get("candidates", []) if c["effect"] == effect]
+            out["identifiability_hidden"]["observed_delta_bic"] = float(obs[0]) if obs else None
         if name in sel.named and not sel.effects[name].stochastic:
             gb, ga = gap(sel_base, hold, seed), gap(sel, hold, seed)
             out["gap_before"] = gb["residual_rms_in_band_rad_s"]
