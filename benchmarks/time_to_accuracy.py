@@ -53,6 +53,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_time_default(args: argparse.Namespace) -> int:
     """`python -m gyrodenoise.train dataset=euroc` with every default, timed from the shell's view."""
+    from gyrodenoise.atomic import write_json
+
     run_dir = Path(tempfile.mkdtemp()) / "run"
     start = time.time()
     rc = subprocess.call(
@@ -69,7 +71,7 @@ def cmd_time_default(args: argparse.Namespace) -> int:
         "note": "python -m gyrodenoise.train dataset=euroc, every default, timed end to end",
     }
     target = RUNS / f"cpu_default_e{epochs}_s{args.seed}.json"  # earlier defaults' timings are kept
-    target.write_text(json.dumps(summary, indent=1))
+    write_json(target, summary)  # atomic: an interrupted write leaves no half file
     print(
         f"wall {wall:.0f} s (fit {summary['train_wall_time_s']:.0f} s), test AOE {summary['test']['test/aoe_deg']:.2f}"
     )

@@ -122,6 +122,17 @@ def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserMo
     return raw
 
 
+def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule) -> tuple[dict, dict]:
+    """Validation (and, with cfg.test, test) metrics of `module` by a trainer without callbacks: the
+    averaging callback of the run's trainer would swap its weights in during validation."""
+    plain: L.Trainer = hydra.utils.instantiate(
+        cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
+    )
+    val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0]
+    test = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") else {}
+    return val, test
+
+
 def train(cfg: DictConfig) -> dict:
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
@@ -144,7 +155,8 @@ def train(cfg: DictConfig) -> dict:
     start = time.time()
     trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
     wall_s = time.time() - start
-    raw_final = _raw_final_weights(trainer, module)  # averaged weights (callbacks=ema): the weights before
+    # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
+    raw_final = _raw_final_weights(trainer, module) if cfg.get("test_other_rule") else None
 
     # the model is chosen by a rule fixed before any test: the final weights (`select: last`, the end
     # of a cosine cycle) or the best validation checkpoint (`select: best_val`)
@@ -158,20 +170,12 @@ def train(cfg: DictConfig) -> dict:
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
-    test, test_other, test_raw_final = {}, {}, {}
-    val_raw_final = {}
-    if raw_final is not None and cfg.get("test_other_rule"):
-        # a trainer without callbacks: the averaging callback would swap its weights in during validation
-        plain: L.Trainer = hydra.utils.instantiate(
-            cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
-        )
-        val_raw_final = (plain.validate(raw_final, datamodule=dm, verbose=False) or [{}])[0]
+    test, test_other = {}, {}
     if cfg.get("test"):
         test = trainer.test(module, datamodule=dm, verbose=False)[0]
         if alternative is not None and cfg.get("test_other_rule"):
             test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
-        if raw_final is not None and cfg.get("test_other_rule"):  # paired: same run, averaging vs none
-            test_raw_final = plain.test(raw_final, datamodule=dm, verbose=False)[0]
+    val_raw_final, test_raw_final = _score_without_callbacks(cfg, dm, raw_final) if raw_final is not None else ({}, {})
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
 

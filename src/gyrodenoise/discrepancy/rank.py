@@ -272,9 +272,8 @@ def _holdout_gain(
             d0.append(window_drift_deg(v.gyro, v.omega + pred0, dt, DRIFT_WINDOW_S))
             d1.append(window_drift_deg(v.gyro, v.omega + pred1, dt, DRIFT_WINDOW_S))
     gain = float(1.0 - p1 / max(p0, 1e-300) - (np.mean(chance) if chance else 0.0))
-    drift = None
-    if d0 and len(np.concatenate(d0)):
-        drift = float(np.median(np.concatenate(d0)) - np.median(np.concatenate(d1)))
+    d0, d1 = (np.concatenate(d) if d else np.empty(0) for d in (d0, d1))
+    drift = float(np.median(d0) - np.median(d1)) if len(d0) else None
     return gain, drift
 
 

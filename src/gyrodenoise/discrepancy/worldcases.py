@@ -192,7 +192,7 @@ def run_world_case(
         out["ok_param"] = err is not None and err < case.tol
         if effect == "bias_random_walk":
             # is the hidden walk detectable at all against this ground truth? (expected delta BIC)
-            thr = float(null.thresholds(10.0).get(effect, 10.0)) if null is not None else 10.0
+            thr = out.get("null_thresholds", {}).get(effect, 10.0)
             res = sel_base.result
             out["identifiability_hidden"] = random_walk_identifiability(
                 fit,
