@@ -16,7 +16,7 @@ decision uses the null bootstrap (`--null-draws` re-simulations per run) and the
 median 10-s drift of the model gyro there). Writes <out>/discrepancy_hidden_effects.{json,md}.
 
     python benchmarks/discrepancy_hidden_effects.py [--world both] [--seeds 2] [--own-seeds 1] \\
-        [--null-seeds 40] [--own-null-seeds 20] [--duration 50] [--null-draws 20] [--out DIR]
+        [--null-seeds 40] [--own-null-seeds 20] [--duration 83] [--null-draws 20] [--out DIR]
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from gyrodenoise import atomic  # noqa: E402
 from gyrodenoise.discrepancy.hidden import CASES, run_case  # noqa: E402
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG  # noqa: E402
 from gyrodenoise.discrepancy.worldcases import WORLD_CASES, run_world_case  # noqa: E402
@@ -158,7 +159,9 @@ def main() -> None:
     p.add_argument("--null-seeds", type=int, default=40, help="independent world, Vicon-like ground truth")
     p.add_argument("--gt-null-seeds", type=int, default=10, help="independent world, EuRoC-like ground truth")
     p.add_argument("--own-null-seeds", type=int, default=20)
-    p.add_argument("--duration", type=float, default=50.0, help="independent world: s per flight")
+    p.add_argument(
+        "--duration", type=float, default=83.0, help="independent world: s per flight (83: the whole fit flight)"
+    )
     p.add_argument("--own-duration", type=float, default=40.0)
     p.add_argument("--null-draws", type=int, default=20, help="null re-simulations per run")
     p.add_argument("--euroc-root", type=Path, default=EUROC)
@@ -186,7 +189,7 @@ def main() -> None:
         w["named_counts"] = _named_counts(w["runs"])
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    (out / "discrepancy_hidden_effects.json").write_text(json.dumps(result, indent=2, default=float) + "\n")
+    atomic.write_text(out / "discrepancy_hidden_effects.json", json.dumps(result, indent=2, default=float) + "\n")
     lines = [
         "# Discrepancy workflow: hidden-effect benchmark",
         "",
@@ -268,7 +271,7 @@ def main() -> None:
             ]
         nn = [r["named"] for r in w["nulls"]["vicon"] + w["nulls"]["euroc-gt"] if r["named"]]
         lines += ["", f"Null runs that named something: {nn or 'none'}.", ""]
-    (out / "discrepancy_hidden_effects.md").write_text("\n".join(lines) + "\n")
+    atomic.write_text(out / "discrepancy_hidden_effects.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
