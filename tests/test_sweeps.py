@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from _asl import run_train, write_asl_sequence
 from hydra import compose, initialize_config_dir
+from lightning.pytorch.callbacks import EMAWeightAveraging
 from omegaconf import OmegaConf
 
 import gyrodenoise
@@ -134,10 +135,12 @@ def test_default_dataset_is_simulated():
 
 
 def test_ema_callbacks_compose():
-    """callbacks=ema keeps the default callbacks and adds Lightning's EMA weight averaging."""
+    """callbacks=ema keeps the default callbacks and adds Lightning's EMA weight averaging (with batch-norm
+    statistics recomputed for the averaged weights)."""
     cb = compose_train(["callbacks=ema"]).callbacks
     assert {"model_checkpoint", "last_checkpoint", "ema"} <= set(cb)
-    assert hydra.utils.instantiate(cb.ema).__class__.__name__ == "EMAWeightAveraging"
+    ema = hydra.utils.instantiate(cb.ema)
+    assert isinstance(ema, EMAWeightAveraging) and ema.bn_batches == 20
 
 
 def test_ddp_trainer_composes():

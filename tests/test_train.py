@@ -126,5 +126,33 @@ def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):
     assert s["val_raw_final"]["val/aoe_deg"] != s["val"]["val/aoe_deg"]
     ckpt = torch.load(tmp_path / "ema" / "checkpoints" / "last.ckpt", weights_only=True)
     shipped = torch.load(tmp_path / "ema" / "model.pt", weights_only=True)["state_dict"]
-    for k, v in shipped.items():  # the shipped model is the average, not the raw weights
-        torch.testing.assert_close(v, ckpt["state_dict"][f"model.{k}"])
+    stats = [k for k in shipped if k.endswith(("running_mean", "running_var"))]
+    assert stats
+    for k, v in shipped.items():  # the shipped model is the average, not the raw weights ...
+        if k not in stats and not k.endswith("num_batches_tracked"):
+            torch.testing.assert_close(v, ckpt["state_dict"][f"model.{k}"])
+    # ... with batch-norm statistics recomputed for it (not the averaged ones the checkpoint holds)
+    assert all(not torch.allclose(shipped[k], ckpt["state_dict"][f"model.{k}"]) for k in stats)
+
+
+def test_recompute_batch_norm_averages_the_batch_statistics():
+    """The first batch norm sees the convolution of the (deterministic) input: its recomputed running mean
+    is the mean over the given batches of their per-batch channel means, whatever it held before."""
+    from gyrodenoise.models.denoiser import DilatedCNNDenoiser
+    from gyrodenoise.weight_averaging import recompute_batch_norm
+
+    torch.manual_seed(0)
+    model = DilatedCNNDenoiser(channels=(4, 8), dilations=(1, 2))
+    bn = model.net[1]
+    bn.running_mean.fill_(100.0)
+    batches = [torch.randn(3, 200, 6) * (1 + i) for i in range(4)]
+    recompute_batch_norm(model, batches)
+    conv = model.net[0]
+    expected = []
+    with torch.no_grad():
+        for imu in batches:
+            x = ((imu - model.mean) / model.std).transpose(1, 2)
+            x = torch.nn.functional.pad(x, (model.receptive_field - 1, 0), mode="replicate")
+            expected.append(conv(x).mean(dim=(0, 2)))
+    torch.testing.assert_close(bn.running_mean, torch.stack(expected).mean(0))
+    assert not model.training or bn.momentum == 0.1  # mode and momentum restored
