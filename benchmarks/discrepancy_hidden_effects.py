@@ -45,6 +45,28 @@ OUT = Path(__file__).parent / "results"
 EUROC = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc"
 
 
+def _misses(runs: list[dict]) -> list[str]:
+    """Every run that did not name its hidden effect exactly, with what the workflow said about it."""
+    lines = []
+    for r in runs:
+        if r.get("ok_named"):
+            continue
+        said = f"named {r['named_labels'] or 'nothing'}"
+        below = [c for c in r.get("below_practical") or [] if c["effect"] in (r["effect"], r.get("named_as"))]
+        for c in below:
+            d = c.get("holdout_drift_reduction_deg")
+            said += (
+                f"; {c['effect']} detected (delta BIC {c['delta_bic']:.1f} > {c['threshold']:.1f}) but below the "
+                f"practical minimum: closes {100 * (c.get('holdout_gain') or 0.0):.2f}% of the held-out in-band power"
+                + (f", 10-s drift {-d:+.3f} deg" if d is not None else "")
+            )
+        idf = r.get("identifiability_hidden")
+        if idf is not None:
+            said += f"; expected delta BIC of the hidden walk {idf['expected_delta_bic']:.1f}"
+        lines.append(f"- {r['effect']} `{r.get('spec', '')}` seed {r['seed']}: {said}.")
+    return ["Runs that did not name their hidden effect exactly:", "", *lines] if lines else []
+
+
 def _own(args) -> dict:
     runs, nulls = [], []
     for name in CASES:
@@ -214,6 +236,8 @@ def main() -> None:
             "",
             *_table(w),
             "",
+            *_misses(w["runs"]),
+            "",
         ]
     if "independent" in result["worlds"]:
         w = result["worlds"]["independent"]
@@ -236,6 +260,7 @@ def main() -> None:
         ]
         for k, v in w["named_counts"].items():
             lines.append(f"- {k}: " + ", ".join(f"{n} {c}" for n, c in sorted(v.items())))
+        lines += ["", *_misses(w["runs"])]
         lines += _rw_detectability(w["runs"])
         dl = [
             (r["effect"], r["delay_or_lowpass"])

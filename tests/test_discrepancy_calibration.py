@@ -11,6 +11,7 @@ from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import make_measured
 from gyrodenoise.discrepancy.null import null_distribution
 from gyrodenoise.discrepancy.rank import practical, select_effects
+from gyrodenoise.discrepancy.report import _below_practical_md
 from gyrodenoise.discrepancy.workflow import decide
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import GSensitivity, SensorBandwidth, WhiteNoise
@@ -96,6 +97,17 @@ def test_practical_minimum_is_power_share_or_ten_second_drift(tmp_path):
     step = sel.steps[0]["candidates"][0]
     assert step["gain"] >= 0.21 > step["holdout_gain"] and step["holdout_drift_reduction_deg"] >= 0.1
     assert select_effects(fcs[:2], min_drift_deg=np.inf, **kw).named == []
+    # the held-out sequences decide: a share above what it closes even on the fit sequences (22%) does
+    # not veto the drift alternative
+    kw["min_gain"] = 0.5
+    assert select_effects(fcs[:2], min_drift_deg=0.1, **kw).named == ["g_sensitivity"]
+    # without it, the effect is reported as detected but below the practical minimum
+    sel = select_effects(fcs[:2], min_drift_deg=np.inf, **kw)
+    assert sel.named == [] and [c["effect"] for c in sel.below_practical] == ["g_sensitivity"]
+    c = sel.below_practical[0]
+    assert c["delta_bic"] >= c["threshold"] and c["holdout_gain"] < 0.5
+    md = _below_practical_md({"below_practical": sel.below_practical})
+    assert "below the practical minimum" in md[0] and md[-2].startswith("| g_sensitivity |")
 
 
 # ----------------------------------------------------------------------------- 5: identifiability

@@ -145,6 +145,14 @@ def _delta_bic(sel, name: str) -> float:
     return float(cand.get("delta_bic", np.nan))
 
 
+_SCORE_KEYS = ("effect", "variant", "delta_bic", "threshold", "gain", "holdout_gain", "holdout_drift_reduction_deg")
+
+
+def _below_practical(sel) -> list[dict]:
+    """Candidates that cleared their threshold but not the practical minimum, in short."""
+    return [{k: c.get(k) for k in _SCORE_KEYS} for c in sel.below_practical]
+
+
 def _steps(sel) -> list[dict]:
     """The selection steps in short: what was added, and the top candidates' delta BIC / threshold."""
     out = []
@@ -154,21 +162,7 @@ def _steps(sel) -> list[dict]:
         out.append(
             {
                 "added": st.get("added"),
-                "top": [
-                    {
-                        k: c.get(k)
-                        for k in (
-                            "effect",
-                            "variant",
-                            "delta_bic",
-                            "threshold",
-                            "gain",
-                            "holdout_gain",
-                            "holdout_drift_reduction_deg",
-                        )
-                    }
-                    for c in st["candidates"][:4]
-                ],
+                "top": [{k: c.get(k) for k in _SCORE_KEYS} for c in st["candidates"][:4]],
             }
         )
     return out
@@ -213,6 +207,7 @@ def run_case(
         "named_labels": [label(sel.fitted[n]) if n in sel.fitted else n for n in sel.named],
         "not_identifiable": list(sel.not_identifiable),
         "steps": _steps(sel),
+        "below_practical": _below_practical(sel),
     }
     if null is not None:
         out["null_p_values"] = {n: null.p_value(n, _delta_bic(sel, n)) for n in sel.named if n in null.delta_bic}

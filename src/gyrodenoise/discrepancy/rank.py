@@ -103,6 +103,19 @@ class Selection:
         return [d["sentence"]] if d is not None and not d["separable"] else []
 
     @property
+    def below_practical(self) -> list[dict]:
+        """Candidates of the last step that clear their threshold but not the practical minimum: there
+        (statistically), too small to matter (what they close on the held-out sequences is recorded)."""
+        last = next((st for st in reversed(self.steps) if "candidates" in st), None)
+        if last is None or last.get("added"):
+            return []
+        return [
+            c
+            for c in last["candidates"]
+            if c.get("threshold") is not None and c["delta_bic"] >= c["threshold"] and c["effect"] not in self.named
+        ]
+
+    @property
     def band_vibration(self) -> bool:
         """Whether the named vibration is the band-limited (stochastic) variant."""
         return "vibration" in self.selected and self.effects["vibration"].stochastic
@@ -406,7 +419,12 @@ def select_effects(
         for sc in st.scores:
             thr = thresholds.get(sc["effect"], bic_threshold)
             sc["threshold"] = thr
-            if sc["delta_bic"] < thr or sc["gain"] < min_gain:
+            # the practical minimum of a regression effect is judged on the held-out sequences (power OR
+            # drift) when there are some: its in-sample power share alone would veto an effect that
+            # matters for attitude while carrying little power
+            judged_on_holdout = bool(holdout) and sc.get("variant") != "band-limited"
+            judged_on_holdout = judged_on_holdout and not effects[sc["effect"]].stochastic
+            if sc["delta_bic"] < thr or (sc["gain"] < min_gain and not judged_on_holdout):
                 continue
             if holdout and sc.get("variant") == "band-limited":
                 # noise cannot be predicted: the band must be there in the held-out spectra too, at a

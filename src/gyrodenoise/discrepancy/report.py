@@ -183,7 +183,7 @@ def _closed(e: dict) -> str:
     out = f"{100 * e['holdout_gain']:.2f}%" if e.get("holdout_gain") is not None else ""
     d = e.get("holdout_drift_reduction_deg")
     if d is not None:
-        out += f"{'; ' if out else ''}10-s drift -{d:.3g} deg"
+        out += f"{'; ' if out else ''}10-s drift {-d:+.3g} deg"
     return out
 
 
@@ -217,6 +217,26 @@ def _decisions_md(report: dict) -> list[str]:
             f"{100 * s['min_gain']:.0f}% of the in-band residual power on the held-out sequences, or (sensor-constant "
             f"effects) {_min_drift(s):g} deg less held-out median 10-s drift of the model gyro."
         ]
+    return lines + [""]
+
+
+def _below_practical_md(report: dict) -> list[str]:
+    """Effects the data show but that are too small to matter (clear the threshold, not the practical minimum)."""
+    rows = report.get("below_practical") or []
+    if not rows:
+        return []
+    lines = [
+        "Detected but below the practical minimum (they clear their threshold, but adding them changes too little "
+        "on the held-out sequences to be worth a model term; see Decisions):",
+        "",
+        "| effect | delta BIC | threshold | share of the fit residual | closed (held-out) |",
+        "|---|---|---|---|---|",
+    ]
+    for c in rows:
+        lines.append(
+            f"| {_label(c)} | {c['delta_bic']:.1f} | {c['threshold']:.1f} | {100 * c.get('gain', 0.0):.2f}% | "
+            f"{_closed(c) or '-'} |"
+        )
     return lines + [""]
 
 
@@ -288,6 +308,7 @@ def markdown(report: dict) -> str:
         lines.append("")
     else:
         lines += [f"{NO_EFFECT[0].upper() + NO_EFFECT[1:]}: no candidate clears the threshold.", ""]
+    lines += _below_practical_md(report)
     if report["not_identifiable"]:
         lines += [
             f"Not identifiable from this motion: {', '.join(report['not_identifiable'])} "

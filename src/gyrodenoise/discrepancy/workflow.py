@@ -280,6 +280,7 @@ def run(
         "fit_sequences": [fc.name for fc in fit],
         "holdout_sequences": [fc.name for fc in holdout],
         "selection_steps": sel.steps,
+        "below_practical": sel.below_practical,
         "settings": {
             "bic_threshold": bic_threshold,
             "min_gain": min_gain,

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.discrepancy.compare import load_fit_context
-from gyrodenoise.discrepancy.hidden import _steps
+from gyrodenoise.discrepancy.hidden import _below_practical, _steps
 from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
 from gyrodenoise.discrepancy.workflow import decide, gap
 from gyrodenoise.testworld import MocapConfig, make_sequence
@@ -161,6 +161,7 @@ def run_world_case(
         "truth_hidden": truth["hidden_effects"],
         "apparent_time_offset_s": truth["timing"]["apparent_time_offset_s"],
         "steps": _steps(sel),
+        "below_practical": _below_practical(sel),
         # a named time offset against a sensor low-pass of the same delay: separable on this motion?
         "delay_or_lowpass": sel.delay_or_lowpass,
         "equivalences": sel.equivalences,
