@@ -9,7 +9,8 @@ its log in OUT/ID.log; when it finishes, its summary.json is copied to COLLECT/I
 with the queue line and the process wall time added. Runs whose ID.json exists in COLLECT or in a
 `--done` folder are skipped, so an interrupted queue resumes (IDs are paths: with `--collect .` the
 summaries land where the reports read them). `--deadline S` starts no run after S seconds (a lease on a borrowed
-GPU machine ends; what is finished is kept). A run that fails is reported with its log's tail and
+GPU machine ends; what is finished is kept). `--shard I/N` runs every N-th line from line I, so that
+N runners (started at different times) share a queue without running a line twice. A run that fails is reported with its log's tail and
 does not stop the queue. Works on a CPU-only machine and on a GPU machine alike (the trainings pick
 the device); on one GPU, several processes share it.
 """
@@ -76,9 +77,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--collect", type=Path, required=True, help="folder for the collected ID.json summaries")
     ap.add_argument("--done", type=Path, action="append", default=[], help="skip runs whose ID.json is here too")
     ap.add_argument("--deadline", type=float, default=None, help="start no run after this many seconds")
+    ap.add_argument(
+        "--shard", default=None, help="I/N: only the runs at positions I, I+N, I+2N, ... of the queue (0-based)"
+    )
     args = ap.parse_args(argv)
     done_dirs = [args.collect, *args.done]
-    todo = [(i, o) for i, o in read_queue(args.queue) if not any((d / f"{i}.json").is_file() for d in done_dirs)]
+    runs = read_queue(args.queue)
+    if args.shard:
+        k, n = _shard(args.shard)
+        runs = runs[k::n]
+    todo = [(i, o) for i, o in runs if not any((d / f"{i}.json").is_file() for d in done_dirs)]
     print(f"{len(todo)} runs to do, {args.jobs} at once, {args.threads} threads each", flush=True)
     start = time.time()
     failed, done = [], 0
@@ -98,6 +106,16 @@ def main(argv: list[str] | None = None) -> int:
         f"{done} runs finished in {elapsed:.0f} s ({3600 * done / max(elapsed, 1e-9):.0f} runs/hour); failed: {failed}"
     )
     return 1 if failed else 0
+
+
+def _shard(text: str) -> tuple[int, int]:
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise SystemExit(f"--shard {text!r}: write I/N with integers, e.g. 0/2") from None
+    if not 0 <= k < n:
+        raise SystemExit(f"--shard {text!r}: I must be in 0..N-1")
+    return k, n
 
 
 def _guarded(

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from _asl import write_asl_sequence
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,3 +44,18 @@ def test_queue_runs_two_at_once_and_resumes(tmp_path):
     assert "2 runs finished" in proc.stdout
     again = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
     assert "1 runs to do" in again.stdout  # only the failed one is tried again
+
+
+def test_shards_split_a_queue_without_overlap(tmp_path):
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import run_queue
+
+    queue = tmp_path / "q.txt"
+    queue.write_text("".join(f"r{i} seed={i}\n" for i in range(7)))
+    runs = run_queue.read_queue(queue)
+    shards = [runs[k::n] for k, n in (run_queue._shard("0/3"), run_queue._shard("1/3"), run_queue._shard("2/3"))]
+    ids = [r for s in shards for r, _ in s]
+    assert sorted(ids) == sorted(r for r, _ in runs) and len(ids) == len(set(ids)) == 7
+    for bad in ("3/3", "a/2", "1"):
+        with pytest.raises(SystemExit, match="--shard"):
+            run_queue._shard(bad)
