@@ -10,9 +10,9 @@ with the queue line and the process wall time added. Runs whose ID.json exists i
 `--done` folder are skipped, so an interrupted queue resumes (IDs are paths: with `--collect .` the
 summaries land where the reports read them). `--deadline S` starts no run after S seconds (a lease on a borrowed
 GPU machine ends; what is finished is kept). `--shard I/N` runs every N-th line from line I, so that
-N runners (started at different times) share a queue without running a line twice. A run that fails is reported with its log's tail and
-does not stop the queue. Works on a CPU-only machine and on a GPU machine alike (the trainings pick
-the device); on one GPU, several processes share it.
+N runners (started at different times) share a queue without running a line twice. A run that fails
+is reported with its log's tail and does not stop the queue. Works on a CPU-only machine and on a GPU
+machine alike (the trainings pick the device); on one GPU, several processes share it.
 """
 
 from __future__ import annotations
