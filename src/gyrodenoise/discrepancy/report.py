@@ -226,8 +226,9 @@ def _below_practical_md(report: dict) -> list[str]:
     if not rows:
         return []
     lines = [
-        "Detected but below the practical minimum (they clear their threshold, but adding them changes too little "
-        "on the held-out sequences to be worth a model term; see Decisions):",
+        "Detected on the fit sequences but below the practical minimum on the held-out ones (they clear their "
+        "threshold, but fitted there they close less than the minimum of the held-out in-band power and of the "
+        "10-s drift; a negative share: the held-out gap grows, a negative drift change: it shrinks; see Decisions):",
         "",
         "| effect | delta BIC | threshold | share of the fit residual | closed (held-out) |",
         "|---|---|---|---|---|",
