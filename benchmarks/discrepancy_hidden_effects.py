@@ -28,6 +28,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # many small solves: threads
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -43,6 +44,19 @@ from gyrodenoise.paths import portable_command, portable_path  # noqa: E402
 
 OUT = Path(__file__).parent / "results"
 EUROC = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc"
+
+
+def _code_version() -> str:
+    """The commit the benchmark ran from (and whether the work tree had changes), for the results file."""
+    repo = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True)
+        dirty = subprocess.run(["git", "status", "--porcelain", "src"], cwd=repo, capture_output=True, text=True)
+    except OSError:
+        return "unknown (no git)"
+    if head.returncode != 0:
+        return "unknown (not a git checkout)"
+    return f"commit {head.stdout.strip()}" + (" with uncommitted changes under src/" if dirty.stdout.strip() else "")
 
 
 def _misses(runs: list[dict]) -> list[str]:
@@ -193,6 +207,7 @@ def main() -> None:
     result: dict = {
         "command": "python " + portable_command(sys.argv),
         "machine": f"{platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} CPU threads)",
+        "code": _code_version(),
         "settings": {
             k: portable_path(v) if isinstance(v, Path) else v for k, v in vars(args).items() if k != "euroc_root"
         },
@@ -217,6 +232,7 @@ def main() -> None:
         "",
         f"Command: `{result['command']}`  ",
         f"Machine: {result['machine']}; wall time {result['wall_time_s']:.0f} s.  ",
+        f"Code: {result['code']}.  ",
         f"Every decision: null bootstrap with {args.null_draws} re-simulations per run (threshold = its 95th "
         "percentile, at least 10), and the practical minimum on the held-out sequence: 1% of the in-band residual "
         "power closed, or, for an effect whose coefficients are sensor constants (not refitted per sequence), "
