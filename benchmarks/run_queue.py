@@ -8,11 +8,13 @@ run is `python -m gyrodenoise.train <overrides> hydra.run.dir=OUT/ID` with OMP_N
 its log in OUT/ID.log; when it finishes, its summary.json is copied to COLLECT/ID.json (atomically)
 with the queue line and the process wall time added. Runs whose ID.json exists in COLLECT or in a
 `--done` folder are skipped, so an interrupted queue resumes (IDs are paths: with `--collect .` the
-summaries land where the reports read them). `--deadline S` starts no run after S seconds (a lease on a borrowed
-GPU machine ends; what is finished is kept). `--shard I/N` runs every N-th line from line I, so that
-N runners (started at different times) share a queue without running a line twice. A run that fails
-is reported with its log's tail and does not stop the queue. Works on a CPU-only machine and on a GPU
-machine alike (the trainings pick the device); on one GPU, several processes share it.
+summaries land where the reports read them). `--deadline S` starts no run after S seconds (a lease
+on a borrowed GPU machine ends; what is finished is kept). Several runners may share one queue: each
+claims a run before starting it (OUT/ID.claim, released when the run ends) and skips runs another live
+runner holds; `--shard I/N` (every N-th line from line I) splits a queue between runners in advance.
+A run that fails is reported with its log's tail and does not stop the queue. Works on a CPU-only
+machine and on a GPU machine alike (the trainings pick the device); on one GPU, several processes
+share it.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
+import socket
 import subprocess
 import sys
 import time
@@ -118,12 +122,51 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
+def _claim(out: Path, run_id: str) -> Path | None:
+    """Claim a run for this runner (an atomic mkdir of OUT/ID.claim holding 'host pid'), so that several
+    runners can share one queue; None if a live runner holds it. A claim left by a runner of this host
+    that is gone is taken over."""
+    claim = out / f"{run_id}.claim"
+    claim.parent.mkdir(parents=True, exist_ok=True)
+    me = f"{socket.gethostname()} {os.getpid()}"
+    try:
+        claim.mkdir()
+    except FileExistsError:
+        try:
+            host, pid = (claim / "owner").read_text().split()
+        except (OSError, ValueError):
+            return None  # being written by its owner right now
+        if host != socket.gethostname() or _alive(int(pid)):
+            return None
+    (claim / "owner").write_text(me)
+    return claim
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _guarded(
     run_id: str, overrides: list[str], args: argparse.Namespace, start: float
 ) -> tuple[str, bool | None, float]:
     if args.deadline is not None and time.time() - start > args.deadline:
         return run_id, None, 0.0  # past the deadline: not started
-    return run_one(run_id, overrides, args.out, args.collect, args.threads)
+    if any((d / f"{run_id}.json").is_file() for d in [args.collect, *args.done]):
+        return run_id, None, 0.0  # finished by another runner meanwhile
+    claim = _claim(args.out, run_id)
+    if claim is None:
+        print(f"skip {run_id}: another runner is on it ({args.out / run_id}.claim)", flush=True)
+        return run_id, None, 0.0
+    try:
+        return run_one(run_id, overrides, args.out, args.collect, args.threads)
+    finally:
+        shutil.rmtree(claim, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -59,3 +59,17 @@ def test_shards_split_a_queue_without_overlap(tmp_path):
     for bad in ("3/3", "a/2", "1"):
         with pytest.raises(SystemExit, match="--shard"):
             run_queue._shard(bad)
+
+
+def test_a_claimed_run_is_skipped_and_a_dead_runners_claim_taken_over(tmp_path):
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import socket
+
+    import run_queue
+
+    claim = run_queue._claim(tmp_path, "runs/a")
+    assert claim is not None and (claim / "owner").read_text() == f"{socket.gethostname()} {os.getpid()}"
+    assert run_queue._claim(tmp_path, "runs/a") is None  # held by a live runner (this one)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (claim / "owner").write_text(f"{socket.gethostname()} {int(dead.stdout)}")
+    assert run_queue._claim(tmp_path, "runs/a") == claim  # its runner is gone: taken over
