@@ -77,7 +77,8 @@ def _misses(runs: list[dict]) -> list[str]:
         idf = r.get("identifiability_hidden")
         if idf is not None:
             said += f"; expected delta BIC of the hidden walk {idf['expected_delta_bic']:.1f}"
-        lines.append(f"- {r['effect']} `{r.get('spec', '')}` seed {r['seed']}: {said}.")
+        spec = f" `{r['spec']}`" if r.get("spec") else f" (magnitude {'small' if r['magnitude'] == 0 else 'large'})"
+        lines.append(f"- {r['effect']}{spec} seed {r['seed']}: {said}.")
     return ["Runs that did not name their hidden effect exactly:", "", *lines] if lines else []
 
 
