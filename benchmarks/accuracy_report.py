@@ -24,6 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from scipy.stats import spearmanr  # noqa: E402
 
+from gyrodenoise.ablation_stats import PairedDiff  # noqa: E402
 from gyrodenoise.atomic import write_json, write_text  # noqa: E402
 from gyrodenoise.evaluate import markdown_table  # noqa: E402
 from gyrodenoise.plots import save  # noqa: E402
@@ -118,6 +119,49 @@ def cv_table() -> tuple[str, dict]:
     return markdown_table(head, rows), summary
 
 
+ROUND2_SEEDS = 3  # per fold and recipe (benchmarks/queues/cv_round2.txt: round 1's seed k, then 100+k, 200+k)
+
+
+def cv_round2() -> tuple[str, dict]:
+    """Round 2 of the EuRoC recipe selection, by the rule written in benchmarks/queues/cv_round2.txt before
+    its runs: figure = mean over the 6 folds of the per-fold mean of 3 seeds; whole replaces ref only if the
+    paired-by-fold difference (whole - ref) has a 95% t-interval below 0. No verdict while runs are missing."""
+    vals: dict[str, dict[int, list[float]]] = {"ref": defaultdict(list), "whole": defaultdict(list)}
+    round1 = {
+        "ref": ["reports/ablation_runs/reference/*.json", "reports/accuracy_runs/euroc_cv/ref_f*.json"],
+        "whole": ["reports/ablation_runs/train_duration/whole_s*.json", "reports/accuracy_runs/euroc_cv/whole_f*.json"],
+    }
+    for recipe, patterns in round1.items():
+        for pattern in patterns:
+            for _p, s in load(pattern):
+                vals[recipe][s["config"]["dataset"]["cv_fold"]].append(metric(s, "val/aoe_deg"))
+    for p, s in load("reports/accuracy_runs/euroc_cv2/*.json"):
+        vals[p.stem.split("_f")[0]][s["config"]["dataset"]["cv_fold"]].append(metric(s, "val/aoe_deg"))
+    folds = range(6)
+    n_runs = sum(len(v[f]) for v in vals.values() for f in folds)
+    complete = all(len(vals[r][f]) == ROUND2_SEEDS for r in vals for f in folds)
+    means = {r: {f: statistics.fmean(vals[r][f]) for f in folds if vals[r][f]} for r in vals}
+    rows = []
+    for r in vals:
+        cells = [" / ".join(f"{x:.2f}" for x in vals[r][f]) or "-" for f in folds]
+        fig = statistics.fmean(means[r].values()) if len(means[r]) == 6 else math.nan
+        rows.append([r, *cells, f"{fig:.2f}" if math.isfinite(fig) else "-"])
+    head = ["recipe", *(f"fold {f}: val AOE per seed" for f in folds), "figure" if complete else "figure so far"]
+    table = markdown_table(head, rows)
+    out: dict = {"runs": n_runs, "complete": complete, "per_fold": {r: dict(vals[r]) for r in vals}}
+    if complete:
+        d = PairedDiff(tuple(str(f) for f in folds), tuple(means["whole"][f] - means["ref"][f] for f in folds))
+        winner = "whole" if d.direction < 0 else "ref"
+        out |= {"whole_minus_ref": d.mean, "t_interval_95": list(d.t_ci), "winner": winner}
+        verdict = (
+            f"whole - ref per fold: {d.mean:+.2f} deg, 95% t-interval [{d.t_ci[0]:+.2f}, {d.t_ci[1]:+.2f}] -> "
+            f"**{winner}** is the EuRoC recipe by the rule."
+        )
+    else:
+        verdict = f"Incomplete: {n_runs} of {2 * 6 * ROUND2_SEEDS} runs; no verdict until every fold has 3 seeds."
+    return table + "\n\n" + verdict + "\n", out
+
+
 def runs_table() -> str:
     rows = []
     for p, s in load("reports/accuracy_runs/*/*.json"):
@@ -175,9 +219,11 @@ def main() -> None:
     write_text(OUT / "runs.md", runs_table())
     write_text(OUT / "full_data.md", full_md)
     write_text(OUT / "ensembles.md", ensemble_table())
+    cv2_md, cv2 = cv_round2()
+    write_text(OUT / "cv_round2.md", cv2_md)
     arm_rows = [[r["arm"], f"{r['new']:.2f}", f"{r['old']:.2f}", f"{r['test']:.2f}"] for r in rc["arms"]]
     write_text(OUT / "rank_arms.md", markdown_table(["recipe (ablation arm)", "new val", "old val", "test"], arm_rows))
-    write_json(OUT / "summary.json", {"rank_correlation": rc, "cv": cv, "full_data": full})
+    write_json(OUT / "summary.json", {"rank_correlation": rc, "cv": cv, "cv_round2": cv2, "full_data": full})
     print(
         json.dumps(
             {
