@@ -2,7 +2,7 @@
 
 Lightning's EMAWeightAveraging (callbacks=ema) averages the batch-norm running statistics along with the
 weights (use_buffers=True); statistics averaged over 100 epochs need not belong to the averaged weights.
-This recomputes them on the run's own training crops (torch.optim.swa_utils.update_bn: the cumulative
+This recomputes them on the run's own training crops (weight_averaging.recompute_batch_norm: the cumulative
 mean over `--batches` training batches, drawn as in training, dropout and augmentation included) and
 validates and tests the result with the run's data configuration, beside the EMA and the raw final
 weights the run itself reported (summary.json: val/test and val_raw_final/test_raw_final). The decision
@@ -27,22 +27,15 @@ import hydra
 import lightning as L
 import torch
 from omegaconf import OmegaConf
-from torch.optim.swa_utils import update_bn
 
 from gyrodenoise import atomic
 from gyrodenoise.ablation_stats import paired_diff
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.weight_averaging import recompute_batch_norm, training_inputs
 
 OUT = Path(__file__).parent / "results" / "ema_bn_recompute.json"
-
-
-def _training_inputs(dm, batches: int):
-    """`batches` training batches (the IMU tensor only), as the training loop draws them."""
-    for _ in range(batches):
-        for batch in dm.train_dataloader():
-            yield batch["imu"]
 
 
 def score_run(run_dir: Path, batches: int, seed: int) -> dict:
@@ -59,7 +52,7 @@ def score_run(run_dir: Path, batches: int, seed: int) -> dict:
     )
     module.model.load_state_dict(model.state_dict())  # the EMA weights and normalisation of model.pt
     t0 = time.time()
-    update_bn(_training_inputs(dm, batches), module.model)
+    recompute_batch_norm(module.model, training_inputs(dm, batches))
     bn_s = time.time() - t0
     module.model.eval()
     trainer = L.Trainer(

@@ -85,12 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         "--shard", default=None, help="I/N: only the runs at positions I, I+N, I+2N, ... of the queue (0-based)"
     )
     args = ap.parse_args(argv)
-    done_dirs = [args.collect, *args.done]
     runs = read_queue(args.queue)
     if args.shard:
         k, n = _shard(args.shard)
         runs = runs[k::n]
-    todo = [(i, o) for i, o in runs if not any((d / f"{i}.json").is_file() for d in done_dirs)]
+    todo = [(i, o) for i, o in runs if not _finished(i, args)]
     print(f"{len(todo)} runs to do, {args.jobs} at once, {args.threads} threads each", flush=True)
     start = time.time()
     failed, done = [], 0
@@ -110,6 +109,11 @@ def main(argv: list[str] | None = None) -> int:
         f"{done} runs finished in {elapsed:.0f} s ({3600 * done / max(elapsed, 1e-9):.0f} runs/hour); failed: {failed}"
     )
     return 1 if failed else 0
+
+
+def _finished(run_id: str, args: argparse.Namespace) -> bool:
+    """Whether the run's summary is collected (in COLLECT or a --done folder)."""
+    return any((d / f"{run_id}.json").is_file() for d in [args.collect, *args.done])
 
 
 def _shard(text: str) -> tuple[int, int]:
@@ -157,7 +161,7 @@ def _guarded(
 ) -> tuple[str, bool | None, float]:
     if args.deadline is not None and time.time() - start > args.deadline:
         return run_id, None, 0.0  # past the deadline: not started
-    if any((d / f"{run_id}.json").is_file() for d in [args.collect, *args.done]):
+    if _finished(run_id, args):
         return run_id, None, 0.0  # finished by another runner meanwhile
     claim = _claim(args.out, run_id)
     if claim is None:

@@ -433,7 +433,7 @@ def select_effects(
                 sc["holdout_gain"] = hg
                 if hg < min_gain:
                     continue
-            elif holdout and not effects[sc["effect"]].stochastic:
+            elif judged_on_holdout:
                 hg, hd = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)
                 sc["holdout_gain"] = hg
                 sc["holdout_drift_reduction_deg"] = hd
