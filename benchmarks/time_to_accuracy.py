@@ -65,17 +65,26 @@ def cmd_time_default(args: argparse.Namespace) -> int:
         return rc
     summary = json.loads((run_dir / "summary.json").read_text())
     epochs = epochs_of(summary)
+    commit = code_version()
     summary["queue"] = {
-        "id": f"cpu_default_e{epochs}_s{args.seed}",
+        "id": f"cpu_default_e{epochs}_s{args.seed}_{commit}",
         "process_wall_time_s": wall,
+        "commit": commit,
         "note": "python -m gyrodenoise.train dataset=euroc, every default, timed end to end",
     }
-    target = RUNS / f"cpu_default_e{epochs}_s{args.seed}.json"  # earlier defaults' timings are kept
+    target = RUNS / f"cpu_default_e{epochs}_s{args.seed}_{commit}.json"  # earlier code's timings are kept
     write_json(target, summary)  # atomic: an interrupted write leaves no half file
     print(
         f"wall {wall:.0f} s (fit {summary['train_wall_time_s']:.0f} s), test AOE {summary['test']['test/aoe_deg']:.2f}"
     )
     return 0
+
+
+def code_version() -> str:
+    """Short commit of the checkout, '-dirty' when it has uncommitted changes."""
+    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True)
+    return (rev or "unknown") + ("-dirty" if dirty.stdout.strip() else "")
 
 
 def kind_of(summary: dict) -> str:
@@ -167,8 +176,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     cpu = [r for r in runs if r["_file"].startswith("cpu_default")]
     cpu_rows = [
         f"| {epochs_of(r)} | {r['seed']} | {r['queue']['process_wall_time_s']:.0f} | {r['train_wall_time_s']:.0f} | "
-        f"{r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
-        for r in cpu
+        f"{r['test']['test/aoe_deg']:.2f} | {r['queue'].get('commit', 'at 1064bc8')} | {r['machine']} |"
+        for r in sorted(cpu, key=lambda r: r["queue"].get("commit") is not None)
     ]
     md = [
         "# Time to accuracy: EuRoC",
@@ -211,9 +220,9 @@ def cmd_report(args: argparse.Namespace) -> int:
         "the epochs column) and times the whole process (imports, data cache, fit, validation, test, outputs)",
         "on the idle VM (every other process paused).",
         "",
-        "| epochs | seed | process wall (s) | fit wall (s) | test AOE (deg) | machine |",
-        "|---|---|---|---|---|---|",
-        *(cpu_rows or ["| - | - | not measured yet | | | |"]),
+        "| epochs | seed | process wall (s) | fit wall (s) | test AOE (deg) | code | machine |",
+        "|---|---|---|---|---|---|---|",
+        *(cpu_rows or ["| - | - | not measured yet | | | | |"]),
         "",
     ]
     OUT.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.models.build import build_model
-from gyrodenoise.models.denoiser import count_parameters, predict_gyro
+from gyrodenoise.models.denoiser import FastDropout, count_parameters, predict_gyro
 
 
 def test_default_network_has_paper_parameter_count():
@@ -32,6 +32,19 @@ def test_outputs_do_not_depend_on_future_samples(act):
     a, b = model(imu), model(changed)
     torch.testing.assert_close(a[:, :800], b[:, :800])
     assert not torch.allclose(a[:, 800:], b[:, 800:])
+
+
+def test_fast_dropout_rate_scale_and_seeding():
+    x = torch.ones(4, 64, 4096)
+    drop = FastDropout(0.1).train()
+    torch.manual_seed(0)
+    y = drop(x)
+    assert abs(float((y == 0).float().mean()) - 0.1) < 0.003  # 1M draws: std 3e-4
+    assert abs(float(y.mean()) - 1.0) < 0.005  # kept values scaled by 1 / (1 - p)
+    torch.manual_seed(0)
+    assert torch.equal(drop(x), y)  # the mask follows torch's seed
+    assert not torch.equal(drop(x), y)
+    assert torch.equal(drop.eval()(x), x)
 
 
 def test_unknown_activation_is_a_clear_error():

@@ -38,7 +38,8 @@ def exp(phi: torch.Tensor) -> torch.Tensor:
     b = torch.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - torch.cos(theta)) / theta2_safe)
     K = hat(phi)
     eye = torch.eye(3, dtype=phi.dtype, device=phi.device).expand(K.shape)
-    return eye + a[..., None, None] * K + b[..., None, None] * (K @ K)
+    K2 = phi[..., :, None] * phi[..., None, :] - theta2[..., None, None] * eye  # hat(phi)^2, no matmul
+    return eye + a[..., None, None] * K + b[..., None, None] * K2
 
 
 def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:

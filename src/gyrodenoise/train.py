@@ -27,6 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
+from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.paths import portable_command, portable_path, portable_tree
@@ -134,6 +135,8 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule) -> tup
 
 
 def train(cfg: DictConfig) -> dict:
+    if cfg.get("retain_freed_memory", True):
+        retain_freed_memory()
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
     if cfg.get("seed") is not None:
