@@ -126,6 +126,19 @@ def queue_throughput() -> list[tuple[Path, str]]:
     return out
 
 
+def cpu_means(cpu: list[dict]) -> list[str]:
+    """One line per code version with >= 2 timed seeds: mean +- sd of the wall time and the test AOE."""
+    by_code: dict[str, list[dict]] = defaultdict(list)
+    for r in cpu:
+        by_code[r["queue"].get("commit", "at 1064bc8")].append(r)
+    return [
+        f"- code {code}, {len(rs)} seeds: process wall {stats([r['queue']['process_wall_time_s'] for r in rs])} s, "
+        f"test AOE {stats([r['test']['test/aoe_deg'] for r in rs])} deg"
+        for code, rs in by_code.items()
+        if len(rs) > 1
+    ]
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     import matplotlib
 
@@ -224,6 +237,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         "|---|---|---|---|---|---|---|",
         *(cpu_rows or ["| - | - | not measured yet | | | | |"]),
         "",
+        *cpu_means(cpu),
     ]
     OUT.mkdir(parents=True, exist_ok=True)
     write_text(OUT.with_suffix(".md"), "\n".join(md))
