@@ -1,14 +1,16 @@
-"""What one CPU training step of the default EuRoC run costs, with and without retained memory.
+"""What one CPU training step of the default EuRoC run costs, and what two CPU measures save.
 
     python benchmarks/cpu_step_profile.py [--rounds 4] [--steps 15] [--threads 2]
 
 One training step of `dataset=euroc` (the real batch: 6 crops of 9601 samples; forward, increment
-loss, backward, Adam) is timed in fresh processes under glibc's default malloc and under
-`gyrodenoise.cpu_memory.retain_freed_memory` (what `python -m gyrodenoise.train` applies,
-`retain_freed_memory: true`). The two kinds of process alternate for `--rounds` rounds, so that a
-slower or faster spell of a shared VM hits both; figures are medians over all timed steps, with
-the minor page faults per step. Then torch's profiler lists the operators of a retained-memory step.
-Writes benchmarks/results/cpu_step_profile.{md,json}. Needs ../shared/data/euroc (or GYRODENOISE_DATA).
+loss, backward, Adam) is timed in fresh processes of four kinds: the training default (freed memory
+retained, `gyrodenoise.cpu_memory`; dilated convolutions' input gradient as a forward convolution,
+`gyrodenoise.models.cpu_layers.DilatedConv1d`), the default without the convolution measure (torch's
+backward), the default under glibc's default malloc, and neither measure (the code before them).
+The kinds alternate for `--rounds` rounds (the order rotating), so that a slower or faster spell of
+a shared VM hits all; figures are medians over all timed steps, with the minor page faults per step.
+Then torch's profiler lists the operators of a default step. Writes
+benchmarks/results/cpu_step_profile.{md,json}. Needs ../shared/data/euroc (or GYRODENOISE_DATA).
 """
 
 from __future__ import annotations
@@ -24,7 +26,13 @@ import time
 from pathlib import Path
 
 OUT = Path("benchmarks/results/cpu_step_profile")
-MODES = ("default", "retain")
+MODES = ("default", "torch_conv_backward", "glibc_malloc", "neither")
+NAMES = {
+    "default": "training default (retained memory, input gradient as a convolution)",
+    "torch_conv_backward": "retained memory, torch's convolution backward",
+    "glibc_malloc": "glibc's default malloc, input gradient as a convolution",
+    "neither": "neither measure (glibc's malloc, torch's backward)",
+}
 
 
 def build():
@@ -63,8 +71,10 @@ def child(mode: str, steps: int, threads: int, profile: bool) -> None:
     import torch
 
     from gyrodenoise.cpu_memory import retain_freed_memory
+    from gyrodenoise.models.cpu_layers import DilatedConv1d
 
-    applied = retain_freed_memory() if mode == "retain" else False
+    applied = retain_freed_memory() if mode not in ("glibc_malloc", "neither") else False
+    DilatedConv1d.input_grad_as_conv = mode not in ("torch_conv_backward", "neither")
     torch.set_num_threads(threads)
     module, opt, batch = build()
     for _ in range(3):  # warm-up: oneDNN primitives, allocator
@@ -103,10 +113,10 @@ def main() -> int:
 
     runs: dict[str, list[dict]] = {m: [] for m in MODES}
     for r in range(args.rounds):
-        for mode in MODES if r % 2 == 0 else MODES[::-1]:
+        for mode in MODES[r % len(MODES) :] + MODES[: r % len(MODES)]:
             runs[mode].append(run_child(mode, args))
             print(f"round {r} {mode}: median {statistics.median(runs[mode][-1]['ms']):.0f} ms", flush=True)
-    profile = run_child("retain", args, profile=True)["profile"]
+    profile = run_child("default", args, profile=True)["profile"]
     ms = {m: [t for run in runs[m] for t in run["ms"]] for m in MODES}
     faults = {m: statistics.median([f for run in runs[m] for f in run["faults"]]) for m in MODES}
     med = {m: statistics.median(v) for m, v in ms.items()}
@@ -121,21 +131,27 @@ def main() -> int:
         "# One CPU training step of the default EuRoC run",
         "",
         f"`{command}` on {machine}, nothing else running. Batch: 6 crops x 9601 samples; forward, increment",
-        "loss (float64), backward, Adam. Fresh processes, the two kinds alternating; medians over all timed",
+        "loss (float64), backward, Adam. Fresh processes, the kinds in rotating order; medians over all timed",
         "steps, quartiles, the median of each process, and the minor page faults per step.",
         "",
-        "| malloc | median step (ms) | quartiles (ms) | per process (ms) | page faults per step |",
+        "| process | median step (ms) | quartiles (ms) | per process (ms) | page faults per step |",
         "|---|---|---|---|---|",
         *(
-            f"| {name} | {med[m]:.0f} | {quart[m][0]:.0f} - {quart[m][2]:.0f} | {per_round[m]} | {faults[m]:.0f} |"
-            for m, name in (("default", "glibc default"), ("retain", "retain_freed_memory (training default)"))
+            f"| {NAMES[m]} | {med[m]:.0f} | {quart[m][0]:.0f} - {quart[m][2]:.0f} | {per_round[m]} | {faults[m]:.0f} |"
+            for m in MODES
         ),
         "",
-        f"Retained memory saves {med['default'] - med['retain']:.0f} ms per step "
-        f"({100 * (med['default'] - med['retain']) / med['default']:.0f}%): at 600 epochs (one step each), "
-        f"{0.6 * (med['default'] - med['retain']):.0f} s of a default EuRoC fit.",
+        *(
+            f"- {what}: {med[m] - med['default']:.0f} ms per step ({100 * (med[m] - med['default']) / med[m]:.0f}%), "
+            f"{0.6 * (med[m] - med['default']):.0f} s of a 600-epoch fit"
+            for m, what in (
+                ("glibc_malloc", "retained memory saves"),
+                ("torch_conv_backward", "the convolution measure saves"),
+                ("neither", "both save"),
+            )
+        ),
         "",
-        "Operators of a retained-memory step (torch profiler, 5 steps):",
+        "Operators of a default step (torch profiler, 5 steps):",
         "",
         "```",
         profile,
@@ -143,7 +159,7 @@ def main() -> int:
         "",
     ]
     write_text(OUT.with_suffix(".md"), "\n".join(md))
-    print("\n".join(md[:13]))
+    print("\n".join(md[:15]))
     return 0
 
 

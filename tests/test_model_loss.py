@@ -5,7 +5,8 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.models.build import build_model
-from gyrodenoise.models.denoiser import FastDropout, count_parameters, predict_gyro
+from gyrodenoise.models.cpu_layers import DilatedConv1d, FastDropout
+from gyrodenoise.models.denoiser import count_parameters, predict_gyro
 
 
 def test_default_network_has_paper_parameter_count():
@@ -32,6 +33,30 @@ def test_outputs_do_not_depend_on_future_samples(act):
     a, b = model(imu), model(changed)
     torch.testing.assert_close(a[:, :800], b[:, :800])
     assert not torch.allclose(a[:, 800:], b[:, 800:])
+
+
+@pytest.mark.parametrize("dilation", [1, 4, 64])
+def test_dilated_conv_gradients_equal_torch_conv(dilation):
+    """The CPU layer's hand-written input gradient: exact in float64 (gradcheck), torch's in float32."""
+    torch.manual_seed(0)
+    conv = DilatedConv1d(5, 4, 7, dilation=dilation).double()
+    x = torch.randn(2, 5, 6 * dilation + 40, dtype=torch.float64, requires_grad=True)
+    w, b = (p.detach().clone().requires_grad_() for p in (conv.weight, conv.bias))
+    assert torch.autograd.gradcheck(
+        lambda x, w, b: torch.func.functional_call(conv, {"weight": w, "bias": b}, (x,)), (x, w, b)
+    )
+    conv32 = DilatedConv1d(16, 32, 7, dilation=dilation)
+    plain = torch.nn.Conv1d(16, 32, 7, dilation=dilation)
+    plain.load_state_dict(conv32.state_dict())
+    x32 = torch.randn(3, 16, 6 * dilation + 500)
+    g = torch.randn(3, 32, 500)
+    grads = []
+    for layer in (conv32, plain):
+        xi = x32.clone().requires_grad_()
+        layer(xi).backward(g)
+        grads.append([xi.grad, layer.weight.grad, layer.bias.grad])
+    for a, b in zip(*grads, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4 * float(b.abs().max()))
 
 
 def test_fast_dropout_rate_scale_and_seeding():
