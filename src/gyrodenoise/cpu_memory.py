@@ -2,10 +2,10 @@
 
 A CPU training step of the EuRoC network allocates and frees dozens of ~30 MB activation tensors.
 By default glibc serves such blocks with mmap (or trims the heap top) and returns them to the OS
-when freed, so the next step page-faults every page back in, zero-filled by the kernel: ~25k page
-faults per step and about a fifth of the step's time on the 2-core VM
-(benchmarks/results/cpu_step_profile.md). `mallopt` makes malloc serve them from its heap and keep
-that heap: the process holds its peak (~1.3 GB for the default EuRoC run) until it exits.
+when freed, so the next step page-faults every page back in, zero-filled by the kernel: 43-60k page
+faults per step, 9-23% of the step's time on the 2-core VM (benchmarks/results/cpu_step_profile.md).
+`mallopt` makes malloc serve them from its heap and keep that heap: the process holds its peak
+(~1.2 GB for the default EuRoC run, steady over the run) until it exits.
 """
 
 from __future__ import annotations
