@@ -1,4 +1,5 @@
-"""Drop-in layers of the denoiser that train faster on the CPU; same parameters and results.
+"""Drop-in layers of the denoiser that train faster on the CPU: same parameters, the same computation
+to float32 rounding (the dropout: masks of the same distribution, from another generator).
 
 Both are subclasses of their torch layer (state_dicts, `isinstance` checks, the streaming corrector
 and exported graphs see nn.Conv1d / nn.Dropout) and behave as it does on other devices.
