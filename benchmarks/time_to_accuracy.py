@@ -126,11 +126,17 @@ def queue_throughput() -> list[tuple[Path, str]]:
     return out
 
 
+def commit_of(timing: dict) -> str:
+    """The code a default-run timing ran: its recorded commit; the one timing from before commits were
+    recorded was committed in 1064bc8."""
+    return timing["queue"].get("commit", "at 1064bc8")
+
+
 def cpu_means(cpu: list[dict]) -> list[str]:
     """One line per code version with >= 2 timed seeds: mean +- sd of the wall time and the test AOE."""
     by_code: dict[str, list[dict]] = defaultdict(list)
     for r in cpu:
-        by_code[r["queue"].get("commit", "at 1064bc8")].append(r)
+        by_code[commit_of(r)].append(r)
     return [
         f"- code {code}, {len(rs)} seeds: process wall {stats([r['queue']['process_wall_time_s'] for r in rs])} s, "
         f"test AOE {stats([r['test']['test/aoe_deg'] for r in rs])} deg"
@@ -189,7 +195,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     cpu = [r for r in runs if r["_file"].startswith("cpu_default")]
     cpu_rows = [
         f"| {epochs_of(r)} | {r['seed']} | {r['queue']['process_wall_time_s']:.0f} | {r['train_wall_time_s']:.0f} | "
-        f"{r['test']['test/aoe_deg']:.2f} | {r['queue'].get('commit', 'at 1064bc8')} | {r['machine']} |"
+        f"{r['test']['test/aoe_deg']:.2f} | {commit_of(r)} | {r['machine']} |"
         for r in sorted(cpu, key=lambda r: r["queue"].get("commit") is not None)
     ]
     md = [
