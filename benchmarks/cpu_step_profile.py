@@ -37,15 +37,13 @@ NAMES = {
 
 def build():
     import torch
-    from hydra import compose, initialize_config_dir
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
-    import gyrodenoise
+    from gyrodenoise.config import compose_config
     from gyrodenoise.lit import DenoiserModule
 
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base=None):
-        cfg = compose("train", overrides=["dataset=euroc"])
+    cfg = compose_config("train", ["dataset=euroc"])
     dm = instantiate(cfg.dataset)
     dm.setup("fit")
     c = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in ("model", "optim", "loss")}

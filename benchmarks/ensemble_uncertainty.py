@@ -17,11 +17,10 @@ import time
 from pathlib import Path
 
 import hydra
-from hydra import compose, initialize_config_dir
 
-import gyrodenoise
 from gyrodenoise import plots
 from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.config import compose_config
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.ensemble import predict_with_spread
 from gyrodenoise.pretrained import load_model
@@ -35,8 +34,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/ensemble_uncertainty"))
     args = ap.parse_args()
     start = time.time()
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose("train", overrides=["dataset=euroc"])
+    cfg = compose_config("train", ["dataset=euroc"])
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.setup("test")
     model, meta = load_model(args.model)

@@ -19,10 +19,9 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from hydra import compose, initialize_config_dir
 
-import gyrodenoise
 from gyrodenoise.atomic import write_json
+from gyrodenoise.config import compose_config
 from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
@@ -40,8 +39,7 @@ ENSEMBLES = {  # name -> member file stems
 
 
 def test_sequences() -> list:
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose("train", overrides=["dataset=euroc"])
+    cfg = compose_config("train", ["dataset=euroc"])
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.setup("test")
     return dm.test_part

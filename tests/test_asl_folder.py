@@ -7,11 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _asl import run_train
-from hydra import compose, initialize_config_dir
 from omegaconf.errors import MissingMandatoryValue
 from scipy.spatial.transform import Rotation
 
-import gyrodenoise
+from gyrodenoise.config import compose_config
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro
 
@@ -50,8 +49,7 @@ def asl_root(tmp_path_factory) -> Path:
 
 
 def test_config_requires_root_and_split():
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose("train", overrides=["dataset=asl_folder"])
+    cfg = compose_config("train", ["dataset=asl_folder"])
     with pytest.raises(MissingMandatoryValue):
         _ = cfg.dataset.root
     with pytest.raises(MissingMandatoryValue):

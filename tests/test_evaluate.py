@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from scipy.spatial.transform import Rotation
 
-import gyrodenoise
+from gyrodenoise.config import compose_config
 from gyrodenoise.evaluate import evaluate, slug
 from gyrodenoise.metrics import aoe, roe
 from gyrodenoise.pretrained import available_models, load_model
@@ -36,8 +35,7 @@ def test_shipped_models_load_by_name():
 
 
 def run_evaluate(*overrides: str) -> dict:
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        return evaluate(compose("evaluate", overrides=list(overrides)))
+    return evaluate(compose_config("evaluate", overrides))
 
 
 def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):

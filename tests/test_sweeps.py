@@ -15,10 +15,9 @@ from hydra import compose, initialize_config_dir
 from lightning.pytorch.callbacks import EMAWeightAveraging
 from omegaconf import OmegaConf
 
-import gyrodenoise
 from gyrodenoise import ablation
+from gyrodenoise.config import CONF_DIR as CONF
 
-CONF = Path(gyrodenoise.__file__).parent / "conf"
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
 SEARCHES = sorted(p.stem for p in (CONF / "hparams_search").glob("*.yaml"))
 LAUNCHERS = sorted(p.stem for p in (CONF / "hydra" / "launcher").glob("*.yaml"))

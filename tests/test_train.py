@@ -7,9 +7,8 @@ from pathlib import Path
 import pytest
 import torch
 from _asl import write_asl_sequence
-from hydra import compose, initialize_config_dir
 
-import gyrodenoise
+from gyrodenoise.config import compose_config
 from gyrodenoise.train import format_test_table, train
 
 
@@ -41,8 +40,7 @@ def config(root: Path, out: Path, *extra: str):
         f"paths.output_dir={out}",
         *extra,
     ]
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        return compose("train", overrides=overrides)
+    return compose_config("train", overrides)
 
 
 def test_seeded_runs_are_reproducible(root, tmp_path):
@@ -97,8 +95,7 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
         "callbacks.progress_bar.print_every_n_epochs=2",
         f"paths.output_dir={tmp_path}",
     ]
-    with initialize_config_dir(str(Path(gyrodenoise.__file__).parent / "conf"), version_base="1.3"):
-        cfg = compose("train", overrides=overrides)
+    cfg = compose_config("train", overrides)
     train(cfg)
     out = capsys.readouterr().out
     lines = [ln for ln in out.splitlines() if ln.startswith("epoch ")]
