@@ -210,6 +210,46 @@ def ensemble_table() -> str:
     return markdown_table(["model", *seqs, "average"], rows)
 
 
+EUROC_CV_RUNS = {  # every EuRoC cross-validation run of the two recipes (rounds 1-3), by recipe
+    "ref": [
+        "reports/ablation_runs/reference/*.json",
+        "reports/accuracy_runs/euroc_cv/ref_f*.json",
+        "reports/accuracy_runs/euroc_cv2/ref_f*.json",
+        "reports/accuracy_runs/euroc_cv3/ref_f*.json",
+    ],
+    "whole": [
+        "reports/ablation_runs/train_duration/whole_s*.json",
+        "reports/accuracy_runs/euroc_cv/whole_f*.json",
+        "reports/accuracy_runs/euroc_cv2/whole_f*.json",
+        "reports/accuracy_runs/euroc_cv3/whole_f*.json",
+    ],
+}
+
+
+def test_by_fold() -> tuple[str, dict]:
+    """Test AOE per test flight of the cross-validation models, by the training flight they left out: which
+    training flight does each test flight need? (Means over every run of both recipes for that fold.)"""
+    per_fold: dict[int, list[dict]] = defaultdict(list)
+    held_out = {}
+    for patterns in EUROC_CV_RUNS.values():
+        for pattern in patterns:
+            for _p, s in load(pattern):
+                k = s["config"]["dataset"]["cv_fold"]
+                per_fold[k].append(s["test"])
+                held_out[k] = s["config"]["dataset"]["train_seqs"][k]
+    first = next(iter(per_fold.values()))[0]
+    seqs = [k.removeprefix("test/aoe_deg/") for k in first if k.startswith("test/aoe_deg/")]
+    rows, out = [], {}
+    for k in sorted(per_fold):
+        tests = per_fold[k]
+        means = {q: statistics.fmean(t[f"test/aoe_deg/{q}"] for t in tests) for q in seqs}
+        avg = statistics.fmean(t["test/aoe_deg"] for t in tests)
+        out[held_out[k]] = {"runs": len(tests), "test_aoe_deg": means, "average": avg}
+        rows.append([f"{k}: {held_out[k]}", str(len(tests)), *(f"{means[q]:.2f}" for q in seqs), f"{avg:.2f}"])
+    head = ["fold: training flight left out", "runs", *seqs, "average"]
+    return markdown_table(head, rows), out
+
+
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     rc = rank_correlation()
@@ -221,9 +261,12 @@ def main() -> None:
     write_text(OUT / "ensembles.md", ensemble_table())
     cv2_md, cv2 = cv_round2()
     write_text(OUT / "cv_round2.md", cv2_md)
+    by_fold_md, by_fold = test_by_fold()
+    write_text(OUT / "test_by_fold.md", by_fold_md)
     arm_rows = [[r["arm"], f"{r['new']:.2f}", f"{r['old']:.2f}", f"{r['test']:.2f}"] for r in rc["arms"]]
     write_text(OUT / "rank_arms.md", markdown_table(["recipe (ablation arm)", "new val", "old val", "test"], arm_rows))
-    write_json(OUT / "summary.json", {"rank_correlation": rc, "cv": cv, "cv_round2": cv2, "full_data": full})
+    summary = {"rank_correlation": rc, "cv": cv, "cv_round2": cv2, "full_data": full, "test_by_fold": by_fold}
+    write_json(OUT / "summary.json", summary)
     print(
         json.dumps(
             {

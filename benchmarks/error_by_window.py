@@ -8,7 +8,8 @@ consecutive windows of `--window` seconds (the error made inside the window when
 ground truth at its beginning; windows are independent of what came before), beside what the body was
 doing: the largest tilt of the body from its usual attitude on the flight (the angle between the world's
 vertical in the body frame and its median direction) and the RMS angular rate. Models are shipped names or
-model files. Writes benchmarks/results/error_by_window.{md,json,png}. CPU only; ~20 s per model.
+model files (LABEL=FILE names a file's column). Writes --out .md, .json, .png (default
+benchmarks/results/error_by_window). CPU only; ~5 s per model and flight.
 """
 
 from __future__ import annotations
@@ -64,14 +65,22 @@ def motion(seq, bounds: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--models", nargs="+", default=["euroc", "euroc-calibrated"], help="shipped names or files")
+    ap.add_argument(
+        "--models",
+        nargs="+",
+        default=["euroc", "euroc-calibrated"],
+        help="shipped names or model files, each optionally LABEL=MODEL",
+    )
     ap.add_argument("--seqs", nargs="+", default=["MH_01_easy", "MH_02_easy", "V2_02_medium"])
     ap.add_argument("--window", type=float, default=10.0, help="window length in s (default: %(default)s)")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/error_by_window"))
     args = ap.parse_args()
     start = time.time()
     dm = hydra.utils.instantiate(compose_config("train", ["dataset=euroc"]).dataset)
-    models = {m: load_model(m)[0] for m in args.models}
+    models = {}
+    for arg in args.models:
+        label, _, name = arg.rpartition("=")
+        models[label or name] = load_model(name)[0]
     result = {
         "command": "python benchmarks/error_by_window.py --models "
         + " ".join(args.models)
