@@ -79,7 +79,7 @@ def main() -> None:
         "--summaries",
         type=Path,
         nargs="*",
-        default=[Path("reports/accuracy_runs/euroc_cv2"), Path("reports/accuracy_runs/euroc_cv3")],
+        default=sorted(Path("reports/accuracy_runs").glob("euroc_cv*")),
         help="folders of the runs' committed summary JSONs (to check each member's figure)",
     )
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/cv_ensemble_figure"))

@@ -8,8 +8,10 @@ consecutive windows of `--window` seconds (the error made inside the window when
 ground truth at its beginning; windows are independent of what came before), beside what the body was
 doing: the largest tilt of the body from its usual attitude on the flight (the angle between the world's
 vertical in the body frame and its median direction) and the RMS angular rate. Models are shipped names or
-model files (LABEL=FILE names a file's column). Writes --out .md, .json, .png (default
-benchmarks/results/error_by_window). CPU only; ~5 s per model and flight.
+model files (LABEL=FILE names a file's column). --level-gravity adds, for each model, the counterfactual
+input with the gravity part of the accelerometer at its usual body direction (does the model fail on a
+tilt?). Writes --out .md, .json, .png (default benchmarks/results/error_by_window). CPU only; ~5 s per
+model and flight.
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro, relative_rotvec
+
+GRAVITY = 9.81  # m/s^2: only its direction matters here (the median is taken of the same vector)
 
 
 def window_bounds(t: np.ndarray, window_s: float) -> list[tuple[int, int]]:
@@ -63,6 +67,15 @@ def motion(seq, bounds: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+def gravity_levelled(seq) -> np.ndarray:
+    """The IMU input with the gravity part of the accelerometer moved to its median body direction on the flight
+    (ground-truth attitude; the dynamic acceleration is kept): what the network would read at its usual tilt."""
+    g_body = np.einsum("nji,j->ni", seq.rot, np.array([0.0, 0.0, GRAVITY]))
+    imu = seq.imu.copy()
+    imu[:, 3:] += np.median(g_body, axis=0) - g_body
+    return imu
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
@@ -73,6 +86,11 @@ def main() -> None:
     )
     ap.add_argument("--seqs", nargs="+", default=["MH_01_easy", "MH_02_easy", "V2_02_medium"])
     ap.add_argument("--window", type=float, default=10.0, help="window length in s (default: %(default)s)")
+    ap.add_argument(
+        "--level-gravity",
+        action="store_true",
+        help="also run each model on the input with gravity at its usual body direction (a counterfactual)",
+    )
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/error_by_window"))
     args = ap.parse_args()
     start = time.time()
@@ -86,7 +104,8 @@ def main() -> None:
         + " ".join(args.models)
         + " --seqs "
         + " ".join(args.seqs)
-        + f" --window {args.window:g}",
+        + f" --window {args.window:g}"
+        + (" --level-gravity" if args.level_gravity else ""),
         "machine": f"{platform.node()} ({platform.machine()}, CPU)",
         "sequences": {},
     }
@@ -97,9 +116,11 @@ def main() -> None:
         bounds = window_bounds(seq.t, args.window)
         tilt, rate = motion(seq, bounds)
         errs = {}
+        inputs = {"": seq.imu} | ({" (gravity levelled)": gravity_levelled(seq)} if args.level_gravity else {})
         for name, model in models.items():
-            R = integrate_gyro(seq.rot[0], predict_gyro(model, seq.imu).numpy(), seq.dt)
-            errs[name] = window_errors(seq.rot, R, bounds)
+            for suffix, imu in inputs.items():
+                R = integrate_gyro(seq.rot[0], predict_gyro(model, imu).numpy(), seq.dt)
+                errs[name + suffix] = window_errors(seq.rot, R, bounds)
         t0 = [float(seq.t[a]) for a, _ in bounds]
         result["sequences"][seq_name] = {
             "window_start_s": t0,
