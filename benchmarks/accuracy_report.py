@@ -119,6 +119,10 @@ def cv_table() -> tuple[str, dict]:
     return markdown_table(head, rows), summary
 
 
+ROUND1_CV_RUNS = {  # round 1 of the EuRoC selection: one run per fold and recipe (seed = fold)
+    "ref": ["reports/ablation_runs/reference/*.json", "reports/accuracy_runs/euroc_cv/ref_f*.json"],
+    "whole": ["reports/ablation_runs/train_duration/whole_s*.json", "reports/accuracy_runs/euroc_cv/whole_f*.json"],
+}
 ROUND2_SEEDS = 3  # per fold and recipe (benchmarks/queues/cv_round2.txt: round 1's seed k, then 100+k, 200+k)
 
 
@@ -127,11 +131,7 @@ def cv_round2() -> tuple[str, dict]:
     its runs: figure = mean over the 6 folds of the per-fold mean of 3 seeds; whole replaces ref only if the
     paired-by-fold difference (whole - ref) has a 95% t-interval below 0. No verdict while runs are missing."""
     vals: dict[str, dict[int, list[float]]] = {"ref": defaultdict(list), "whole": defaultdict(list)}
-    round1 = {
-        "ref": ["reports/ablation_runs/reference/*.json", "reports/accuracy_runs/euroc_cv/ref_f*.json"],
-        "whole": ["reports/ablation_runs/train_duration/whole_s*.json", "reports/accuracy_runs/euroc_cv/whole_f*.json"],
-    }
-    for recipe, patterns in round1.items():
+    for recipe, patterns in ROUND1_CV_RUNS.items():
         for pattern in patterns:
             for _p, s in load(pattern):
                 vals[recipe][s["config"]["dataset"]["cv_fold"]].append(metric(s, "val/aoe_deg"))
@@ -210,19 +210,10 @@ def ensemble_table() -> str:
     return markdown_table(["model", *seqs, "average"], rows)
 
 
-EUROC_CV_RUNS = {  # every EuRoC cross-validation run of the two recipes (rounds 1-3), by recipe
-    "ref": [
-        "reports/ablation_runs/reference/*.json",
-        "reports/accuracy_runs/euroc_cv/ref_f*.json",
-        "reports/accuracy_runs/euroc_cv2/ref_f*.json",
-        "reports/accuracy_runs/euroc_cv3/ref_f*.json",
-    ],
-    "whole": [
-        "reports/ablation_runs/train_duration/whole_s*.json",
-        "reports/accuracy_runs/euroc_cv/whole_f*.json",
-        "reports/accuracy_runs/euroc_cv2/whole_f*.json",
-        "reports/accuracy_runs/euroc_cv3/whole_f*.json",
-    ],
+# every EuRoC cross-validation run of the two recipes (rounds 1-3), by recipe
+EUROC_CV_RUNS = {
+    recipe: [*patterns, *(f"reports/accuracy_runs/euroc_cv{r}/{recipe}_f*.json" for r in (2, 3))]
+    for recipe, patterns in ROUND1_CV_RUNS.items()
 }
 
 

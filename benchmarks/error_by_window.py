@@ -55,9 +55,14 @@ def window_errors(R_gt: np.ndarray, R_est: np.ndarray, bounds: list[tuple[int, i
     return np.degrees(np.linalg.norm(relative_rotvec(dR_gt, dR_est), axis=-1))
 
 
+def world_up_in_body(seq) -> np.ndarray:
+    """(N, 3) unit vector of the world's vertical in the body frame (ground-truth attitude)."""
+    return seq.rot[:, 2, :]  # R^T e_z: the third row of the body-to-world rotation
+
+
 def motion(seq, bounds: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
     """Per window: the largest tilt from the flight's median attitude (deg) and the RMS gyro rate (deg/s)."""
-    up = np.einsum("nji,j->ni", seq.rot, np.array([0.0, 0.0, 1.0]))  # world vertical in the body frame
+    up = world_up_in_body(seq)
     ref = np.median(up, axis=0)
     tilt = np.degrees(np.arccos(np.clip(up @ (ref / np.linalg.norm(ref)), -1.0, 1.0)))
     rate = np.degrees(np.linalg.norm(seq.gyro, axis=1))
@@ -70,7 +75,7 @@ def motion(seq, bounds: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
 def gravity_levelled(seq) -> np.ndarray:
     """The IMU input with the gravity part of the accelerometer moved to its median body direction on the flight
     (ground-truth attitude; the dynamic acceleration is kept): what the network would read at its usual tilt."""
-    g_body = np.einsum("nji,j->ni", seq.rot, np.array([0.0, 0.0, GRAVITY]))
+    g_body = GRAVITY * world_up_in_body(seq)
     imu = seq.imu.copy()
     imu[:, 3:] += np.median(g_body, axis=0) - g_body
     return imu
