@@ -1,6 +1,6 @@
 """What the training loop costs per epoch around the network's arithmetic (issue 9).
 
-    python benchmarks/epoch_overhead.py [--device cpu|cuda] [--rounds 3] [--label TEXT]
+    python benchmarks/epoch_overhead.py [--device cpu|cuda] [--rounds 3] [--label TEXT] [TRAIN OVERRIDES ...]
 
 One epoch of gyrodenoise's training is one optimiser step, so where the step's arithmetic is cheap (a GPU:
 ~45 ms per epoch on an H100, against ~30 for the authors' code) what the loop does around it sets the wall
@@ -35,7 +35,7 @@ TINY = ["dataset=euroc", "dataset.window=64", "model.channels=[2,2,2,2]"]
 EPOCHS = (200, 600)
 
 
-def loop_wall(epochs: int, device: str) -> float:
+def loop_wall(epochs: int, device: str, overrides: list[str]) -> float:
     """train_wall_time_s of a tiny training run of `epochs` epochs."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [
@@ -51,6 +51,7 @@ def loop_wall(epochs: int, device: str) -> float:
             "threads=1",
             f"trainer.accelerator={'gpu' if device == 'cuda' else 'cpu'}",
             f"hydra.run.dir={tmp}",
+            *overrides,
         ]
         subprocess.run(cmd, check=True, capture_output=True)
         return json.loads((Path(tmp) / "summary.json").read_text())["train_wall_time_s"]
@@ -121,10 +122,11 @@ def main() -> None:
     ap.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--label", default="", help="what the code measured is (e.g. a commit and what it changes)")
+    ap.add_argument("overrides", nargs="*", help="extra train overrides of the loop (e.g. logger=none)")
     args = ap.parse_args()
     loop, bare, syncs = [], [], []
     for r in range(args.rounds):
-        walls = {e: loop_wall(e, args.device) for e in EPOCHS}
+        walls = {e: loop_wall(e, args.device, args.overrides) for e in EPOCHS}
         loop.append((walls[EPOCHS[1]] - walls[EPOCHS[0]]) / (EPOCHS[1] - EPOCHS[0]) * 1e3)
         ms, s = bare_epoch_ms(args.device)
         bare.append(ms)
@@ -134,7 +136,9 @@ def main() -> None:
         "label": args.label,
         "device": args.device,
         "machine": machine(args.device),
-        "command": "python benchmarks/epoch_overhead.py --device " + args.device + f" --rounds {args.rounds}",
+        "command": " ".join(
+            ["python benchmarks/epoch_overhead.py --device", args.device, f"--rounds {args.rounds}", *args.overrides]
+        ),
         "loop_ms_per_epoch": statistics.median(loop),
         "bare_ms_per_epoch": statistics.median(bare),
         "host_syncs_per_step_bare": syncs[0],
@@ -160,14 +164,16 @@ def report(rows: list[dict]) -> str:
         "from 200 vs 600 epochs; bare: the same step in a plain loop; medians over rounds. One row per "
         "measurement, oldest first.",
         "",
-        "| code | device | machine | loop (ms/epoch) | bare (ms/epoch) | loop - bare | host syncs per step (bare) |",
-        "|---|---|---|---|---|---|---|",
+        "| code | device | machine | loop (ms/epoch) | bare (ms/epoch) | loop - bare | host syncs per step (bare) "
+        "| command |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = r["host_syncs_per_step_bare"]
         lines.append(
             f"| {r['label']} | {r['device']} | {r['machine']} | {r['loop_ms_per_epoch']:.2f} | "
-            f"{r['bare_ms_per_epoch']:.2f} | {r['overhead_ms_per_epoch']:.2f} | {'n/a (CPU)' if s is None else f'{s:g}'} |"
+            f"{r['bare_ms_per_epoch']:.2f} | {r['overhead_ms_per_epoch']:.2f} | "
+            f"{'n/a (CPU)' if s is None else f'{s:g}'} | `{r['command']}` |"
         )
     return "\n".join(lines) + "\n"
 

@@ -3,6 +3,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise import so3
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.models.build import build_model
 from gyrodenoise.models.cpu_layers import DilatedConv1d, FastDropout
@@ -121,6 +122,29 @@ def test_loss_ignores_increments_without_ground_truth():
     mask = torch.tensor([[True, True, True, False]])
     assert loss(w, dt, dR, mask).item() == 0.0  # the bad increment is masked, and its 32-sample parent too
     assert loss(w, dt, dR, torch.ones(1, 4, dtype=torch.bool)).item() > 0
+
+
+def test_masked_loss_equals_the_mean_over_available_increments_with_its_gradient():
+    """The sync-free masked mean equals the Huber mean over the available components (boolean indexing),
+    value and gradient, for a batch with increments missing at random; nothing available gives 0."""
+    gen = torch.Generator().manual_seed(0)
+    B, n = 3, 1 + 128
+    w = (0.5 * torch.randn(B, n, 3, generator=gen, dtype=torch.float64)).requires_grad_()
+    dt = torch.full((B, n), 0.005, dtype=torch.float64)
+    dR = so3.exp(0.02 * torch.randn(B, 8, 3, generator=gen, dtype=torch.float64))
+    mask = torch.rand(B, 8, generator=gen) > 0.3
+    loss = IncrementLoss((16, 32), huber_delta=0.005, weight=1e6)
+    got = loss(w, dt, dR, mask)
+    (g_got,) = torch.autograd.grad(got, w)
+    ref = 0.0
+    for _, r, m in loss.residuals(w, dt, dR, mask):
+        ref = ref + 1e6 * torch.nn.functional.huber_loss(r[m], torch.zeros_like(r[m]), delta=0.005)
+    (g_ref,) = torch.autograd.grad(ref, w)
+    torch.testing.assert_close(got, ref, rtol=1e-12, atol=0)
+    torch.testing.assert_close(g_got, g_ref, rtol=1e-10, atol=1e-12)
+    none = loss(w, dt, dR, torch.zeros_like(mask))
+    (g_none,) = torch.autograd.grad(none, w)
+    assert none.item() == 0.0 and torch.count_nonzero(g_none) == 0
 
 
 def test_predict_gyro_is_float64_and_restores_mode():

@@ -45,9 +45,14 @@ class IncrementLoss(torch.nn.Module):
             yield j, so3.log(gt @ est.transpose(-1, -2)), m
 
     def forward(self, w_hat, dt, dR, mask) -> torch.Tensor:
+        """Sum over increment lengths of weight x the Huber mean over the components of available increments.
+
+        Masked means, not boolean indexing or a branch on the mask: both would wait for the device
+        (a host sync) at every training step. A length with no available increment adds 0.
+        """
         total = w_hat.new_zeros((), dtype=torch.float64)
         for _, r, m in self.residuals(w_hat, dt, dR, mask):
-            if m.any():
-                rho = F.huber_loss(r[m], torch.zeros_like(r[m]), reduction="mean", delta=self.delta)
-                total = total + self.weight * rho
+            rho = F.huber_loss(r, torch.zeros_like(r), reduction="none", delta=self.delta)
+            rho = torch.where(m[..., None], rho, 0.0)  # ground truth is finite where missing (SLERP)
+            total = total + self.weight * rho.sum() / (3 * m.sum()).clamp(min=1)
         return total
