@@ -93,6 +93,7 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
         "trainer.max_epochs=4",
         "trainer.check_val_every_n_epoch=2",
         "callbacks.progress_bar.print_every_n_epochs=2",
+        "trainer.log_every_n_steps=2",
         f"paths.output_dir={tmp_path}",
     ]
     cfg = compose_config("train", overrides)
@@ -107,7 +108,8 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     ev.Reload()
     tags = ev.Tags()
     assert {"train/loss", "lr-Adam", "val/aoe_deg", "test/aoe_deg"} <= set(tags["scalars"]), tags["scalars"]
-    assert len(ev.Scalars("train/loss")) == 4
+    assert [e.step for e in ev.Scalars("train/loss")] == [1, 3]  # every log_every_n_steps (one step per epoch)
+    assert [e.step for e in ev.Scalars("lr-Adam")] == [1, 3]
     assert {"val/orientation", "val/gyro_correction"} <= set(tags["images"]), tags["images"]
     assert "_hparams_/session_start_info" in ev.summary_metadata
 

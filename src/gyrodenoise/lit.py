@@ -44,8 +44,19 @@ class DenoiserModule(L.LightningModule):
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
-        self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
+        if self._logs_this_step():
+            self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
         return loss
+
+    def _logs_this_step(self) -> bool:
+        """Whether the loggers write this step (trainer.log_every_n_steps, and the last epoch for the progress
+        bar). A logged loss is read back to the host at the step's end (the progress bar's number): on a GPU
+        that waits for the step, so the other steps do not log it."""
+        trainer = self._trainer
+        if trainer is None:
+            return True
+        last = trainer.max_epochs is not None and self.current_epoch + 1 >= trainer.max_epochs
+        return (self.global_step + 1) % trainer.log_every_n_steps == 0 or last
 
     @staticmethod
     def _integrate_and_score(batch: dict, gyro: torch.Tensor) -> tuple[torch.Tensor, tuple[float, float]]:
