@@ -25,7 +25,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from cv_ensemble_figure import find_runs, held_out_flight
+from cv_ensemble_figure import ROUND3_ROOTS, find_runs, fold_ensemble_and_calibrated
 from error_by_window import world_up_in_body
 from scipy.optimize import minimize
 
@@ -36,9 +36,6 @@ from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro
-
-CV_ROOTS = [Path("runs/cv2/reports/accuracy_runs/euroc_cv2"), Path("runs/cv3/reports/accuracy_runs/euroc_cv3")]
-CV_SEEDS = (100, 200, 300)
 
 
 def aoe_with_offset(seq, gyro: np.ndarray, offset_deg_s: np.ndarray) -> float:
@@ -71,16 +68,11 @@ def hindsight(seq, gyro: np.ndarray) -> dict:
 
 def cv_cases() -> list[tuple[str, object, dict]]:
     """(set, flight, {model label: corrected gyro}) for every held-out flight of the EuRoC folds."""
-    runs = find_runs(CV_ROOTS)
+    runs = find_runs(ROUND3_ROOTS)
     cases = []
     for k in range(6):
-        paths = [runs.get(("ref", k, s + k)) for s in CV_SEEDS]
-        if None in paths:
-            raise SystemExit(f"fold {k}: missing ref runs of seeds {[s + k for s in CV_SEEDS]} under {CV_ROOTS}")
-        seq = held_out_flight(k)
-        members = [predict_gyro(load_model(p)[0], seq.imu).numpy() for p in paths]
-        calibrated = predict_gyro(load_model(paths[0].parent / "calibrated.pt")[0], seq.imu).numpy()
-        cases.append(("cross-validation", seq, {"ref ensemble": np.mean(members, axis=0), "calibrated": calibrated}))
+        seq, ens, cal = fold_ensemble_and_calibrated(k, runs)
+        cases.append(("cross-validation", seq, {"ref ensemble": ens, "calibrated": cal}))
     return cases
 
 

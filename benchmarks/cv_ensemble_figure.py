@@ -55,6 +55,22 @@ def held_out_flight(fold: int):
     return dm.load(dm.cv_holdout)
 
 
+ROUND3_ROOTS = [Path("runs/cv2/reports/accuracy_runs/euroc_cv2"), Path("runs/cv3/reports/accuracy_runs/euroc_cv3")]
+ROUND3_SEEDS = (100, 200, 300)
+
+
+def fold_ensemble_and_calibrated(fold: int, runs: dict, recipe: str = "ref", seeds=ROUND3_SEEDS):
+    """(held-out flight, mean corrected gyro of the fold's members of seeds s + fold, the corrected gyro of the
+    calibrated model the first member's run fitted on the same training flights)."""
+    paths = [runs.get((recipe, fold, s + fold)) for s in seeds]
+    if None in paths:
+        raise SystemExit(f"fold {fold}: missing {recipe} runs of seeds {[s + fold for s in seeds]}")
+    seq = held_out_flight(fold)
+    ens = np.mean([predict_gyro(load_model(p)[0], seq.imu).numpy() for p in paths], axis=0)
+    cal = predict_gyro(load_model(paths[0].parent / "calibrated.pt")[0], seq.imu).numpy()
+    return seq, ens, cal
+
+
 def aoe_deg(seq, gyro: np.ndarray) -> float:
     return math.degrees(aoe(seq.rot, integrate_gyro(seq.rot[0], gyro, seq.dt), seq.gt_mask)[0])
 

@@ -18,16 +18,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from cv_ensemble_figure import aoe_deg, find_runs, held_out_flight
+from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.evaluate import markdown_table
-from gyrodenoise.models.denoiser import predict_gyro
-from gyrodenoise.pretrained import load_model
 
-ROOTS = [Path("runs/cv2/reports/accuracy_runs/euroc_cv2"), Path("runs/cv3/reports/accuracy_runs/euroc_cv3")]
-SEEDS = (100, 200, 300)
 WINDOWS_S: tuple[float | None, ...] = (2.0, 10.0, 30.0, 100.0, None)  # None: the whole past
 
 
@@ -52,15 +48,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/cv_slow_part"))
     args = ap.parse_args()
     start = time.time()
-    runs = find_runs(ROOTS)
+    runs = find_runs(ROUND3_ROOTS)
     folds = []
     for k in range(6):
-        paths = [runs.get(("ref", k, s + k)) for s in SEEDS]
-        if None in paths:
-            raise SystemExit(f"fold {k}: missing ref runs of seeds {[s + k for s in SEEDS]} under {ROOTS}")
-        seq = held_out_flight(k)
-        ens = np.mean([predict_gyro(load_model(p)[0], seq.imu).numpy() for p in paths], axis=0)
-        cal = predict_gyro(load_model(paths[0].parent / "calibrated.pt")[0], seq.imu).numpy()
+        seq, ens, cal = fold_ensemble_and_calibrated(k, runs)
         rate_hz = 1.0 / float(np.median(seq.dt))
         row = {"fold": k, "held_out": seq.name, "ensemble": aoe_deg(seq, ens), "calibrated": aoe_deg(seq, cal)}
         for w in WINDOWS_S:
