@@ -18,30 +18,26 @@ Nothing here selects a model. Writes --out .md and .json. CPU only; ~5 min.
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import time
 from pathlib import Path
 
 import hydra
 import numpy as np
-from cv_ensemble_figure import ROUND3_ROOTS, find_runs, fold_ensemble_and_calibrated
+from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated
 from error_by_window import world_up_in_body
 from scipy.optimize import minimize
 
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
 from gyrodenoise.evaluate import markdown_table
-from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
-from gyrodenoise.so3 import integrate_gyro
 
 
 def aoe_with_offset(seq, gyro: np.ndarray, offset_deg_s: np.ndarray) -> float:
     """AOE 3D (deg) of the integration of `gyro` + a constant offset (deg/s, body axes)."""
-    R = integrate_gyro(seq.rot[0], gyro + np.radians(offset_deg_s)[None, :], seq.dt)
-    return math.degrees(aoe(seq.rot, R, seq.gt_mask)[0])
+    return aoe_deg(seq, gyro + np.radians(offset_deg_s)[None, :])
 
 
 def hindsight(seq, gyro: np.ndarray) -> dict:

@@ -38,7 +38,6 @@ NAMES = {
 def build():
     import torch
     from hydra.utils import instantiate
-    from omegaconf import OmegaConf
 
     from gyrodenoise.config import compose_config
     from gyrodenoise.lit import DenoiserModule
@@ -46,10 +45,9 @@ def build():
     cfg = compose_config("train", ["dataset=euroc"])
     dm = instantiate(cfg.dataset)
     dm.setup("fit")
-    c = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in ("model", "optim", "loss")}
-    module = DenoiserModule(c["model"], c["optim"], c["loss"])
+    module = DenoiserModule.from_config(cfg)
     module.model.set_normalization(*dm.normalization())
-    opt = torch.optim.Adam(module.parameters(), lr=c["optim"]["lr"], weight_decay=c["optim"]["weight_decay"])
+    opt = torch.optim.Adam(module.parameters(), lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
     torch.manual_seed(0)
     return module, opt, next(iter(dm.train_dataloader()))
 

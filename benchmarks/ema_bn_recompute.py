@@ -45,11 +45,7 @@ def score_run(run_dir: Path, batches: int, seed: int) -> dict:
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.setup("fit")
     model, _ = load_model(run_dir / "model.pt")
-    module = DenoiserModule(
-        model=OmegaConf.to_container(cfg.model, resolve=True),
-        optim=OmegaConf.to_container(cfg.optim, resolve=True),
-        loss=OmegaConf.to_container(cfg.loss, resolve=True),
-    )
+    module = DenoiserModule.from_config(cfg)
     module.model.load_state_dict(model.state_dict())  # the EMA weights and normalisation of model.pt
     t0 = time.time()
     recompute_batch_norm(module.model, training_inputs(dm, batches))

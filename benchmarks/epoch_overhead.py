@@ -61,7 +61,6 @@ def bare_epoch_ms(device: str, epochs: int = 300) -> tuple[float, float | None]:
     """Per-epoch ms of a plain loop over the same step, and host syncs per step (CUDA only)."""
     import torch
     from hydra.utils import instantiate
-    from omegaconf import OmegaConf
 
     from gyrodenoise.config import compose_config
     from gyrodenoise.lit import DenoiserModule
@@ -70,8 +69,7 @@ def bare_epoch_ms(device: str, epochs: int = 300) -> tuple[float, float | None]:
     cfg = compose_config("train", TINY)
     dm = instantiate(cfg.dataset)
     dm.setup("fit")
-    c = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in ("model", "optim", "loss")}
-    module = DenoiserModule(c["model"], c["optim"], c["loss"])
+    module = DenoiserModule.from_config(cfg)
     module.model.set_normalization(*dm.normalization())
     module.to(device).train()
     opts = module.configure_optimizers()

@@ -14,6 +14,7 @@ import lightning.pytorch as L
 import numpy as np
 import torch
 from lightning.pytorch.loggers import TensorBoardLogger
+from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise import plots
 from gyrodenoise.losses import IncrementLoss
@@ -31,6 +32,11 @@ class DenoiserModule(L.LightningModule):
         self.figure_every_n_val = figure_every_n_val
         self._val_outputs: list[dict] = []
         self._val_count = 0
+
+    @classmethod
+    def from_config(cls, cfg: DictConfig) -> DenoiserModule:
+        """The module of a train config (its `model`, `optim` and `loss` nodes, resolved to plain containers)."""
+        return cls(**{k: OmegaConf.to_container(cfg[k], resolve=True) for k in ("model", "optim", "loss")})
 
     def setup(self, stage: str) -> None:
         dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
