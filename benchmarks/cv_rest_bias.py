@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated
+from scipy.spatial.transform import Rotation
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
@@ -137,6 +138,10 @@ def offsets_at_rest(seq, models: dict[str, np.ndarray], hindsight: dict) -> list
     """Per model: the constant offset (deg/s) that zeroes its corrected gyro over the strict rest blocks, beside
     the AOE-minimising offset of benchmarks/results/bias_hindsight.json (same sign convention: added)."""
     idx = strict_rest_blocks(seq)
+    w = round(seq.rate_hz)
+    starts = idx[::w]  # strict blocks are whole w-sample blocks
+    turn = Rotation.from_matrix(seq.rot[starts]).inv() * Rotation.from_matrix(seq.rot[starts + w - 1])
+    gt_rate = np.degrees(turn.as_rotvec()).mean(0) * seq.rate_hz / (w - 1) if len(idx) else np.full(3, np.nan)
     rows = []
     for name, gyro in models.items():
         rest = -np.degrees(gyro[idx].mean(0)) if len(idx) else np.full(3, np.nan)
@@ -147,6 +152,7 @@ def offsets_at_rest(seq, models: dict[str, np.ndarray], hindsight: dict) -> list
                 "rest_s": len(idx) / seq.rate_hz,
                 "rest_offset_deg_s": rest.tolist(),
                 "hindsight_offset_deg_s": hindsight[(seq.name, name)],
+                "gt_turn_rate_at_rest_deg_s": gt_rate.tolist(),
             }
         )
     return rows
@@ -249,10 +255,19 @@ def report(result: dict) -> str:
             "moved < 0.1 deg/s and mean accelerometer < 0.02 m/s^2 since the previous block, per-sample gyro sd "
             "< 1 deg/s. 'at rest': the offset (deg/s, body x y z, added) that zeroes the model's corrected gyro "
             "over those blocks; 'hindsight': the AOE-minimising constant offset of the whole flight "
-            "(benchmarks/results/bias_hindsight.json). Body x is about vertical in EuRoC.",
+            "(benchmarks/results/bias_hindsight.json); the ground truth's turn rate: its mean rotation rate over the "
+            "same blocks, where the vehicle is still. Body x is about vertical in EuRoC.",
             "",
             markdown_table(
-                ["held-out flight", "model", "strict rest (s)", "offset at rest", "hindsight offset", "difference"],
+                [
+                    "held-out flight",
+                    "model",
+                    "strict rest (s)",
+                    "offset at rest",
+                    "hindsight offset",
+                    "difference",
+                    "ground truth's turn rate at rest",
+                ],
                 [
                     [
                         o["flight"],
@@ -261,6 +276,7 @@ def report(result: dict) -> str:
                         _vec(o["rest_offset_deg_s"]),
                         _vec(o["hindsight_offset_deg_s"]),
                         _vec(np.subtract(o["rest_offset_deg_s"], o["hindsight_offset_deg_s"])),
+                        _vec(o["gt_turn_rate_at_rest_deg_s"]),
                     ]
                     for o in result["offsets_at_rest"]
                 ],
