@@ -71,6 +71,22 @@ def fold_ensemble_and_calibrated(fold: int, runs: dict, recipe: str = "ref", see
     return seq, ens, cal
 
 
+def round_decision(folds: list[dict], candidates: list[str]) -> dict:
+    """The rule of rounds 5-6: figure = mean over the folds; the candidate with the lowest figure replaces the plain
+    ensemble only if the paired-by-fold difference (candidate - ensemble) has a 95% t-interval below 0."""
+    figure = {key: float(np.mean([f[key] for f in folds])) for key in ["ensemble", "calibrated", *candidates]}
+    best = min(candidates, key=figure.get)
+    d = PairedDiff(tuple(str(f["fold"]) for f in folds), tuple(f[best] - f["ensemble"] for f in folds))
+    return {
+        "figure": figure,
+        "chosen": best,
+        "diff_mean": d.mean,
+        "diff_t_ci": list(d.t_ci),
+        "verdict": d.verdict,
+        "decision": f"{best} replaces the plain ensemble" if d.t_ci[1] < 0 else "the plain ensemble stays",
+    }
+
+
 def aoe_deg(seq, gyro: np.ndarray) -> float:
     return math.degrees(aoe(seq.rot, integrate_gyro(seq.rot[0], gyro, seq.dt), seq.gt_mask)[0])
 

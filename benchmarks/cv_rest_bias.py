@@ -24,10 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated
+from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated, round_decision
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.evaluate import markdown_table
 
@@ -194,10 +193,6 @@ def main() -> None:
         folds.append(row)
         offsets += offsets_at_rest(seq, {"ensemble": ens, "calibrated": cal}, hindsight)
         print(k, seq.name, periods, {key: round(v, 2) for key, v in row.items() if isinstance(v, float)}, flush=True)
-    figure = {key: float(np.mean([f[key] for f in folds])) for key in ["ensemble", "calibrated", *CANDIDATES]}
-    best = min(CANDIDATES, key=figure.get)
-    d = PairedDiff(tuple(str(f["fold"]) for f in folds), tuple(f[best] - f["ensemble"] for f in folds))
-    adopted = d.t_ci[1] < 0
     result = {
         "command": "python benchmarks/cv_rest_bias.py",
         "rule": "benchmarks/queues/cv_round6.txt",
@@ -205,17 +200,12 @@ def main() -> None:
         "detector": vars(detector),
         "wall_s": time.time() - start,
         "folds": folds,
-        "figure": figure,
-        "chosen": best,
-        "diff_mean": d.mean,
-        "diff_t_ci": list(d.t_ci),
-        "verdict": d.verdict,
-        "decision": f"{best} replaces the plain ensemble" if adopted else "the plain ensemble stays",
+        **round_decision(folds, list(CANDIDATES)),
         "offsets_at_rest": offsets,
     }
     write_json(args.out.with_suffix(".json"), result)
     write_text(args.out.with_suffix(".md"), report(result))
-    print(result["decision"], {k: round(v, 2) for k, v in figure.items()})
+    print(result["decision"], {k: round(v, 2) for k, v in result["figure"].items()})
 
 
 def report(result: dict) -> str:
