@@ -90,7 +90,8 @@ def main() -> None:
     print("gains chosen on the folds:", gains, flush=True)
     test = cases_with_raw(test_cases())
     test_scores = run(
-        [((s, i), seq, models[s], *gains[s]) for i, (seq, models) in enumerate(test) for s in SOURCES], args.jobs
+        [((s, i, gains[s]), seq, models[s], *gains[s]) for i, (seq, models) in enumerate(test) for s in SOURCES],
+        args.jobs,
     )
     result = {
         "command": "python benchmarks/ahrs_fusion.py",
@@ -100,15 +101,11 @@ def main() -> None:
         "cv_grid": cv_rows,
         "flights": [],
     }
-    for set_name, cases, key in (
-        ("cross-validation", cv, lambda s, i: (s, i, gains[s])),
-        ("test", test, lambda s, i: (s, i)),
-    ):
+    for set_name, cases, filtered in (("cross-validation", cv, cv_scores), ("test", test, test_scores)):
         for i, (seq, models) in enumerate(cases):
             row = {"set": set_name, "flight": seq.name}
             for s in SOURCES:
-                sc = (cv_scores if set_name == "cross-validation" else test_scores)[key(s, i)]
-                row[s] = {"open_loop_aoe_deg": aoe_deg(seq, models[s]), **sc}
+                row[s] = {"open_loop_aoe_deg": aoe_deg(seq, models[s]), **filtered[(s, i, gains[s])]}
             result["flights"].append(row)
     result["comparisons"] = comparisons(result["flights"])
     result["wall_s"] = time.time() - start

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated, round_decision
+from cv_slow_part import causal_mean
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.atomic import write_json, write_text
@@ -56,7 +57,7 @@ class RestDetector:
         flags = np.zeros(len(gyro), dtype=bool)
         if len(gyro) < 2 * w:
             return flags
-        mg, ma = _trailing_mean(gyro, w), _trailing_mean(acc, w)
+        mg, ma = causal_mean(gyro, w), causal_mean(acc, w)
         dg = np.linalg.norm(mg[w:] - mg[:-w], axis=1)
         da = np.linalg.norm(ma[w:] - ma[:-w], axis=1)
         flags[w:] = (dg < self.gyro_tol) & (da < self.acc_tol)
@@ -100,14 +101,6 @@ def remove_rest_bias(
     return corrected - rest_bias(corrected, flags, detector.window(rate_hz))
 
 
-def _trailing_mean(x: np.ndarray, w: int) -> np.ndarray:
-    """Mean over [n - w + 1, n] for n >= w - 1 (rows before that hold partial means; unused)."""
-    c = np.cumsum(x, axis=0, dtype=np.float64)
-    out = c / np.arange(1, len(x) + 1)[:, None]
-    out[w:] = (c[w:] - c[:-w]) / w
-    return out
-
-
 def _check(x: np.ndarray, what: str) -> np.ndarray:
     x = np.asarray(x)
     if x.ndim != 2 or x.shape[1] != 3:
@@ -137,10 +130,12 @@ def offsets_at_rest(seq, models: dict[str, np.ndarray], hindsight: dict) -> list
     """Per model: the constant offset (deg/s) that zeroes its corrected gyro over the strict rest blocks, beside
     the AOE-minimising offset of benchmarks/results/bias_hindsight.json (same sign convention: added)."""
     idx = strict_rest_blocks(seq)
-    w = round(seq.rate_hz)
-    starts = idx[::w]  # strict blocks are whole w-sample blocks
-    turn = Rotation.from_matrix(seq.rot[starts]).inv() * Rotation.from_matrix(seq.rot[starts + w - 1])
-    gt_rate = np.degrees(turn.as_rotvec()).mean(0) * seq.rate_hz / (w - 1) if len(idx) else np.full(3, np.nan)
+    gt_rate = np.full(3, np.nan)
+    if len(idx):
+        w = round(seq.rate_hz)
+        starts = idx[::w]  # strict blocks are whole w-sample blocks
+        turn = Rotation.from_matrix(seq.rot[starts]).inv() * Rotation.from_matrix(seq.rot[starts + w - 1])
+        gt_rate = np.degrees(turn.as_rotvec()).mean(0) * seq.rate_hz / (w - 1)
     rows = []
     for name, gyro in models.items():
         rest = -np.degrees(gyro[idx].mean(0)) if len(idx) else np.full(3, np.nan)
