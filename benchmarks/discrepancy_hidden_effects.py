@@ -28,7 +28,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # many small solves: threads
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -41,6 +40,7 @@ from gyrodenoise.discrepancy.hidden import CASES, run_case  # noqa: E402
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG  # noqa: E402
 from gyrodenoise.discrepancy.worldcases import WORLD_CASES, run_world_case  # noqa: E402
 from gyrodenoise.paths import portable_command, portable_path  # noqa: E402
+from gyrodenoise.provenance import git_revision  # noqa: E402
 
 OUT = Path(__file__).parent / "results"
 EUROC = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc"
@@ -48,15 +48,10 @@ EUROC = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc"
 
 def _code_version() -> str:
     """The commit the benchmark ran from (and whether the work tree had changes), for the results file."""
-    repo = Path(__file__).resolve().parents[1]
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True)
-        dirty = subprocess.run(["git", "status", "--porcelain", "src"], cwd=repo, capture_output=True, text=True)
-    except OSError:
-        return "unknown (no git)"
-    if head.returncode != 0:
-        return "unknown (not a git checkout)"
-    return f"commit {head.stdout.strip()}" + (" with uncommitted changes under src/" if dirty.stdout.strip() else "")
+    rev = git_revision(Path(__file__).resolve().parents[1], scope="src", untracked=True)
+    if rev is None:
+        return "unknown (no git checkout)"
+    return f"commit {rev[0]}" + (" with uncommitted changes under src/" if rev[1] else "")
 
 
 def _misses(runs: list[dict]) -> list[str]:

@@ -27,6 +27,8 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from gyrodenoise.provenance import git_revision
+
 RUNS = Path("benchmarks/results/time_to_accuracy_runs")
 OUT = Path("benchmarks/results/time_to_accuracy")
 
@@ -81,10 +83,9 @@ def cmd_time_default(args: argparse.Namespace) -> int:
 
 
 def code_version() -> str:
-    """Short commit of the checkout, '-dirty' when it has uncommitted changes."""
-    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True)
-    return (rev or "unknown") + ("-dirty" if dirty.stdout.strip() else "")
+    """Short commit of the checkout, '-dirty' when its tracked files have uncommitted changes."""
+    rev = git_revision(Path.cwd())
+    return "unknown" if rev is None else rev[0] + ("-dirty" if rev[1] else "")
 
 
 def kind_of(summary: dict) -> str:

@@ -11,8 +11,6 @@ shipped-model format) and summary.json (wall time, best validation and test metr
 from __future__ import annotations
 
 import math
-import os
-import platform
 import sys
 import time
 import warnings
@@ -33,12 +31,7 @@ from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.paths import portable_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
-
-
-def machine_description() -> str:
-    cpu = platform.processor() or platform.machine()
-    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
-    return f"{platform.node()} ({cpu}, {os.cpu_count()} CPU threads, torch {torch.__version__}, {gpu})"
+from gyrodenoise.provenance import machine_description
 
 
 def flat_hparams(cfg: DictConfig) -> dict:
