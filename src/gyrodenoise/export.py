@@ -23,6 +23,7 @@ from torch import nn
 
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
+from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.pretrained import load_model
 
 INPUT_NAME, OUTPUT_NAME, STD_NAME = "imu", "gyro_corrected", "gyro_std"
@@ -101,6 +102,7 @@ def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET) ->
 
 
 def main(argv: list[str] | None = None) -> None:
+    quiet_library_notices()
     ap = argparse.ArgumentParser(
         prog="python -m gyrodenoise.export",
         description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export.",

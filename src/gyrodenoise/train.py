@@ -29,6 +29,7 @@ from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.paths import portable_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
@@ -143,6 +144,7 @@ def train(cfg: DictConfig) -> dict:
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     if not loggers:  # Lightning refuses a learning-rate monitor without a logger
         callbacks = [c for c in callbacks if not isinstance(c, LearningRateMonitor)]
+    quiet_library_notices()
     trainer: L.Trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
 
     # one optimiser step per epoch: log_every_n_steps counts steps across epochs, as intended here

@@ -1,0 +1,29 @@
+"""Third-party messages that say nothing about the user's run, kept out of its output.
+
+Lightning 2.6 advertises a cloud logger at every Trainer start and notes that a ModelSummary callback is configured
+(conf/callbacks/default.yaml sets one on purpose, for a plain-text summary); Lightning 2.6 and torch.export under
+torch 2.13 warn that `isinstance(treespec, LeafSpec)` is deprecated, inside their own code. Everything else they
+log or warn is left alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+
+LIGHTNING_LOGGER = "lightning.pytorch.utilities.rank_zero"
+NOISE_PREFIXES = ("💡 Tip:", "Trainer already configured with model summary callbacks")
+LEAFSPEC_DEPRECATION = r"`isinstance\(treespec, LeafSpec\)` is deprecated"
+
+
+class _DropNoise(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(NOISE_PREFIXES)
+
+
+def quiet_library_notices() -> None:
+    """Drop the messages above (idempotent: the log filter is added once)."""
+    log = logging.getLogger(LIGHTNING_LOGGER)
+    if not any(isinstance(f, _DropNoise) for f in log.filters):
+        log.addFilter(_DropNoise())
+    warnings.filterwarnings("ignore", message=LEAFSPEC_DEPRECATION)
