@@ -3,7 +3,7 @@
 import logging
 import warnings
 
-from gyrodenoise.notices import LIGHTNING_LOGGER, quiet_library_notices
+from gyrodenoise.notices import LIGHTNING_LOGGER, ONNX_REGISTRATION_LOGGER, quiet_library_notices
 
 
 def test_only_the_named_notices_are_dropped(caplog):
@@ -16,6 +16,12 @@ def test_only_the_named_notices_are_dropped(caplog):
         log.info("Trainer already configured with model summary callbacks: [ModelSummary].")
         log.info("GPU available: False, used: False")
     assert [r.getMessage() for r in caplog.records] == ["GPU available: False, used: False"]
+    caplog.clear()
+    onnx_log = logging.getLogger(ONNX_REGISTRATION_LOGGER)
+    with caplog.at_level(logging.WARNING, logger=ONNX_REGISTRATION_LOGGER):
+        onnx_log.warning("torchvision is not installed. Skipping torchvision::roi_align")
+        onnx_log.warning("some other registration problem")
+    assert [r.getMessage() for r in caplog.records] == ["some other registration problem"]
 
 
 def test_leafspec_deprecation_is_dropped_other_warnings_are_not():

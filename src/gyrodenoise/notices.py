@@ -2,7 +2,8 @@
 
 Lightning 2.6 advertises a cloud logger at every Trainer start and notes that a ModelSummary callback is configured
 (conf/callbacks/default.yaml sets one on purpose, for a plain-text summary); Lightning 2.6 and torch.export under
-torch 2.13 warn that `isinstance(treespec, LeafSpec)` is deprecated, inside their own code. Everything else they
+torch 2.13 warn that `isinstance(treespec, LeafSpec)` is deprecated, inside their own code; torch's ONNX exporter
+logs, once per operator, that torchvision (which no gyrodenoise model uses) is not installed. Everything else they
 log or warn is left alone.
 """
 
@@ -12,18 +13,27 @@ import logging
 import warnings
 
 LIGHTNING_LOGGER = "lightning.pytorch.utilities.rank_zero"
-NOISE_PREFIXES = ("💡 Tip:", "Trainer already configured with model summary callbacks")
+ONNX_REGISTRATION_LOGGER = "torch.onnx._internal.exporter._registration"
+NOISE_PREFIXES = {  # logger -> message starts to drop
+    LIGHTNING_LOGGER: ("💡 Tip:", "Trainer already configured with model summary callbacks"),
+    ONNX_REGISTRATION_LOGGER: ("torchvision is not installed",),
+}
 LEAFSPEC_DEPRECATION = r"`isinstance\(treespec, LeafSpec\)` is deprecated"
 
 
 class _DropNoise(logging.Filter):
+    def __init__(self, prefixes: tuple[str, ...]) -> None:
+        super().__init__()
+        self.prefixes = prefixes
+
     def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith(NOISE_PREFIXES)
+        return not record.getMessage().startswith(self.prefixes)
 
 
 def quiet_library_notices() -> None:
     """Drop the messages above (idempotent: the log filter is added once)."""
-    log = logging.getLogger(LIGHTNING_LOGGER)
-    if not any(isinstance(f, _DropNoise) for f in log.filters):
-        log.addFilter(_DropNoise())
+    for name, prefixes in NOISE_PREFIXES.items():
+        log = logging.getLogger(name)
+        if not any(isinstance(f, _DropNoise) for f in log.filters):
+            log.addFilter(_DropNoise(prefixes))
     warnings.filterwarnings("ignore", message=LEAFSPEC_DEPRECATION)
