@@ -73,6 +73,28 @@ def test_fast_dropout_rate_scale_and_seeding():
     assert torch.equal(drop.eval()(x), x)
 
 
+def test_fast_dropout_is_torchs_own_inside_torch_compile(monkeypatch):
+    """numpy's generator cannot be traced: while torch.compile traces, the layer is nn.Dropout (same torch draws)."""
+    x = torch.ones(2, 8, 256)
+    drop = FastDropout(0.25).train()
+    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
+    torch.manual_seed(0)
+    y = drop(x)
+    torch.manual_seed(0)
+    assert torch.equal(y, torch.nn.functional.dropout(x, 0.25, training=True))
+
+
+def test_dilated_conv_trains_under_cpu_autocast():
+    """Under bfloat16 autocast (e.g. Lightning's precision=bf16-mixed) the layer is nn.Conv1d: a backward that
+    mixed the bf16 gradient with the float32 kernel would fail."""
+    conv = DilatedConv1d(4, 8, 7, dilation=4)
+    x = torch.randn(2, 4, 200, requires_grad=True)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        y = conv(x)
+    y.float().sum().backward()
+    assert y.dtype == torch.bfloat16 and x.grad is not None and conv.weight.grad.dtype == torch.float32
+
+
 def test_unknown_activation_is_a_clear_error():
     with pytest.raises(ValueError, match="model.act='swish2'"):
         build_model("denoiser", act="swish2")

@@ -22,14 +22,20 @@ class FastDropout(nn.Dropout):
     Here each 64-bit word of numpy's SFC64 generator (twice as fast as torch's Mersenne twister for
     the bits; seeded from torch's generator at every call, so `seed_everything` fixes the masks)
     gives four 16-bit lanes, and the low 15 bits of each lane are compared with p * 2^15. On other
-    devices (fused dropout kernels) it is nn.Dropout.
+    devices (fused dropout kernels) and inside torch.compile it is nn.Dropout.
     """
 
     LEVELS = 1 << 15
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if not self.training or self.p == 0.0 or x.device.type != "cpu" or self.inplace:
-            return super().forward(x)
+        if (
+            not self.training
+            or self.p == 0.0
+            or x.device.type != "cpu"
+            or self.inplace
+            or torch.compiler.is_compiling()
+        ):
+            return super().forward(x)  # torch.compile: numpy cannot be traced, the compiler fuses torch's own
         drop = round(self.p * self.LEVELS)
         if drop >= self.LEVELS:
             return torch.zeros_like(x)
@@ -81,8 +87,8 @@ class DilatedConv1d(nn.Conv1d):
     oneDNN's backward-data pass of dilated 1D convolutions is slow on this network (layer 2 and 3:
     about twice its forward time); a forward convolution with the flipped kernel gives the same
     gradient (to float32 rounding) ~8% faster per training step. Only for the stride-1, unpadded,
-    ungrouped convolutions of the denoiser; otherwise, off the CPU, without gradients or while
-    torch.export traces, it is nn.Conv1d.
+    ungrouped convolutions of the denoiser; otherwise, off the CPU, without gradients, under autocast or
+    while torch.export / torch.compile trace, it is nn.Conv1d.
     """
 
     input_grad_as_conv = True  # False: torch's backward (benchmarks/cpu_step_profile.py compares)
@@ -95,6 +101,7 @@ class DilatedConv1d(nn.Conv1d):
             or x.device.type != "cpu"
             or not torch.is_grad_enabled()
             or torch.compiler.is_compiling()
+            or torch.is_autocast_enabled("cpu")  # mixed precision: its backward would mix bf16 and float32
         ):
             return super().forward(x)
         return _InputGradAsConv.apply(x, self.weight, self.bias, self.dilation[0])
