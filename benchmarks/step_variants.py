@@ -149,11 +149,13 @@ def main() -> int:
     ap.add_argument("--epochs", type=int, default=600, help="fit length for the per-fit saving column")
     ap.add_argument("--child", choices=KINDS, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    import torch
+
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: this machine has no CUDA device (torch.cuda.is_available() is False)")
     if args.child:
         child(args.child, args.steps, args.threads, args.device)
         return 0
-    import torch
-
     from gyrodenoise.atomic import write_json, write_text
     from gyrodenoise.provenance import git_revision, machine_description
 
