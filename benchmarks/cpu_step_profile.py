@@ -52,6 +52,17 @@ def build():
     return module, opt, next(iter(dm.train_dataloader()))
 
 
+def alternate(kinds: tuple[str, ...], rounds: int, run_one, describe) -> dict[str, list[dict]]:
+    """`rounds` fresh processes per kind, `run_one(kind)` each, the kinds' order rotating from round to round
+    so that a slower or faster spell of a shared machine hits all kinds; prints `describe(result)` per process."""
+    runs: dict[str, list[dict]] = {k: [] for k in kinds}
+    for r in range(rounds):
+        for kind in kinds[r % len(kinds) :] + kinds[: r % len(kinds)]:
+            runs[kind].append(run_one(kind))
+            print(f"round {r} {kind}: {describe(runs[kind][-1])}", flush=True)
+    return runs
+
+
 def step(module, opt, batch: dict) -> tuple[float, int]:
     """Wall seconds and minor page faults of one optimiser step."""
     faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -107,11 +118,9 @@ def main() -> int:
 
     from gyrodenoise.atomic import write_json, write_text
 
-    runs: dict[str, list[dict]] = {m: [] for m in MODES}
-    for r in range(args.rounds):
-        for mode in MODES[r % len(MODES) :] + MODES[: r % len(MODES)]:
-            runs[mode].append(run_child(mode, args))
-            print(f"round {r} {mode}: median {statistics.median(runs[mode][-1]['ms']):.0f} ms", flush=True)
+    runs = alternate(
+        MODES, args.rounds, lambda m: run_child(m, args), lambda res: f"median {statistics.median(res['ms']):.0f} ms"
+    )
     profile = run_child("default", args, profile=True)["profile"]
     ms = {m: [t for run in runs[m] for t in run["ms"]] for m in MODES}
     faults = {m: statistics.median([f for run in runs[m] for f in run["faults"]]) for m in MODES}

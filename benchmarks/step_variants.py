@@ -30,7 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpu_step_profile import build  # a sibling: run from the repository root as `python benchmarks/step_variants.py`
+# a sibling module: run from the repository root as `python benchmarks/step_variants.py`
+from cpu_step_profile import alternate, build
 
 OUT = Path("benchmarks/results/step_variants")
 KINDS = ("eager", "loss", "net", "net+loss", "bf16")
@@ -94,9 +95,8 @@ def child(kind: str, steps: int, threads: int, device: str) -> None:
 
     retain_freed_memory()
     torch.set_num_threads(threads)
-    module, _, batch = build()
-    batch = to_device(module, batch, device)
-    opt = torch.optim.Adam(module.parameters(), lr=1e-2, weight_decay=0.1)  # after the move: state on the device
+    module, opt, batch = build()
+    batch = to_device(module, batch, device)  # the parameters move in place: Adam keeps them (its state is lazy)
     fn = step_function(module, kind)
     first = timed_step(fn, opt, batch, device)
     for _ in range(2):  # warm-up: the rest of the recompilations, oneDNN primitives, allocator
@@ -159,14 +159,12 @@ def main() -> int:
     from gyrodenoise.atomic import write_json, write_text
     from gyrodenoise.provenance import git_revision, machine_description
 
-    runs: dict[str, list[dict]] = {k: [] for k in KINDS}
-    for r in range(args.rounds):
-        for kind in KINDS[r % len(KINDS) :] + KINDS[: r % len(KINDS)]:
-            runs[kind].append(run_child(kind, args))
-            last = runs[kind][-1]
-            print(
-                f"round {r} {kind}: first step {last['first_s']:.1f} s, median {statistics.median(last['ms']):.0f} ms"
-            )
+    runs = alternate(
+        KINDS,
+        args.rounds,
+        lambda k: run_child(k, args),
+        lambda res: f"first step {res['first_s']:.1f} s, median {statistics.median(res['ms']):.0f} ms",
+    )
     torch.set_num_threads(args.threads)
     par = parity(args.device)
     med = {k: statistics.median([t for run in runs[k] for t in run["ms"]]) for k in KINDS}
