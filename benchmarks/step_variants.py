@@ -106,7 +106,7 @@ def child(kind: str, steps: int, threads: int, device: str) -> None:
 
 
 def parity(device: str) -> dict:
-    """Loss and parameter gradients of the compiled paths against eager, dropout off, same weights and batch."""
+    """Loss and parameter gradients of each kind against eager, dropout off, same weights and batch."""
     import torch
 
     module, _, batch = build()

@@ -160,7 +160,7 @@ ACCURACY_LINE_DEG = 2.9  # issue 9: the authors' level
 
 def pooled_default_figure(runs: list[dict]) -> list[str]:
     """Issue 9's accuracy line by the committed rule: mean test AOE of POOLED_DEFAULT_RUNS, its 95% t-interval."""
-    from scipy import stats as sps
+    from gyrodenoise.ablation_stats import t_interval
 
     by_id = {r["_file"].removesuffix(".json"): r for r in runs}
     missing = [i for i in POOLED_DEFAULT_RUNS if i not in by_id]
@@ -168,13 +168,13 @@ def pooled_default_figure(runs: list[dict]) -> list[str]:
         return [f"Pooled figure not computed: runs missing from {RUNS}: {', '.join(missing)}."]
     xs = [by_id[i]["test"]["test/aoe_deg"] for i in POOLED_DEFAULT_RUNS]
     mean, sd = statistics.fmean(xs), statistics.stdev(xs)
-    half = sps.t.ppf(0.975, len(xs) - 1) * sd / math.sqrt(len(xs))
+    lo, hi = t_interval(mean, sd, len(xs))
     verdict = "met" if mean <= ACCURACY_LINE_DEG else f"not met, by {mean - ACCURACY_LINE_DEG:.2f} deg"
     return [
         "**Pooled figure of the default recipe** (rule and run list fixed before seeds 8-11 ran:",
         "`benchmarks/queues/default_seeds.txt`): the test AOE of its "
         f"{len(xs)} independent runs ({', '.join(POOLED_DEFAULT_RUNS)}) is",
-        f"**{mean:.2f} ± {sd:.2f} deg** (mean ± sd; 95% t-interval [{mean - half:.2f}, {mean + half:.2f}]; "
+        f"**{mean:.2f} ± {sd:.2f} deg** (mean ± sd; 95% t-interval [{lo:.2f}, {hi:.2f}]; "
         f"min {min(xs):.2f}, max {max(xs):.2f}) against the line ≤ {ACCURACY_LINE_DEG} deg: {verdict}.",
     ]
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gyrodenoise.ablation_stats import PairedDiff
+from gyrodenoise.ablation_stats import PairedDiff, paired_diff
 from gyrodenoise.atomic import write_json, write_text
 
 OUT = Path("benchmarks/results/tumvi_nobn")
@@ -42,11 +42,6 @@ def load(folder: Path) -> dict[str, dict[str, dict]]:
     return runs
 
 
-def paired(a: dict[str, float], b: dict[str, float]) -> PairedDiff:
-    keys = sorted(a.keys() & b.keys())
-    return PairedDiff(tuple(keys), tuple(a[k] - b[k] for k in keys))
-
-
 def fmt(d: PairedDiff) -> str:
     return f"{d.mean:+.2f} [{d.t_ci[0]:+.2f}, {d.t_ci[1]:+.2f}] ({d.verdict})"
 
@@ -58,8 +53,8 @@ def main() -> int:
     runs = load(args.runs)
     model = {a: {k: r["model"] for k, r in runs[a].items()} for a in ARMS}
     calibrated = {a: {k: r["calibrated"] for k, r in runs[a].items()} for a in ARMS}
-    nobn_vs_ref = paired(model["nobn"], model["ref"])
-    vs_cal = {a: paired(model[a], calibrated[a]) for a in ARMS}
+    nobn_vs_ref = paired_diff(model["nobn"], model["ref"])[0]
+    vs_cal = {a: paired_diff(model[a], calibrated[a])[0] for a in ARMS}
     better = nobn_vs_ref.t_ci[1] < 0
     ships = [a for a in ARMS if vs_cal[a].t_ci[1] < 0 and (a == "ref" or better)]
     decision = (
