@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.cli_errors import user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
@@ -229,7 +230,8 @@ def evaluate(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
 def main(cfg: DictConfig) -> None:
-    evaluate(cfg)
+    with user_errors():
+        evaluate(cfg)
 
 
 if __name__ == "__main__":

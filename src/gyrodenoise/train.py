@@ -26,6 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
+from gyrodenoise.cli_errors import user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.lit import DenoiserModule
@@ -230,7 +231,8 @@ def train(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
-    summary = train(cfg)
+    with user_errors():
+        summary = train(cfg)
     # the value an Optuna sweep minimises
     return summary["val"].get("val/aoe_deg")
 

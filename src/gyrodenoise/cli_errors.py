@@ -1,0 +1,29 @@
+"""Errors in what a user gave (a data folder, a file, a field) end a Hydra command with one line, not a traceback.
+
+Hydra prints a full stack trace when the error is raised inside Lightning (the data are read in the
+datamodule's setup), which buries the message that says what to do. The entry points wrap their work in
+`user_errors()`: these errors print as ``error: <message>`` and exit with status 2; HYDRA_FULL_ERROR=1 (Hydra's
+own switch) shows the trace as before.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from gyrodenoise.data.readers import DataFormatError
+
+USER_ERRORS = (DataFormatError, FileNotFoundError)
+
+
+@contextmanager
+def user_errors() -> Iterator[None]:
+    try:
+        yield
+    except USER_ERRORS as e:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
+        print(f"error: {e}\n(HYDRA_FULL_ERROR=1 shows the stack trace)", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -1,0 +1,40 @@
+"""A bad data folder or model path ends the Hydra commands with one clear line and status 2, not a trace."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from gyrodenoise.cli_errors import user_errors
+from gyrodenoise.data.readers import DataFormatError
+
+
+def test_train_with_missing_data_folder_prints_one_line(tmp_path):
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", "dataset=euroc", f"dataset.root={tmp_path / 'nowhere'}",
+         "logger=none", f"hydra.run.dir={tmp_path / 'run'}"],
+        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=180,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "sequence folder not found" in proc.stderr and "Set dataset.root" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("error", [DataFormatError("imu.csv, line 3: 4 fields"), FileNotFoundError("x.pt: no file")])
+def test_user_errors_exit_2_with_the_message(error, monkeypatch, capsys):
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    with pytest.raises(SystemExit) as exit_info, user_errors():
+        raise error
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.startswith(f"error: {error}\n")
+
+
+def test_full_error_switch_and_other_errors_keep_the_trace(monkeypatch):
+    monkeypatch.setenv("HYDRA_FULL_ERROR", "1")
+    with pytest.raises(FileNotFoundError), user_errors():
+        raise FileNotFoundError("x")
+    monkeypatch.delenv("HYDRA_FULL_ERROR")
+    with pytest.raises(RuntimeError), user_errors():  # a bug is not a user error: its trace stays
+        raise RuntimeError("bug")
