@@ -24,13 +24,13 @@ NAME = re.compile(r"(?P<arm>[a-z]+)_f(?P<fold>\d)_s(?P<seed>\d+)\.json")
 ARMS = ("ref", "nobn")
 
 
-def load(folder: Path) -> dict[str, dict[str, dict]]:
+def load(folder: Path, arms: tuple[str, ...] = ARMS) -> dict[str, dict[str, dict]]:
     """arm -> 'f<fold>_s<seed>' -> {'model': held-out AOE, 'calibrated': its calibrated baseline's, ...}."""
-    runs: dict[str, dict[str, dict]] = {a: {} for a in ARMS}
+    runs: dict[str, dict[str, dict]] = {a: {} for a in arms}
     for path in sorted(folder.glob("*.json")):
         m = NAME.fullmatch(path.name)
         if m is None or m["arm"] not in runs:
-            raise SystemExit(f"{path}: not a run of the tumvi_nobn queue (expected <ref|nobn>_f<fold>_s<seed>.json)")
+            raise SystemExit(f"{path}: not a run of this queue (expected <{'|'.join(arms)}>_f<fold>_s<seed>.json)")
         s = json.loads(path.read_text())
         runs[m["arm"]][f"f{m['fold']}_s{m['seed']}"] = {
             "model": s["val"]["val/aoe_deg"],
