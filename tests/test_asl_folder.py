@@ -103,3 +103,45 @@ def test_validation_split(asl_root):
     # whole training sequences and no validation sequence named: nothing to validate on (select=last needs none)
     train, val = parts(train_seqs=["walk_1"], val_seqs=None, train_duration_s=None)
     assert train == [n] and val == []
+
+
+def test_missing_sequences_fail_before_training(asl_root):
+    """A run whose test sequences are not in the folder (TUM-VI's withheld rooms) stops before training, and
+    says test=false is the way to train without them; a missing training sequence gets no such hint."""
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    def dm(train, test):
+        return ImuDataModule(name="my_imu", root=str(asl_root), train_seqs=train, test_seqs=test, window=256)
+
+    with pytest.raises(FileNotFoundError, match=r"not found: room_2, room_4 .*pass test=false"):
+        dm(["walk_1"], ["walk_2", "room_2", "room_4"]).check_sequences(test=True)
+    dm(["walk_1"], ["room_2"]).check_sequences(test=False)
+    with pytest.raises(FileNotFoundError, match=r"not found: walk_9 \(ASL layout") as err:
+        dm(["walk_1", "walk_9"], ["room_2"]).check_sequences(test=False)
+    assert "test=false" not in str(err.value)
+
+
+def test_fit_calibrated_alone(asl_root, tmp_path):
+    """python -m gyrodenoise.fit_calibrated: the safety net's L-BFGS fit as a model file; it learns the
+    synthetic gyro bias, so it beats the raw IMU on a sequence it did not see, and its file reproduces it."""
+    from gyrodenoise.baseline import evaluate_on
+    from gyrodenoise.fit_calibrated import fit
+
+    cfg = compose_config(
+        "train",
+        ["dataset=asl_folder", f"dataset.root={asl_root}", "dataset.name=my_imu", "dataset.train_seqs=[walk_1,walk_2]",
+         "dataset.val_seqs=[walk_3]", "dataset.test_seqs=[walk_3]", "dataset.train_duration_s=null",
+         f"paths.output_dir={tmp_path}"],
+    )  # fmt: skip
+    summary = fit(cfg)
+    model, meta = load_model(tmp_path / "model.pt")
+    assert meta["train_seqs"] == ["walk_1", "walk_2"] and meta["train_duration_s"] is None
+    assert meta["val_aoe_deg"] == pytest.approx(summary["aoe_deg"]["val"])
+    assert summary["aoe_deg"]["test"] == pytest.approx(summary["aoe_deg"]["val"])  # the same sequence
+    from gyrodenoise.data.cache import load_sequence
+    from gyrodenoise.metrics import aoe
+
+    seq = load_sequence(str(asl_root), "walk_3", None, 3.0, None)
+    assert evaluate_on(model, [seq])["walk_3"] == pytest.approx(summary["aoe_deg"]["val"], rel=1e-5)
+    raw = np.degrees(aoe(seq.rot, integrate_gyro(seq.rot[0], seq.gyro, seq.dt), seq.gt_mask)[0])
+    assert summary["aoe_deg"]["val"] < 0.2 * raw

@@ -36,7 +36,7 @@ from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, not_better_warning
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, not_better_warning, training_overlap_warning
 from gyrodenoise.so3 import integrate_gyro
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
@@ -58,6 +58,14 @@ def load_checked(name_or_path: str) -> tuple[CorrectionModel, dict, str | None]:
     if msg:
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     return model, meta, msg
+
+
+def evaluated_part(seq: Sequence, train_duration_s: float | None) -> tuple[str, float]:
+    """(sequence name, start in s) of an evaluated sequence: a validation part "<name>[<T>s:]" starts
+    where the training part of its sequence ends, anything else at its beginning."""
+    if "[" in seq.name and train_duration_s is not None:
+        return seq.name.split("[", 1)[0], float(train_duration_s)
+    return seq.name, 0.0
 
 
 def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
@@ -141,6 +149,10 @@ def evaluate(cfg: DictConfig) -> dict:
                 dm.root, seq.name, variant_file, dm.max_gap_factor, dm.cache_dir
             )
 
+    parts = [evaluated_part(seq, dm.train_duration_s) for seq in sequences.values()]
+    overlap = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
+    for w in overlap:
+        warnings.warn(w, ModelQualityWarning, stacklevel=2)
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
     calib: dict[str, uncertainty.CalibrationResult] = {}
@@ -198,7 +210,7 @@ def evaluate(cfg: DictConfig) -> dict:
             m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in METHODS
         },
     }
-    warned = [w for w in (proposed_warning, calibrated_warning) if w]
+    warned = [w for w in (proposed_warning, calibrated_warning, *overlap) if w]
     if warned:
         summary["warnings"] = warned
     if calib:

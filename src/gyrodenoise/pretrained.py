@@ -113,3 +113,23 @@ def not_better_warning(meta: dict) -> str | None:
         else "use a calibrated model (python -m gyrodenoise.train model=calibrated ...) instead"
     )
     return f"model {name} did not beat the 12-parameter calibrated baseline on its validation data{numbers}: {advice}."
+
+
+def training_overlap_warning(meta: dict, parts: list[tuple[str, float]]) -> str | None:
+    """The warning for scoring a model on data it was trained on, else None.
+
+    parts: (sequence name, start in seconds) of each evaluated part. A model trained on the first
+    `train_duration_s` of its `train_seqs` (None: the whole sequences) overlaps a part of one of them that
+    starts before that time. Metadata without `train_seqs` (older files, user models) cannot be checked.
+    """
+    trained = meta.get("train_seqs") or []
+    duration = meta.get("train_duration_s")
+    seen = [n for n, start in parts if n in trained and (duration is None or start < float(duration))]
+    if not seen:
+        return None
+    name = meta.get("name", meta.get("path", "this model"))
+    span = "whole" if duration is None else f"first {float(duration):g} s"
+    return (
+        f"model {name} was trained on the {span} of {', '.join(dict.fromkeys(seen))}: its figures there are "
+        "training figures, not held-out ones (evaluate it on sequences it did not see, e.g. a cross-validation fold)."
+    )

@@ -140,6 +140,7 @@ def train(cfg: DictConfig) -> dict:
     out_dir = Path(cfg.paths.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
+    dm.check_sequences(test=bool(cfg.get("test")))
     module = DenoiserModule.from_config(cfg)
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]

@@ -159,6 +159,23 @@ class ImuDataModule(L.LightningDataModule):
                 aug[f"{kind}_noise_std"] = noise_std_from_density(density, self.sensor.get("rate_hz", 200.0), scale)
         return AugmentConfig(**aug)
 
+    def check_sequences(self, test: bool = True) -> None:
+        """Fail before training, not after it: every sequence the run will read has its folder.
+
+        A run whose test sequences are missing (TUM-VI's withheld rooms) would otherwise train for minutes
+        and then stop at the test without writing its model.
+        """
+        names = [*self.train_names, *([self.cv_holdout] if self.cv_holdout else [])]
+        names += [*(self.val_names if self.val_explicit else []), *(self.test_names if test else [])]
+        missing = [n for n in dict.fromkeys(names) if not (Path(self.root) / n / "mav0").is_dir()]
+        if missing:
+            only_test = set(missing) <= set(self.test_names)
+            hint = "; or pass test=false to train without the test sequences" if only_test else ""
+            raise FileNotFoundError(
+                f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "
+                f"<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root to the folder that holds them{hint}."
+            )
+
     def load(self, name: str) -> Sequence:
         return load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
 
