@@ -2,7 +2,7 @@
 
     python -m gyrodenoise.evaluate dataset=euroc                     # shipped models
     python -m gyrodenoise.evaluate dataset=euroc weights.proposed=outputs/.../model.pt weights.calibrated=...
-    python -m gyrodenoise.evaluate dataset=tumvi split=val   # validation parts (test rooms withheld)
+    python -m gyrodenoise.evaluate dataset=tumvi split=val weights.proposed=tumvi-denoiser  # validation parts
 
 Methods: raw IMU (integrated gyro), zero motion (initial orientation held), calibrated IMU (the
 12-parameter baseline), proposed (the denoiser, or an ensemble of them). Every estimate is aligned
@@ -12,7 +12,8 @@ trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajec
 An ensemble as the proposed model adds its uncertainty: a +-2 sigma band in the correction figures,
 and in results.json / figures/uncertainty_calibration.png the calibration of its spread against the
 actual 1-s increment errors (gyrodenoise.uncertainty). A model whose metadata says it did not beat
-the calibrated baseline on validation gets a warning (gyrodenoise.pretrained.ModelQualityWarning).
+the calibrated baseline on validation gets a warning (gyrodenoise.pretrained.ModelQualityWarning), and so does
+a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on the TUM-VI rooms whole, on split=val).
 """
 
 from __future__ import annotations

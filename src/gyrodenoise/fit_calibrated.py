@@ -1,7 +1,7 @@
 """Hydra entry point: fit the 12-parameter calibrated-IMU model alone (seconds, no training loop).
 
-    python -m gyrodenoise.fit_calibrated dataset=tumvi dataset.train_duration_s=null   # rooms 1, 3, 5 whole
-    python -m gyrodenoise.fit_calibrated dataset=tumvi dataset.cv_fold=0               # score on a held-out room
+    python -m gyrodenoise.fit_calibrated dataset=tumvi test=false dataset.train_duration_s=null  # the shipped `tumvi`
+    python -m gyrodenoise.fit_calibrated dataset=tumvi test=false dataset.cv_fold=0   # score on a held-out room
 
 The same fit as every training's safety net (`gyrodenoise.baseline.fit_calibrated`: the training loss,
 L-BFGS, float64, whole training parts), written as a model file that loads like any other (model.pt) with a
