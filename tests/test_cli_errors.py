@@ -18,7 +18,7 @@ def test_train_with_missing_data_folder_prints_one_line(tmp_path):
         capture_output=True, text=True, cwd=tmp_path, env=env, timeout=180,
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
-    assert "sequence folder not found" in proc.stderr and "Set dataset.root" in proc.stderr
+    assert "MH_01_easy" in proc.stderr and "not found" in proc.stderr and "Set dataset.root" in proc.stderr
     assert "Traceback" not in proc.stderr
 
 

@@ -130,6 +130,9 @@ def evaluate(cfg: DictConfig) -> dict:
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ValueError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
+    dm.check_sequences(
+        train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
+    )
     dm.setup("test" if split == "test" else "fit")
     proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
     calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)

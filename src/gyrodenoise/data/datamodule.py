@@ -159,21 +159,24 @@ class ImuDataModule(L.LightningDataModule):
                 aug[f"{kind}_noise_std"] = noise_std_from_density(density, self.sensor.get("rate_hz", 200.0), scale)
         return AugmentConfig(**aug)
 
-    def check_sequences(self, test: bool = True) -> None:
-        """Fail before training, not after it: every sequence the run will read has its folder.
+    def check_sequences(
+        self, train: bool = True, test: bool = True, test_hint: str = "pass test=false to train without them"
+    ) -> None:
+        """Fail before the work, not in the middle of it: every sequence the command will read has its folder.
 
-        A run whose test sequences are missing (TUM-VI's withheld rooms) would otherwise train for minutes
-        and then stop at the test without writing its model.
+        A training whose test sequences are missing (TUM-VI's withheld rooms) would otherwise run for minutes
+        and then stop at the test without writing its model. `test_hint` is what to do when only test
+        sequences are missing.
         """
-        names = [*self.train_names, *([self.cv_holdout] if self.cv_holdout else [])]
-        names += [*(self.val_names if self.val_explicit else []), *(self.test_names if test else [])]
+        names = [*self.train_names, *([self.cv_holdout] if self.cv_holdout else [])] if train else []
+        names += [*(self.val_names if self.val_explicit and train else []), *(self.test_names if test else [])]
         missing = [n for n in dict.fromkeys(names) if not (Path(self.root) / n / "mav0").is_dir()]
         if missing:
             only_test = set(missing) <= set(self.test_names)
-            hint = "; or pass test=false to train without the test sequences" if only_test else ""
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "
-                f"<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root to the folder that holds them{hint}."
+                f"<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root to the folder that holds them"
+                f"{'; or ' + test_hint if only_test else ''}."
             )
 
     def load(self, name: str) -> Sequence:
