@@ -64,11 +64,7 @@ def fit(cfg: DictConfig) -> dict:
         {"name": "calibrated"},
         out_dir / "model.pt",
         meta={
-            "dataset": cfg.dataset.name,
-            "sensor": OmegaConf.to_container(cfg.dataset.sensor, resolve=True),
-            "rate_hz": dm.rate_hz,
-            "train_seqs": list(dm.train_names),
-            "train_duration_s": dm.train_duration_s,
+            **dm.model_meta(),
             "fit": "baseline.fit_calibrated",
             "val_aoe_deg": means.get("val"),
             "test": {f"test/aoe_deg/{k}": v for k, v in scores.get("test", {}).items()},

@@ -204,11 +204,7 @@ def train(cfg: DictConfig) -> dict:
         OmegaConf.to_container(cfg.model, resolve=True),
         out_dir / "model.pt",
         meta={
-            "dataset": cfg.dataset.name,
-            "sensor": OmegaConf.to_container(cfg.dataset.sensor, resolve=True),
-            "rate_hz": dm.rate_hz,
-            "train_seqs": list(dm.train_names),
-            "train_duration_s": dm.train_duration_s,
+            **dm.model_meta(),
             "val_aoe_deg": val.get("val/aoe_deg"),
             "test": test,
             "train_wall_time_s": wall_s,

@@ -179,6 +179,16 @@ class ImuDataModule(L.LightningDataModule):
                 f"{'; or ' + test_hint if only_test else ''}."
             )
 
+    def model_meta(self) -> dict:
+        """What a model file records of the data it was trained on (read back by evaluate, correct, export)."""
+        return {
+            "dataset": self.name,
+            "sensor": dict(self.sensor),
+            "rate_hz": self.rate_hz,
+            "train_seqs": list(self.train_names),
+            "train_duration_s": self.train_duration_s,
+        }
+
     def load(self, name: str) -> Sequence:
         return load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
 
