@@ -36,9 +36,8 @@ def main() -> int:
         **{arm: v["aoe"] for arm, v in round2.items()},
     }
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = compose_config(
-            "train", ["dataset=tumvi", "test=false", "dataset.train_duration_s=null", f"paths.output_dir={tmp}"]
-        )
+        overrides = ["dataset=tumvi", "test=false", "dataset.train_duration_s=null", f"paths.output_dir={tmp}"]
+        cfg = compose_config("fit_calibrated", overrides)
         fit(cfg)
         model, meta = load_model(Path(tmp) / "model.pt")
     best = min(denoisers, key=denoisers.get)

@@ -128,7 +128,7 @@ def test_fit_calibrated_alone(asl_root, tmp_path):
     from gyrodenoise.fit_calibrated import fit
 
     cfg = compose_config(
-        "train",
+        "fit_calibrated",
         ["dataset=asl_folder", f"dataset.root={asl_root}", "dataset.name=my_imu", "dataset.train_seqs=[walk_1,walk_2]",
          "dataset.val_seqs=[walk_3]", "dataset.test_seqs=[walk_3]", "dataset.train_duration_s=null",
          f"paths.output_dir={tmp_path}"],

@@ -97,7 +97,7 @@ def test_shipped_tumvi_is_the_calibrated_fit_on_whole_rooms(tumvi_root, tmp_path
     assert meta["model"]["name"] == "calibrated" and meta["train_duration_s"] is None
     assert meta["command"].endswith("dataset=tumvi test=false dataset.train_duration_s=null")
     cfg = compose_config(
-        "train",
+        "fit_calibrated",
         ["dataset=tumvi", f"dataset.root={tumvi_root}", "test=false", "dataset.train_duration_s=null",
          f"paths.output_dir={tmp_path}"],
     )  # fmt: skip

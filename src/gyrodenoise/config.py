@@ -17,6 +17,6 @@ CONF_DIR = Path(__file__).parent / "conf"
 
 
 def compose_config(name: str = "train", overrides: Sequence[str] = ()) -> DictConfig:
-    """Config `name` (train, evaluate) of gyrodenoise/conf with Hydra `overrides` applied."""
+    """Config `name` (train, evaluate, fit_calibrated) of gyrodenoise/conf with Hydra `overrides` applied."""
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         return compose(name, overrides=list(overrides))

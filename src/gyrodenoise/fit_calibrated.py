@@ -7,8 +7,8 @@ The same fit as every training's safety net (`gyrodenoise.baseline.fit_calibrate
 L-BFGS, float64, whole training parts), written as a model file that loads like any other (model.pt) with a
 summary.json: the AOE on each validation group ("val": the held-out sequence under cross-validation or the
 end of the training sequences; "val_tail": the end of the other training sequences under cross-validation)
-and on the test sequences when `test=true` and they exist. Reads the `dataset` and `loss` groups of the
-training config; the network, trainer and optimiser settings do not apply.
+and on the test sequences when `test=true` and they exist. Config `fit_calibrated`: the training config with
+`model=calibrated`; only its `dataset` and `loss` groups are used (no trainer, no optimiser).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def fit(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="train")
+@hydra.main(version_base="1.3", config_path="conf", config_name="fit_calibrated")
 def main(cfg: DictConfig) -> float:
     with user_errors():
         summary = fit(cfg)
