@@ -50,10 +50,8 @@ def fit(cfg: DictConfig) -> dict:
     command = Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:])
     summary = {
         "command": command,
-        "dataset": cfg.dataset.name,
-        "train_seqs": list(dm.train_names),
-        "train_duration_s": dm.train_duration_s,
-        "cv_fold": cfg.dataset.get("cv_fold"),
+        **dm.model_meta(),
+        "cv_fold": dm.cv_fold,
         "fit_s": fit_s,
         "machine": machine_description(),
         "aoe_deg": means,
