@@ -94,12 +94,12 @@ def fit_calibrated(
     return model.eval()
 
 
-def evaluate_on(model: CorrectionModel, sequences: Seq[Sequence]) -> dict[str, float]:
-    """{sequence name: AOE (deg, 3D)} of the open-loop integration of the corrected gyro, aligned on
-    ground truth at the first sample (as validation and `gyrodenoise.evaluate` do)."""
+def evaluate_on(model: CorrectionModel | None, sequences: Seq[Sequence]) -> dict[str, float]:
+    """{sequence name: AOE (deg, 3D)} of the open-loop integration of the corrected gyro (model None: the raw
+    gyro), aligned on ground truth at the first sample (as validation and `gyrodenoise.evaluate` do)."""
     out = {}
     for seq in sequences:
-        gyro = predict_gyro(model, seq.imu).numpy()
+        gyro = seq.gyro if model is None else predict_gyro(model, seq.imu).numpy()
         R = integrate_gyro(seq.rot[0], gyro, seq.dt)
         out[seq.name] = math.degrees(aoe(seq.rot, R, seq.gt_mask)[0])
     return out

@@ -61,14 +61,6 @@ def load_checked(name_or_path: str) -> tuple[CorrectionModel, dict, str | None]:
     return model, meta, msg
 
 
-def evaluated_part(seq: Sequence, train_duration_s: float | None) -> tuple[str, float]:
-    """(sequence name, start in s) of an evaluated sequence: a validation part "<name>[<T>s:]" starts
-    where the training part of its sequence ends, anything else at its beginning."""
-    if "[" in seq.name and train_duration_s is not None:
-        return seq.name.split("[", 1)[0], float(train_duration_s)
-    return seq.name, 0.0
-
-
 def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
     """Open-loop attitude aligned at the first instant; gyro None means zero motion."""
     if gyro is None:
@@ -153,7 +145,7 @@ def evaluate(cfg: DictConfig) -> dict:
                 dm.root, seq.name, variant_file, dm.max_gap_factor, dm.cache_dir
             )
 
-    parts = [evaluated_part(seq, dm.train_duration_s) for seq in sequences.values()]
+    parts = [dm.origin(seq) for seq in sequences.values()]
     overlap = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
     for w in overlap:
         warnings.warn(w, ModelQualityWarning, stacklevel=2)

@@ -148,6 +148,7 @@ class ImuDataModule(L.LightningDataModule):
         self.train_part: list[Sequence] = []
         self.val_part: list[Sequence] = []
         self.val_groups: list[str] = []  # metric group of each validation sequence
+        self.part_origin: dict[str, tuple[str, float]] = {}  # validation part name -> (sequence, start in s)
         self.test_part: list[Sequence] = []
 
     def _augment_config(self, aug: dict) -> AugmentConfig:
@@ -189,6 +190,11 @@ class ImuDataModule(L.LightningDataModule):
             "train_duration_s": self.train_duration_s,
         }
 
+    def origin(self, seq: Sequence) -> tuple[str, float]:
+        """(sequence name, start in s) of a sequence this module serves: a validation part starts where the
+        training part of its sequence ends, anything else (whole sequences) at its beginning."""
+        return self.part_origin.get(seq.name, (seq.name, 0.0))
+
     def load(self, name: str) -> Sequence:
         return load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
 
@@ -212,6 +218,7 @@ class ImuDataModule(L.LightningDataModule):
                             "dataset.train_duration_s or name other sequences in dataset.val_seqs"
                         )
                     self.val_part.append(seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]"))
+                    self.part_origin[self.val_part[-1].name] = (name, float(self.train_duration_s))
                     self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
