@@ -21,22 +21,30 @@ from gyrodenoise.ablation_stats import paired_diff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.baseline import evaluate_on, fit_calibrated
 from gyrodenoise.config import compose_config
+from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.models.denoiser import CalibratedImu
 from gyrodenoise.provenance import machine_description
 
 OUT = Path("benchmarks/results/calibrated_cv")
 DURATIONS = {"first 50 s": "50", "whole": "null"}
 
 
+def fit_fold(dataset: str, fold: int, duration: str) -> tuple[CalibratedImu, list[Sequence]]:
+    """The calibrated model fitted on the training sequences of `fold` (their first `duration` s, or "null": whole)
+    and the held-out sequence's parts (whole; split only at ground-truth gaps)."""
+    overrides = [f"dataset={dataset}", f"dataset.cv_fold={fold}", f"dataset.train_duration_s={duration}"]
+    cfg = compose_config("train", overrides)
+    dm = hydra.utils.instantiate(cfg.dataset)
+    dm.setup("fit")
+    held_out = [s for s, g in zip(dm.val_part, dm.val_groups, strict=True) if g == "val"]
+    return fit_calibrated(dm.train_part, loss=dict(cfg.loss)), held_out
+
+
 def fold_scores(dataset: str, fold: int) -> dict[str, float | str]:
     """{'held-out': name, 'raw IMU': AOE, 'first 50 s': AOE, 'whole': AOE} on the held-out sequence of `fold`."""
     out: dict[str, float | str] = {}
     for label, duration in DURATIONS.items():
-        overrides = [f"dataset={dataset}", f"dataset.cv_fold={fold}", f"dataset.train_duration_s={duration}"]
-        cfg = compose_config("train", overrides)
-        dm = hydra.utils.instantiate(cfg.dataset)
-        dm.setup("fit")
-        held_out = [s for s, g in zip(dm.val_part, dm.val_groups, strict=True) if g == "val"]
-        model = fit_calibrated(dm.train_part, loss=dict(cfg.loss))
+        model, held_out = fit_fold(dataset, fold, duration)
         out[label] = float(np.mean(list(evaluate_on(model, held_out).values())))
     out["held-out"] = held_out[0].name
     out["raw IMU"] = evaluate_on(None, held_out)[held_out[0].name]
