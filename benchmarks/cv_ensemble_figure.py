@@ -55,6 +55,14 @@ def held_out_flight(fold: int):
     return dm.load(dm.cv_holdout)
 
 
+REGENERATE = (
+    "The model files are not in the repository (their runs' summaries are, in reports/accuracy_runs/). Retrain "
+    "them with the queue that made them, collecting the summaries aside (with --collect . the runs whose summary is "
+    "committed are skipped), e.g. `python benchmarks/run_queue.py benchmarks/queues/cv_round2.txt --jobs 1 "
+    "--threads 1 --out runs/cv2 --collect runs/cv2-summaries` (cv_round3.txt into runs/cv3, cv_round7.txt into "
+    "runs/cv7). Runs retrained after the code changed differ from the committed ones by seed-sized amounts "
+    "(reports/accuracy.md, round 7)."
+)
 ROUND3_ROOTS = [Path("runs/cv2/reports/accuracy_runs/euroc_cv2"), Path("runs/cv3/reports/accuracy_runs/euroc_cv3")]
 ROUND3_SEEDS = (100, 200, 300)
 
@@ -64,7 +72,7 @@ def fold_ensemble_and_calibrated(fold: int, runs: dict, recipe: str = "ref", see
     calibrated model the first member's run fitted on the same training flights)."""
     paths = [runs.get((recipe, fold, s + fold)) for s in seeds]
     if None in paths:
-        raise SystemExit(f"fold {fold}: missing {recipe} runs of seeds {[s + fold for s in seeds]}")
+        raise SystemExit(f"fold {fold}: missing {recipe} runs of seeds {[s + fold for s in seeds]}. {REGENERATE}")
     seq = held_out_flight(fold)
     ens = np.mean([predict_gyro(load_model(p)[0], seq.imu).numpy() for p in paths], axis=0)
     cal = predict_gyro(load_model(paths[0].parent / "calibrated.pt")[0], seq.imu).numpy()
@@ -127,7 +135,9 @@ def main() -> None:
         if (r, k, s + k) not in runs
     ]
     if missing:
-        raise SystemExit(f"missing run folders (with model.pt) under {[str(r) for r in args.roots]}: {missing}")
+        raise SystemExit(
+            f"missing run folders (with model.pt) under {[str(r) for r in args.roots]}: {missing}. {REGENERATE}"
+        )
     folds = []
     for k in range(args.folds):
         seq = held_out_flight(k)
