@@ -71,13 +71,18 @@ def cross_validation(root: Path) -> list[dict]:
             row[source] = {"plain_deg": aoe_deg(seq, gyro), "grid_deg": grid_aoe(seq, gyro)}
         print(f"fold {k} {seq.name}: network {row['network']['plain_deg']:.2f} deg", flush=True)
         folds.append(row)
-    for source in SOURCES:
+    apply_nested_gains(folds, SOURCES)
+    return folds
+
+
+def apply_nested_gains(folds: list[dict], sources: tuple[str, ...]) -> None:
+    """Per source, give each fold the gains chosen on the other folds and its AOE with them (in place)."""
+    for source in sources:
         grids = [f[source]["grid_deg"] for f in folds]
         for k, f in enumerate(folds):
             g = nested_choice(grids, k)
             f[source]["nested_gains"] = list(GRID[g])
             f[source]["tracked_deg"] = grids[k][g]
-    return folds
 
 
 def decision(folds: list[dict]) -> dict:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from calibrated_cv import fit_fold
 from cv_ensemble_figure import aoe_deg
-from cv_gravity_bias import GRID, grid_aoe, nested_choice
+from cv_gravity_bias import GRID, apply_nested_gains, grid_aoe
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
@@ -51,12 +51,7 @@ def main() -> None:
     args = ap.parse_args()
     start = time.time()
     folds = [fold_grid(k) for k in range(FOLDS)]
-    for source in SOURCES:
-        grids = [f[source]["grid_deg"] for f in folds]
-        for k, f in enumerate(folds):
-            g = nested_choice(grids, k)
-            f[source]["nested_gains"] = list(GRID[g])
-            f[source]["tracked_deg"] = grids[k][g]
+    apply_nested_gains(folds, SOURCES)
     d = PairedDiff(
         tuple(str(f["fold"]) for f in folds),
         tuple(f["calibrated"]["tracked_deg"] - f["calibrated"]["plain_deg"] for f in folds),
