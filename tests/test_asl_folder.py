@@ -124,6 +124,12 @@ def test_missing_sequences_fail_before_training(asl_root):
     with pytest.raises(FileNotFoundError, match=r"not found: walk_9 \(ASL layout") as err:
         dm(["walk_1", "walk_9"], ["room_2"]).check_sequences(test=False)
     assert "test=false" not in str(err.value)
+    # no data folder at all: say so (and the environment variable), not "train without the test sequences"
+    nowhere = ImuDataModule(name="my_imu", root=str(asl_root / "nowhere"), train_seqs=["walk_1"],
+                            test_seqs=["room_2"], window=256)  # fmt: skip
+    with pytest.raises(FileNotFoundError, match=r"nowhere: data folder not found .*GYRODENOISE_DATA") as err:
+        nowhere.check_sequences(train=False, test=True, test_hint="pass test=false")
+    assert "test=false" not in str(err.value)
 
 
 def test_fit_calibrated_alone(asl_root, tmp_path):
