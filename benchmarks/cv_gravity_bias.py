@@ -207,30 +207,7 @@ def report(result: dict) -> str:
         f"k_I={dec['gains_all_folds'][1]:g}.",
         "",
     ]
-    if result["test"]:
-        labels = [k for k in result["test"][0] if k != "flight"]
-        rows = [
-            [t["flight"], *[f"{t[k]['plain_deg']:.2f} → {t[k]['tracked_deg']:.2f}" for k in labels]]
-            for t in result["test"]
-        ]
-        rows.append(
-            [
-                "**mean**",
-                *[
-                    f"**{np.mean([t[k]['plain_deg'] for t in result['test']]):.2f} → "
-                    f"{np.mean([t[k]['tracked_deg'] for t in result['test']]):.2f}**"
-                    for k in labels
-                ],
-            ]
-        )
-        lines += [
-            "## Test flights, once (shipped `euroc`, V1_01 against the recomputed ground truth)",
-            "",
-            "Open loop → with the tracker, the ensemble and each of its members.",
-            "",
-            markdown_table(["flight", *labels], rows),
-            "",
-        ]
+    lines += test_section(result["test"])
     lines += ["## Gain grid (mean held-out AOE over the 6 folds, deg; information)", ""]
     grid_mean = {s: np.mean([f[s]["grid_deg"] for f in result["folds"]], axis=0) for s in SOURCES}
     lines.append(
@@ -243,6 +220,32 @@ def report(result: dict) -> str:
         )
     )
     return "\n".join(lines) + "\n"
+
+
+def test_section(test: list[dict]) -> list[str]:
+    """Markdown lines of the once-only test table (open loop -> with the tracker), or none without a test."""
+    if not test:
+        return []
+    labels = [k for k in test[0] if k != "flight"]
+    rows = [[t["flight"], *[f"{t[k]['plain_deg']:.2f} → {t[k]['tracked_deg']:.2f}" for k in labels]] for t in test]
+    rows.append(
+        [
+            "**mean**",
+            *[
+                f"**{np.mean([t[k]['plain_deg'] for t in test]):.2f} → "
+                f"{np.mean([t[k]['tracked_deg'] for t in test]):.2f}**"
+                for k in labels
+            ],
+        ]
+    )
+    return [
+        "## Test flights, once (shipped `euroc`, V1_01 against the recomputed ground truth)",
+        "",
+        "Open loop → with the tracker, the ensemble and each of its members.",
+        "",
+        markdown_table(["flight", *labels], rows),
+        "",
+    ]
 
 
 if __name__ == "__main__":
