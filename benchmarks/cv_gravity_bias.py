@@ -102,8 +102,9 @@ def decision(folds: list[dict]) -> dict:
     }
 
 
-def test_flights(gains: tuple[float, float]) -> list[dict]:
-    """Shipped `euroc` (its ensemble and each member) with and without the tracker, once."""
+def test_flights(gains: tuple[float, float], acc_offset: np.ndarray | None = None) -> list[dict]:
+    """Shipped `euroc` (its ensemble and each member) with and without the tracker, once; the tracker is fed the
+    accelerometer minus `acc_offset` (m/s^2, body frame) when one is given."""
     dm = hydra.utils.instantiate(compose_config("train", ["dataset=euroc"]).dataset)
     ensemble = load_model("euroc")[0]
     rows = []
@@ -113,7 +114,8 @@ def test_flights(gains: tuple[float, float]) -> list[dict]:
         sources = {"ensemble": np.mean(members, axis=0), **{f"member {i}": g for i, g in enumerate(members)}}
         row = {"flight": name}
         for label, gyro in sources.items():
-            bias = track_bias(gyro, seq.acc, seq.dt, np.array([gains[0]]), np.array([gains[1]]))[0]
+            acc = seq.acc if acc_offset is None else seq.acc - acc_offset
+            bias = track_bias(gyro, acc, seq.dt, np.array([gains[0]]), np.array([gains[1]]))[0]
             row[label] = {"plain_deg": aoe_deg(seq, gyro), "tracked_deg": aoe_deg(seq, gyro - bias)}
         print(f"test {name}: ensemble {row['ensemble']['plain_deg']:.2f} -> {row['ensemble']['tracked_deg']:.2f}")
         rows.append(row)

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 MIN_ACC_NORM = 1e-6  # m/s^2: below this the accelerometer has no direction (free fall, a zeroed sample)
 
@@ -87,6 +88,28 @@ def _one_pass(gyro: list, up: list, dt: list, k_p: float, k_i: float) -> np.ndar
             ux, uy, uz = ux / norm, uy / norm, uz / norm
         bx, by, bz = bx - k_i * ex * h, by - k_i * ey * h, bz - k_i * ez * h
     return out
+
+
+def accelerometer_offset(seq, spline_step: int = 20, edge_s: float = 1.0, g: float = 9.81) -> np.ndarray:
+    """(3,) m/s^2: a flight's constant accelerometer offset in the body frame against its ground truth, the per-axis
+    median over ground-truth-valid samples (the first and last `edge_s` left out) of a - R^T (p'' + g e_z).
+
+    Why: the tracker reads the accelerometer's direction as gravity's; a constant offset of ~0.1 m/s^2 is a tilt of
+    ~0.6 deg that, as the body yaws, the observer explains with a gyro bias that is not there. p'' comes from a cubic
+    spline (scipy) through every `spline_step`-th ground-truth position, which smooths the mocap noise that a
+    second derivative would amplify. `seq` is a `gyrodenoise.data.sequence.Sequence` (rot body-to-world, pos world).
+    """
+    t = np.asarray(seq.t, dtype=np.float64)
+    keep = np.asarray(seq.gt_mask, dtype=bool) & (t >= t[0] + edge_s) & (t <= t[-1] - edge_s)
+    knots = np.flatnonzero(seq.gt_mask)[::spline_step]
+    if keep.sum() == 0 or len(knots) < 4:
+        raise ValueError(
+            f"accelerometer_offset: {getattr(seq, 'name', 'sequence')} has too little ground truth "
+            f"({int(np.sum(seq.gt_mask))} valid samples) to fit an offset; use a longer flight"
+        )
+    acc_world = CubicSpline(t[knots], seq.pos[knots])(t[keep], 2) + np.array([0.0, 0.0, g])
+    specific_force = np.einsum("nji,nj->ni", seq.rot[keep], acc_world)  # R^T (p'' + g e_z)
+    return np.median(np.asarray(seq.acc)[keep] - specific_force, axis=0)
 
 
 def _checked(gyro: np.ndarray, acc: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
