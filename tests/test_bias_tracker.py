@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.bias_tracker import GravityBiasTracker, track_bias
+from gyrodenoise.bias_tracker import GravityBiasTracker, accelerometer_offset, track_bias
+from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.so3 import integrate_gyro, relative_rotvec
 
 RATE = 200.0
@@ -92,3 +93,33 @@ def test_bad_input_is_named() -> None:
         GravityBiasTracker().bias(gyro, np.ones_like(gyro), dt)
     with pytest.raises(ValueError, match="k_i must be a finite number >= 0"):
         GravityBiasTracker(k_i=-1.0)
+
+
+def moving_flight(offset: np.ndarray, gt_mask: np.ndarray | None = None) -> Sequence:
+    """A body that moves and turns (positions and angles from closed-form sines, rotations from scipy), its
+    accelerometer = R^T (p'' + g e_z) + offset + white noise, p'' from the closed form (not from a spline)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 1.0 / RATE)
+    w = np.array([0.4, 0.7, 0.3])
+    pos = np.sin(np.outer(t, w)) * [2.0, 1.5, 0.5]
+    acc_world = -np.sin(np.outer(t, w)) * [2.0, 1.5, 0.5] * w**2
+    R = Rotation.from_euler("ZYX", np.stack([0.2 * t, 0.3 * np.sin(0.5 * t), 0.2 * np.sin(0.7 * t)], 1)).as_matrix()
+    acc = np.einsum("nji,nj->ni", R, acc_world + [0.0, 0.0, G]) + offset + 0.05 * rng.standard_normal((len(t), 3))
+    mask = np.ones(len(t), bool) if gt_mask is None else gt_mask
+    return Sequence("synthetic", 0, t, np.zeros((len(t), 3)), acc, R, pos, mask)
+
+
+def test_accelerometer_offset_is_recovered_from_the_ground_truth() -> None:
+    offset = np.array([-0.02, 0.12, 0.07])
+    np.testing.assert_allclose(accelerometer_offset(moving_flight(offset)), offset, atol=5e-3)
+    mask = np.ones(len(moving_flight(offset).t), bool)
+    mask[3000:3200] = False  # a 1-s ground-truth gap whose positions are garbage: not used, not a knot
+    gappy = moving_flight(offset, mask)
+    gappy.pos[3000:3200] = 0.0
+    np.testing.assert_allclose(accelerometer_offset(gappy), offset, atol=5e-3)
+
+
+def test_accelerometer_offset_needs_ground_truth() -> None:
+    seq = moving_flight(np.zeros(3), gt_mask=np.zeros(12000, bool))
+    with pytest.raises(ValueError, match="synthetic has too little ground truth \\(0 valid samples\\)"):
+        accelerometer_offset(seq)
