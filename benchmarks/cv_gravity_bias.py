@@ -132,19 +132,25 @@ def main() -> None:
     dec = decision(folds)
     print(json.dumps(dec), flush=True)
     test = test_flights(tuple(dec["gains_all_folds"])) if dec["adopted"] else []
-    result = {
-        "command": "python benchmarks/cv_gravity_bias.py",
-        "rule": "benchmarks/queues/cv_round7.txt",
+    result = run_info("cv_gravity_bias.py", "cv_round7.txt") | {"grid": GRID, "folds": folds, "decision": dec}
+    save(args.out, result | {"test": test, "wall_s": time.time() - start}, report)
+
+
+def run_info(script: str, rule: str) -> dict:
+    """The command, the rule file and the machine of a round's figure."""
+    return {
+        "command": f"python benchmarks/{script}",
+        "rule": f"benchmarks/queues/{rule}",
         "machine": f"{platform.node()} ({platform.machine()}, CPU)",
-        "grid": GRID,
-        "folds": folds,
-        "decision": dec,
-        "test": test,
-        "wall_s": time.time() - start,
     }
-    write_json(args.out.with_suffix(".json"), result)
-    write_text(args.out.with_suffix(".md"), report(result))
-    print(report(result))
+
+
+def save(out: Path, result: dict, render) -> None:
+    """out.json and out.md (rendered by `render`), each written whole; the markdown is printed too."""
+    text = render(result)
+    write_json(out.with_suffix(".json"), result)
+    write_text(out.with_suffix(".md"), text)
+    print(text)
 
 
 def report(result: dict) -> str:

@@ -15,17 +15,15 @@ and only then is the test computed. Writes --out .md and .json. CPU only; ~5 min
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 from pathlib import Path
 
 import hydra
 import numpy as np
 from cv_ensemble_figure import REGENERATE, aoe_deg, find_runs, held_out_flight
-from cv_gravity_bias import GRID, test_flights, test_section
+from cv_gravity_bias import GRID, run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.bias_tracker import accelerometer_offset, track_bias
 from gyrodenoise.config import compose_config
 from gyrodenoise.evaluate import markdown_table
@@ -124,20 +122,13 @@ def main() -> None:
     print(dec, flush=True)
     all_flights = np.median(list(offsets.values()), axis=0)
     test = test_flights(tuple(dec["gains_all_folds"]), acc_offset=all_flights) if dec["adopted"] else []
-    result = {
-        "command": "python benchmarks/cv_tracker_acc_offset.py",
-        "rule": "benchmarks/queues/cv_round9.txt",
-        "machine": f"{platform.node()} ({platform.machine()}, CPU)",
+    result = run_info("cv_tracker_acc_offset.py", "cv_round9.txt") | {
         "grid": GRID,
         "training_flight_offsets_m_s2": {k: v.tolist() for k, v in offsets.items()},
         "folds": folds,
         "decision": dec,
-        "test": test,
-        "wall_s": time.time() - start,
     }
-    write_json(args.out.with_suffix(".json"), result)
-    write_text(args.out.with_suffix(".md"), report(result))
-    print(report(result))
+    save(args.out, result | {"test": test, "wall_s": time.time() - start}, report)
 
 
 def report(result: dict) -> str:

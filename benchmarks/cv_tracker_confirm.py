@@ -15,16 +15,14 @@ CPU only; ~1 min (~3 with the test).
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 from cv_ensemble_figure import REGENERATE, aoe_deg, find_runs, held_out_flight, logged_figure
-from cv_gravity_bias import test_flights, test_section
+from cv_gravity_bias import run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.bias_tracker import track_bias
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
@@ -96,21 +94,14 @@ def main() -> None:
     print(dec, flush=True)
     round7 = [score_fold(k, find_runs([args.round7]), (ROUND7_SEED,)) for k in range(6)]
     test = test_flights(GAINS["network"]) if dec["adopted"] else []
-    result = {
-        "command": "python benchmarks/cv_tracker_confirm.py",
-        "rule": "benchmarks/queues/cv_round8.txt",
-        "machine": f"{platform.node()} ({platform.machine()}, CPU)",
+    result = run_info("cv_tracker_confirm.py", "cv_round8.txt") | {
         "gains": GAINS,
         "folds": new,
         "round7_folds": round7,
         "decision": dec,
         "pooled_with_round7": pooled(new, round7),
-        "test": test,
-        "wall_s": time.time() - start,
     }
-    write_json(args.out.with_suffix(".json"), result)
-    write_text(args.out.with_suffix(".md"), report(result))
-    print(report(result))
+    save(args.out, result | {"test": test, "wall_s": time.time() - start}, report)
 
 
 def fold_rows(folds: list[dict]) -> list[list[str]]:
