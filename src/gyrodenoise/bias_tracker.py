@@ -21,9 +21,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+
+if TYPE_CHECKING:
+    from gyrodenoise.data.sequence import Sequence
 
 MIN_ACC_NORM = 1e-6  # m/s^2: below this the accelerometer has no direction (free fall, a zeroed sample)
 
@@ -90,14 +94,15 @@ def _one_pass(gyro: list, up: list, dt: list, k_p: float, k_i: float) -> np.ndar
     return out
 
 
-def accelerometer_offset(seq, spline_step: int = 20, edge_s: float = 1.0, g: float = 9.81) -> np.ndarray:
+def accelerometer_offset(seq: Sequence, spline_step: int = 20, edge_s: float = 1.0, g: float = 9.81) -> np.ndarray:
     """(3,) m/s^2: a flight's constant accelerometer offset in the body frame against its ground truth, the per-axis
     median over ground-truth-valid samples (the first and last `edge_s` left out) of a - R^T (p'' + g e_z).
 
-    Why: the tracker reads the accelerometer's direction as gravity's; a constant offset of ~0.1 m/s^2 is a tilt of
-    ~0.6 deg that, as the body yaws, the observer explains with a gyro bias that is not there. p'' comes from a cubic
-    spline (scipy) through every `spline_step`-th ground-truth position, which smooths the mocap noise that a
-    second derivative would amplify. `seq` is a `gyrodenoise.data.sequence.Sequence` (rot body-to-world, pos world).
+    Why: the tracker reads the accelerometer's direction as gravity's, and a constant offset of ~0.1 m/s^2 is a tilt
+    of ~0.6 deg that, as the body yaws, an observer may explain with a gyro bias that is not there. Feeding the
+    tracker a - offset was measured on EuRoC (round 9, reports/accuracy.md) and not adopted. p'' comes from a cubic
+    spline (scipy) through every `spline_step`-th ground-truth position, which smooths the mocap noise that a second
+    derivative would amplify; rot is body-to-world, pos in the world frame.
     """
     t = np.asarray(seq.t, dtype=np.float64)
     keep = np.asarray(seq.gt_mask, dtype=bool) & (t >= t[0] + edge_s) & (t <= t[-1] - edge_s)
