@@ -42,10 +42,11 @@ ROUND2 = Path("reports/accuracy_runs/euroc_cv2")
 COLLECTED = Path("reports/accuracy_runs/euroc_cv7")
 
 
-def grid_aoe(seq, gyro: np.ndarray) -> list[float]:
-    """AOE 3D (deg) of the open-loop integration of gyro - tracked bias, for every gain pair of GRID."""
+def grid_aoe(seq, gyro: np.ndarray, acc: np.ndarray | None = None) -> list[float]:
+    """AOE 3D (deg) of the open-loop integration of gyro - tracked bias, for every gain pair of GRID; the tracker
+    is fed `acc` (default: the flight's accelerometer)."""
     kp, ki = np.array(GRID).T
-    biases = track_bias(gyro, seq.acc, seq.dt, kp, ki)
+    biases = track_bias(gyro, seq.acc if acc is None else acc, seq.dt, kp, ki)
     return [aoe_deg(seq, gyro - b) for b in biases]
 
 

@@ -21,10 +21,10 @@ from pathlib import Path
 import hydra
 import numpy as np
 from cv_ensemble_figure import REGENERATE, aoe_deg, find_runs, held_out_flight
-from cv_gravity_bias import GRID, run_info, save, test_flights, test_section
+from cv_gravity_bias import GRID, grid_aoe, nested_choice, run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.bias_tracker import accelerometer_offset, track_bias
+from gyrodenoise.bias_tracker import accelerometer_offset
 from gyrodenoise.config import compose_config
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
@@ -43,11 +43,6 @@ def training_offsets() -> dict[str, np.ndarray]:
 
 def fold_offset(offsets: dict[str, np.ndarray], held_out: str) -> np.ndarray:
     return np.median([b for name, b in offsets.items() if name != held_out], axis=0)
-
-
-def grid_aoe(seq, gyro: np.ndarray, acc: np.ndarray) -> list[float]:
-    kp, ki = np.array(GRID).T
-    return [aoe_deg(seq, gyro - b) for b in track_bias(gyro, acc, seq.dt, kp, ki)]
 
 
 def score_fold(fold: int, runs: dict, offsets: dict[str, np.ndarray]) -> dict:
@@ -77,15 +72,15 @@ def nested(folds: list[dict], variant: str) -> None:
     """Per fold: the gains chosen on the other five folds, and the fold-mean difference to open loop with them."""
     grids = [fold_grid(f, variant) for f in folds]
     for k, f in enumerate(folds):
-        g = int(np.argmin(np.mean([x for j, x in enumerate(grids) if j != k], axis=0)))
+        g = nested_choice(grids, k)
         plain = np.mean([r["plain_deg"] for r in f["runs"].values()])
         f[variant] = {"gains": list(GRID[g]), "tracked_deg": float(grids[k][g]), "d_deg": float(grids[k][g] - plain)}
 
 
 def calibrated_nested(folds: list[dict]) -> None:
-    grids = [np.array(f["calibrated"]["corrected"]) for f in folds]
+    grids = [f["calibrated"]["corrected"] for f in folds]
     for k, f in enumerate(folds):
-        g = int(np.argmin(np.mean([x for j, x in enumerate(grids) if j != k], axis=0)))
+        g = nested_choice(grids, k)
         f["calibrated"]["nested"] = {"gains": list(GRID[g]), "tracked_deg": float(grids[k][g])}
 
 
