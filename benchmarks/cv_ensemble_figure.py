@@ -67,12 +67,19 @@ ROUND3_ROOTS = [Path("runs/cv2/reports/accuracy_runs/euroc_cv2"), Path("runs/cv3
 ROUND3_SEEDS = (100, 200, 300)
 
 
+def fold_run_paths(runs: dict, fold: int, seeds, recipe: str = "ref") -> dict[int, Path]:
+    """{seed + fold: model.pt} of the fold's runs of `recipe`; a missing run stops with how to retrain it."""
+    paths = {s + fold: runs.get((recipe, fold, s + fold)) for s in seeds}
+    missing = [s for s, p in paths.items() if p is None]
+    if missing:
+        raise SystemExit(f"fold {fold}: missing {recipe} runs of seeds {missing}. {REGENERATE}")
+    return paths
+
+
 def fold_ensemble_and_calibrated(fold: int, runs: dict, recipe: str = "ref", seeds=ROUND3_SEEDS):
     """(held-out flight, mean corrected gyro of the fold's members of seeds s + fold, the corrected gyro of the
     calibrated model the first member's run fitted on the same training flights)."""
-    paths = [runs.get((recipe, fold, s + fold)) for s in seeds]
-    if None in paths:
-        raise SystemExit(f"fold {fold}: missing {recipe} runs of seeds {[s + fold for s in seeds]}. {REGENERATE}")
+    paths = list(fold_run_paths(runs, fold, seeds, recipe).values())
     seq = held_out_flight(fold)
     ens = np.mean([predict_gyro(load_model(p)[0], seq.imu).numpy() for p in paths], axis=0)
     cal = predict_gyro(load_model(paths[0].parent / "calibrated.pt")[0], seq.imu).numpy()

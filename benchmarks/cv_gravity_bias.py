@@ -50,6 +50,13 @@ def grid_aoe(seq, gyro: np.ndarray, acc: np.ndarray | None = None) -> list[float
     return [aoe_deg(seq, gyro - b) for b in biases]
 
 
+def plain_and_tracked(seq, gyro: np.ndarray, gains: tuple[float, float], acc: np.ndarray | None = None) -> dict:
+    """AOE 3D (deg) of gyro as it is and minus the tracked bias at one gain pair (fed `acc`, default the flight's)."""
+    kp, ki = np.array([gains[0]]), np.array([gains[1]])
+    bias = track_bias(gyro, seq.acc if acc is None else acc, seq.dt, kp, ki)[0]
+    return {"plain_deg": aoe_deg(seq, gyro), "tracked_deg": aoe_deg(seq, gyro - bias)}
+
+
 def nested_choice(grid_by_fold: list[list[float]], fold: int) -> int:
     """Index of the gain pair with the lowest mean AOE over the folds other than `fold`."""
     others = [g for j, g in enumerate(grid_by_fold) if j != fold]
@@ -113,11 +120,8 @@ def test_flights(gains: tuple[float, float], acc_offset: np.ndarray | None = Non
         seq = dm.load(name)
         members = [predict_gyro(m, seq.imu).numpy() for m in ensemble.members]
         sources = {"ensemble": np.mean(members, axis=0), **{f"member {i}": g for i, g in enumerate(members)}}
-        row = {"flight": name}
-        for label, gyro in sources.items():
-            acc = seq.acc if acc_offset is None else seq.acc - acc_offset
-            bias = track_bias(gyro, acc, seq.dt, np.array([gains[0]]), np.array([gains[1]]))[0]
-            row[label] = {"plain_deg": aoe_deg(seq, gyro), "tracked_deg": aoe_deg(seq, gyro - bias)}
+        acc = seq.acc if acc_offset is None else seq.acc - acc_offset
+        row = {"flight": name} | {label: plain_and_tracked(seq, gyro, gains, acc) for label, gyro in sources.items()}
         print(f"test {name}: ensemble {row['ensemble']['plain_deg']:.2f} -> {row['ensemble']['tracked_deg']:.2f}")
         rows.append(row)
     return rows

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from cv_ensemble_figure import REGENERATE, aoe_deg, find_runs, held_out_flight
+from cv_ensemble_figure import aoe_deg, find_runs, fold_run_paths, held_out_flight
 from cv_gravity_bias import GRID, grid_aoe, nested_choice, run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
@@ -46,10 +46,7 @@ def fold_offset(offsets: dict[str, np.ndarray], held_out: str) -> np.ndarray:
 
 
 def score_fold(fold: int, runs: dict, offsets: dict[str, np.ndarray]) -> dict:
-    paths = {s + fold: runs.get(("ref", fold, s + fold)) for s in SEEDS}
-    missing = [s for s, p in paths.items() if p is None]
-    if missing:
-        raise SystemExit(f"fold {fold}: missing ref runs of seeds {missing}. {REGENERATE}")
+    paths = fold_run_paths(runs, fold, SEEDS)
     seq = held_out_flight(fold)
     b_a = fold_offset(offsets, seq.name)
     accs = {"corrected": seq.acc - b_a, "uncorrected": seq.acc}

@@ -19,11 +19,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from cv_ensemble_figure import REGENERATE, aoe_deg, find_runs, held_out_flight, logged_figure
-from cv_gravity_bias import run_info, save, test_flights, test_section
+from cv_ensemble_figure import find_runs, fold_run_paths, held_out_flight, logged_figure
+from cv_gravity_bias import plain_and_tracked, run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.bias_tracker import track_bias
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
@@ -34,17 +33,9 @@ ROUND7_SEED = 100
 COLLECTED = [Path("reports/accuracy_runs/euroc_cv8"), Path("reports/accuracy_runs/euroc_cv7")]
 
 
-def plain_and_tracked(seq, gyro: np.ndarray, gains: tuple[float, float]) -> dict:
-    bias = track_bias(gyro, seq.acc, seq.dt, np.array([gains[0]]), np.array([gains[1]]))[0]
-    return {"plain_deg": aoe_deg(seq, gyro), "tracked_deg": aoe_deg(seq, gyro - bias)}
-
-
 def score_fold(fold: int, runs: dict, seeds: tuple[int, ...]) -> dict:
     """Every run of the fold (network, plain and tracked) and the first run's calibrated model."""
-    paths = {s + fold: runs.get(("ref", fold, s + fold)) for s in seeds}
-    missing = [s for s, p in paths.items() if p is None]
-    if missing:
-        raise SystemExit(f"fold {fold}: missing ref runs of seeds {missing}. {REGENERATE}")
+    paths = fold_run_paths(runs, fold, seeds)
     seq = held_out_flight(fold)
     row = {"fold": fold, "flight": seq.name, "runs": {}}
     for seed, path in paths.items():
