@@ -145,7 +145,16 @@ def _delta_bic(sel, name: str) -> float:
     return float(cand.get("delta_bic", np.nan))
 
 
-_SCORE_KEYS = ("effect", "variant", "delta_bic", "threshold", "gain", "holdout_gain", "holdout_drift_reduction_deg")
+_SCORE_KEYS = (
+    "effect",
+    "variant",
+    "delta_bic",
+    "threshold",
+    "gain",
+    "holdout_gain",
+    "holdout_drift_reduction_deg",
+    "holdout_transfer_dloglik",
+)
 
 
 def _below_practical(sel) -> list[dict]:

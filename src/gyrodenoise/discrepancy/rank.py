@@ -13,8 +13,10 @@ regression's Gaussian likelihood:
 
 A candidate is named when its delta BIC clears its threshold (a null distribution's quantile,
 `null.py`, or the fixed `bic_threshold`) and it is practically meaningful: it closes at least
-`min_gain` of the residual power in the trusted band (of the held-out sequences, when given, for
-regression effects; of the fit sequences for stochastic ones). For a regression effect whose
+`min_gain` of the residual power in the trusted band (of the held-out sequences, when given). A
+band-limited vibration is noise, judged on the held-out spectra: its level refitted there must carry
+that share, and with the level fitted on the fit sequences (a sensor constant) it must raise their
+Whittle likelihood (`_holdout_band_share`). For a regression effect whose
 coefficients are sensor constants (not refitted per sequence), closing `min_drift_deg` of the
 held-out median 10-s attitude drift of the model gyro against the measured gyro is the alternative
 practical minimum (`_holdout_gain`): an effect can matter for attitude while carrying little power.
@@ -307,28 +309,36 @@ def _holdout_band_share(
     corner: float | None,
     sat_limit: float | None,
     band: BandFit,
-) -> float:
-    """Share of the held-out in-band residual power that a band-limited vibration of the fitted centre
-    and width carries when its level is refitted on the held-out spectra (0 when the band does not
-    raise their Whittle likelihood): whether the band the fit sequences show is a property of the
-    sensor that the held-out flights share."""
+) -> tuple[float, float]:
+    """(share, transfer): whether the band the fit sequences show is a property of the sensor that
+    the held-out flights share.
+
+    share: of the held-out in-band residual power, what a band of the fitted centre and width
+    carries with its level refitted there (0 when it does not raise their Whittle likelihood).
+    transfer: the gain in the held-out Whittle log-likelihood when the band keeps the level fitted
+    on the fit sequences (a sensor constant, like the regression effects' coefficients; floor and
+    reconstruction-error level refitted). A band whose level is that of one fit flight's motion,
+    not of the sensor, shows in the first and fails the second: the held-out spectra then fit
+    better without it, and a re-simulation with it would widen the gap it is meant to close."""
     res = design.fit(names)
     views = [sensor_view(h, corner) for h in holdout]
     resid = [v.residual - _predict(design, res, effects, names, sigma, v, sat_limit) for v in views]
     rate = holdout[0].rate_hz
-    fit = fit_band(
-        resid,
-        rate,
-        row_masks(views),
+    kw = dict(
         starts=[(band.frequency_hz, band.bandwidth_hz)],
         bands=band_edges(views),
         floor_corner_hz=corner,
         nuisance=nuisance_of(views),
         fixed_band=True,
     )
-    if fit is None or fit.loglik <= fit.loglik_floor:
-        return 0.0
-    return fit.explained(sigma, rate)
+    fit = fit_band(resid, rate, row_masks(views), **kw)
+    if fit is None:
+        return 0.0, float("nan")
+    kept = fit_band(resid, rate, row_masks(views), fixed_power=band.power, **kw)
+    transfer = float(kept.loglik - kept.loglik_floor)
+    if fit.loglik <= fit.loglik_floor:
+        return 0.0, transfer
+    return fit.explained(sigma, rate), transfer
 
 
 def select_effects(
@@ -429,9 +439,10 @@ def select_effects(
             if holdout and sc.get("variant") == "band-limited":
                 # noise cannot be predicted: the band must be there in the held-out spectra too, at a
                 # practical share of their in-band power
-                hg = _holdout_band_share(design, effects, selected, sigma, holdout, corner, sat_limit, st.band)
+                hg, dll = _holdout_band_share(design, effects, selected, sigma, holdout, corner, sat_limit, st.band)
                 sc["holdout_gain"] = hg
-                if hg < min_gain:
+                sc["holdout_transfer_dloglik"] = dll
+                if hg < min_gain or not dll > 0:
                     continue
             elif judged_on_holdout:
                 hg, hd = _holdout_gain(design, effects, selected, sc["effect"], sigma, holdout, corner, sat_limit)

@@ -181,6 +181,9 @@ def _closed(e: dict) -> str:
     """What a named effect closes on the held-out sequences: in-band power share, and the reduction
     of the median 10-s drift where it is defined (sensor-constant effects)."""
     out = f"{100 * e['holdout_gain']:.2f}%" if e.get("holdout_gain") is not None else ""
+    t = e.get("holdout_transfer_dloglik")
+    if t is not None:  # a band-limited vibration: the share above is at a level refitted on the held-out flights
+        out += f" (level refitted); at the fit level, held-out log-likelihood {t:+.1f}"
     d = e.get("holdout_drift_reduction_deg")
     if d is not None:
         out += f"{'; ' if out else ''}10-s drift {-d:+.3g} deg"
@@ -198,7 +201,8 @@ def _decisions_md(report: dict) -> list[str]:
             f"{null['draws']} re-simulations of the fitted base model along these sequences (fresh sensor noise and a "
             f"fresh draw of the reconstruction error; common random numbers), and at least {s['bic_threshold']:g}; and "
             f"when it closes at least {100 * s['min_gain']:.0f}% of the residual power in the compared band on the "
-            "held-out sequences (stochastic effects: carries that share on the fit sequences), or, for an effect "
+            "held-out sequences (a band-limited vibration: with its level refitted there; and with the level fitted on "
+            "the fit sequences, a sensor constant, it must raise their Whittle log-likelihood), or, for an effect "
             "whose coefficients are sensor constants (fitted on the fit sequences, not refitted per sequence), "
             f"reduces the held-out median 10-s attitude drift of the model gyro against the measured gyro by at "
             f"least {_min_drift(s):g} deg. The null rank p is the "
@@ -228,7 +232,9 @@ def _below_practical_md(report: dict) -> list[str]:
     lines = [
         "Detected on the fit sequences but below the practical minimum on the held-out ones (they clear their "
         "threshold, but fitted there they close less than the minimum of the held-out in-band power and of the "
-        "10-s drift; a negative share: the held-out gap grows, a negative drift change: it shrinks; see Decisions):",
+        "10-s drift; a negative share: the held-out gap grows, a negative drift change: it shrinks; a band-limited "
+        "vibration also fails when, at the level fitted on the fit sequences, it lowers the held-out "
+        "log-likelihood: its level is not the sensor's; see Decisions):",
         "",
         "| effect | delta BIC | threshold | share of the fit residual | closed (held-out) |",
         "|---|---|---|---|---|",

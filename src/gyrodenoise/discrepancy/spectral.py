@@ -218,18 +218,21 @@ def _fit_levels_nuisance(
     theta: np.ndarray | None = None,
     iters: int = 60,
     fixed_floor: np.ndarray | None = None,
+    fixed_power: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """Whittle fit with the reconstruction error as a nuisance term: S = c + P g(f; band) + kappa E(f)
     per axis, all levels >= 0 (projected Fisher scoring). Returns (theta (3, 3): rows c, P, kappa;
-    log L; Fisher information of (c, P) (3, 2, 2), the nuisance level profiled out)."""
+    log L; Fisher information of (c, P) (3, 2, 2), the nuisance level profiled out). `fixed_power`:
+    the band's level P is given (3,), only the floor and the nuisance's level are fitted; without a
+    nuisance (sp.E None, an exact ground truth) its column is zero and stays out of the fit."""
     I, E = sp.I, sp.E
     G = np.zeros_like(I) if band is None else Vibration.band_psd(sp.f, band[0], band[1], sp.rate_hz)[:, None]
     if band is not None and sp.shape is not None:
         G = G / sp.shape[:, None]
     G = np.broadcast_to(G, I.shape)
-    B = np.stack([np.ones_like(I), G, E], -1)  # (M, 3 axes, 3 levels)
+    B = np.stack([np.ones_like(I), G, np.zeros_like(I) if E is None else E], -1)  # (M, 3 axes, 3 levels)
     floor = sp.floor if fixed_floor is None else fixed_floor
-    free = np.array([floor is None, band is not None, True])
+    free = np.array([floor is None, band is not None and fixed_power is None, E is not None])
     if theta is None or theta.shape[0] < 3:
         lo = sp.f <= np.quantile(sp.f, 0.2)  # where the error is smallest: a floor start
         c = np.median(I[lo], axis=0) / np.log(2) if lo.any() else I.mean(0)
@@ -240,6 +243,8 @@ def _fit_levels_nuisance(
             th[0] = floor
     if band is None:
         th[1] = 0.0
+    elif fixed_power is not None:
+        th[1] = np.asarray(fixed_power, dtype=np.float64)
     for _ in range(iters):
         S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
         W = 1 / S**2
@@ -414,12 +419,15 @@ def fit_band(
     floor_corner_hz: float | None = None,
     nuisance: Nuisance | None = None,
     fixed_band: bool = False,
+    fixed_power: np.ndarray | None = None,
 ) -> BandFit | None:
     """Maximum-Whittle-likelihood band-limited vibration (see the module docstring); None when the
     residuals show no excess to start from. `with_errors`: standard errors (a few more fits).
     `starts`: (f0, bw) to start from (default: `initial_guesses`). `bands`: trusted band per
     sequence (`spectra`). `floor_corner_hz`: the floor is shaped by a sensor low-pass of this
-    corner (`Spectra.shaped`). `fixed_band`: keep the first start's centre and width, fit levels only."""
+    corner (`Spectra.shaped`). `fixed_band`: keep the first start's centre and width, fit levels only;
+    `fixed_power` (with `fixed_band`): the band's level per axis too, only the floor (and the
+    nuisance's level) fitted: how well a band fitted elsewhere explains these spectra."""
     f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
     starts = initial_guesses(residuals, rate_hz, f_max=f_hi) if starts is None else starts
     if not starts:
@@ -430,7 +438,10 @@ def fit_band(
     _, ll0, _ = _fit_levels(sp, None)
     if fixed_band:  # centre and width as given: only the levels are fitted
         f0, bw = _clip_band(*starts[0], rate_hz, float(sp.f[-1]))
-        theta, ll, _ = _fit_levels(sp, (f0, bw))
+        if fixed_power is None:
+            theta, ll, _ = _fit_levels(sp, (f0, bw))
+        else:
+            theta, ll, _ = _fit_levels_nuisance(sp, (f0, bw), fixed_power=fixed_power)
         mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
         return BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
     prof = _maximise(sp, starts)

@@ -253,6 +253,7 @@ def run(
             "explained_fraction": cand.get("gain"),
             "holdout_gain": cand.get("holdout_gain"),
             "holdout_drift_reduction_deg": cand.get("holdout_drift_reduction_deg"),
+            "holdout_transfer_dloglik": cand.get("holdout_transfer_dloglik"),
             "threshold": cand.get("threshold"),
             "null_p_value": None
             if null is None or cand.get("delta_bic") is None
