@@ -79,7 +79,7 @@ def _misses(runs: list[dict]) -> list[str]:
 
 def _own(args) -> dict:
     runs, nulls = [], []
-    for name in CASES:
+    for name in _chosen(list(CASES), args):
         for m in (0, 1):
             for seed in range(args.own_seeds):
                 with tempfile.TemporaryDirectory() as d:
@@ -92,13 +92,13 @@ def _own(args) -> dict:
         with tempfile.TemporaryDirectory() as d:
             nulls.append(run_case(d, "none", 0, 5000 + seed, duration_s=args.own_duration, null_draws=args.null_draws))
         print("own null", seed, nulls[-1]["named"], flush=True)
-    return {"runs": runs, "nulls": {"default": nulls}, "vocab": list(CASES)}
+    return {"runs": runs, "nulls": {"default": nulls}, "vocab": _chosen(list(CASES), args)}
 
 
 def _independent(args) -> dict:
     runs, nulls = [], {"vicon": [], "euroc-gt": []}
     kw = {"duration_s": args.duration, "null_draws": args.null_draws, "euroc_root": args.euroc_root}
-    for name in [*WORLD_CASES, "bandwidth"]:
+    for name in _chosen([*WORLD_CASES, "bandwidth"], args):
         for m in (0, 1) if name != "bandwidth" else (0,):
             for seed in range(args.seeds):
                 with tempfile.TemporaryDirectory() as d:
@@ -113,7 +113,13 @@ def _independent(args) -> dict:
             with tempfile.TemporaryDirectory() as d:
                 nulls[mocap].append(run_world_case(d, "none", 0, 5000 + seed, mocap=mocap, **kw))
             print("independent null", mocap, seed, nulls[mocap][-1]["named"], flush=True)
-    return {"runs": runs, "nulls": nulls, "vocab": [*WORLD_CASES, "bandwidth"]}
+    return {"runs": runs, "nulls": nulls, "vocab": _chosen([*WORLD_CASES, "bandwidth"], args)}
+
+
+def _chosen(vocab: list[str], args) -> list[str]:
+    """The hidden-effect cases to run: all, or those named by --effects (a rerun of the cases a change
+    can affect)."""
+    return vocab if not args.effects else [n for n in vocab if n in args.effects]
 
 
 def _equivalent(r: dict) -> bool:
@@ -196,6 +202,7 @@ def main() -> None:
     )
     p.add_argument("--own-duration", type=float, default=40.0)
     p.add_argument("--null-draws", type=int, default=20, help="null re-simulations per run")
+    p.add_argument("--effects", nargs="+", default=None, help="only these hidden-effect cases (default: all)")
     p.add_argument("--euroc-root", type=Path, default=EUROC)
     p.add_argument("--out", type=Path, default=OUT)
     args = p.parse_args()
