@@ -33,7 +33,6 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise import atomic
 from gyrodenoise.data.readers import find_groundtruth_file, read_groundtruth, read_imu
-from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.paths import portable_command
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,9 +111,8 @@ def main() -> None:
     rows = {}
     for name, root in (("euroc", args.euroc), ("tumvi", args.tumvi)):
         for mav0 in _sequences(root):
-            seq = mav0.parent.name
-            rows[f"{name}/{seq}"] = measure(sequence_folder(root, seq))
-            print(seq, flush=True)
+            rows[f"{name}/{mav0.parent.name}"] = measure(mav0)
+            print(mav0.parent.name, flush=True)
     if not rows:
         sys.exit(f"no sequences under {args.euroc} or {args.tumvi}: give --euroc / --tumvi")
     result = {
