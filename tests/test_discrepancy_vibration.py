@@ -79,10 +79,8 @@ def test_a_band_named_on_the_fit_flights_must_keep_its_level_on_the_held_out_one
         return Vibration(frequency_hz=20.0, bandwidth_hz=6.0, amplitude=a)
 
     def transfer(fit, held):
-        kw = dict(starts=[(fit.frequency_hz, fit.bandwidth_hz)], fixed_band=True)
-        refit = fit_band(held, RATE, **kw)
-        kept = fit_band(held, RATE, fixed_power=fit.power, **kw)
-        return refit.loglik - refit.loglik_floor, kept.loglik - kept.loglik_floor
+        b = fit_band(held, RATE, starts=[(fit.frequency_hz, fit.bandwidth_hz)], fixed_band=True, fixed_power=fit.power)
+        return b.loglik - b.loglik_floor, b.loglik_kept - b.loglik_floor
 
     # a sensor constant: the same band in every flight
     refit, kept = transfer(fit_band(_noise([wn, band(amp)], seed=2), RATE), _noise([wn, band(amp)], 2, seed=3))

@@ -324,18 +324,20 @@ def _holdout_band_share(
     views = [sensor_view(h, corner) for h in holdout]
     resid = [v.residual - _predict(design, res, effects, names, sigma, v, sat_limit) for v in views]
     rate = holdout[0].rate_hz
-    kw = dict(
+    fit = fit_band(
+        resid,
+        rate,
+        row_masks(views),
         starts=[(band.frequency_hz, band.bandwidth_hz)],
         bands=band_edges(views),
         floor_corner_hz=corner,
         nuisance=nuisance_of(views),
         fixed_band=True,
+        fixed_power=band.power,
     )
-    fit = fit_band(resid, rate, row_masks(views), **kw)
     if fit is None:
         return 0.0, float("nan")
-    kept = fit_band(resid, rate, row_masks(views), fixed_power=band.power, **kw)
-    transfer = float(kept.loglik - kept.loglik_floor)
+    transfer = float(fit.loglik_kept - fit.loglik_floor)
     if fit.loglik <= fit.loglik_floor:
         return 0.0, transfer
     return fit.explained(sigma, rate), transfer

@@ -137,6 +137,8 @@ class BandFit:
     f_hi_hz: float = float("inf")  # upper edge of the compared band (the trusted band)
     mean_psd: np.ndarray | None = None  # (3,) mean periodogram over the compared bins
     kappa: np.ndarray | None = None  # (3,) level of the reconstruction-error nuisance fitted beside the band
+    # log L with the band's level kept at a level fitted elsewhere (`fit_band(fixed_power=...)`)
+    loglik_kept: float | None = None
 
     @property
     def amplitude(self) -> np.ndarray:
@@ -426,8 +428,9 @@ def fit_band(
     `starts`: (f0, bw) to start from (default: `initial_guesses`). `bands`: trusted band per
     sequence (`spectra`). `floor_corner_hz`: the floor is shaped by a sensor low-pass of this
     corner (`Spectra.shaped`). `fixed_band`: keep the first start's centre and width, fit levels only;
-    `fixed_power` (with `fixed_band`): the band's level per axis too, only the floor (and the
-    nuisance's level) fitted: how well a band fitted elsewhere explains these spectra."""
+    `fixed_power` (with `fixed_band`): also the log-likelihood with the band's level per axis kept at
+    these values, only the floor (and the nuisance's level) fitted (`BandFit.loglik_kept`): how well
+    a band fitted elsewhere explains these spectra."""
     f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
     starts = initial_guesses(residuals, rate_hz, f_max=f_hi) if starts is None else starts
     if not starts:
@@ -438,12 +441,12 @@ def fit_band(
     _, ll0, _ = _fit_levels(sp, None)
     if fixed_band:  # centre and width as given: only the levels are fitted
         f0, bw = _clip_band(*starts[0], rate_hz, float(sp.f[-1]))
-        if fixed_power is None:
-            theta, ll, _ = _fit_levels(sp, (f0, bw))
-        else:
-            theta, ll, _ = _fit_levels_nuisance(sp, (f0, bw), fixed_power=fixed_power)
+        theta, ll, _ = _fit_levels(sp, (f0, bw))
+        kept = None if fixed_power is None else _fit_levels_nuisance(sp, (f0, bw), fixed_power=fixed_power)[1]
         mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
-        return BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
+        fit = BandFit(f0, bw, theta[1], theta[0], ll, ll0, len(sp.f), f_hi_hz=f_hi, mean_psd=mean_psd)
+        fit.loglik_kept = kept
+        return fit
     prof = _maximise(sp, starts)
     ll, f0, bw, theta, info = prof.best
     mean_psd = (sp.I * (1.0 if sp.shape is None else sp.shape[:, None])).mean(0)
