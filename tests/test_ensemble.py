@@ -181,6 +181,33 @@ def test_build_refuses_different_input_conventions(tmp_path, capsys):
     assert ensemble_cli.main(["build", "--from-multirun", str(tmp_path / "none")]) == 2
 
 
+def test_scale_cli_calibrates_the_spread_and_keeps_the_mean(tmp_path, capsys):
+    files = [member_file(tmp_path / c, k) for k, c in enumerate("abc")]
+    raw = tmp_path / "ens.pt"
+    assert ensemble_cli.main(["build", *map(str, files), "--out", str(raw)]) == 0
+    scaled = tmp_path / "ens-scaled.pt"
+    argv = ["scale", str(raw), "--by", "1.6", "--fitted-by", "fold check", "--out", str(scaled)]
+    assert ensemble_cli.main(argv) == 0
+    ens0, (ens1, meta1) = load_model(raw)[0], load_model(scaled)
+    imu = random_imu(400)
+    (m0, s0), (m1, s1) = predict_with_spread(ens0, imu), predict_with_spread(ens1, imu)
+    assert np.array_equal(m0, m1) and s0.mean() > 1e-4 and np.allclose(s1, 1.6 * s0, rtol=1e-6)
+    assert meta1["model"]["spread_scale"] == 1.6 and meta1["spread_scale"]["fitted_by"] == "fold check"
+    assert meta1["spread_scale"]["previous"] == 1.0 and meta1["n_members"] == 3  # the rest of the metadata kept
+    # a new ensemble built from a scaled one starts again from the raw spread, and says so
+    with pytest.warns(UserWarning, match="spread_scale 1.6 .* not carried"):
+        assert ensemble_cli.main(["build", str(scaled), "--out", str(tmp_path / "re.pt")]) == 0
+    assert load_model(tmp_path / "re.pt")[0].spread_scale == 1.0
+    # what has no spread cannot be scaled; a factor must be positive
+    assert (
+        ensemble_cli.main(["scale", str(files[0]), "--by", "2", "--fitted-by", "x", "--out", str(tmp_path / "s.pt")])
+        == 2
+    )
+    assert "no spread to scale" in capsys.readouterr().err
+    assert ensemble_cli.main(["scale", str(raw), "--by", "0", "--fitted-by", "x", "--out", str(tmp_path / "s.pt")]) == 2
+    assert "must be a positive number" in capsys.readouterr().err and not (tmp_path / "s.pt").exists()
+
+
 @pytest.mark.slow
 def test_experiment_ensemble_trains_members_and_builds(tmp_path):
     """`-m experiment=ensemble` with 2 seeds on tiny synthetic data ends with <sweep>/ensemble.pt."""
@@ -219,7 +246,7 @@ def test_experiment_ensemble_trains_members_and_builds(tmp_path):
 
 @pytest.mark.parametrize("backend", ["numpy", "torch"])
 def test_streaming_ensemble_equals_batch(backend):
-    ens = EnsembleCorrection(members()).eval()
+    ens = EnsembleCorrection(members(), spread_scale=1.5).eval()  # the scale must reach the streamed std too
     imu = random_imu(700)
     mean, std = predict_with_spread(ens, imu)
     sc = StreamingCorrector(ens, backend=backend)
@@ -239,7 +266,7 @@ def test_onnx_ensemble_outputs_mean_and_std(tmp_path):
     ort = pytest.importorskip("onnxruntime")
     from gyrodenoise.export import INPUT_NAME, OUTPUT_NAME, STD_NAME, export_onnx, onnx_parity
 
-    ens = EnsembleCorrection(members()).eval()
+    ens = EnsembleCorrection(members(), spread_scale=1.5).eval()  # the exported std carries the scale
     path = export_onnx(ens, tmp_path / "e.onnx")
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     assert [o.name for o in sess.get_outputs()] == [OUTPUT_NAME, STD_NAME]

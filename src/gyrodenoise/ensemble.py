@@ -2,6 +2,7 @@
 
     python -m gyrodenoise.ensemble build outputs/train/a/model.pt outputs/train/b/model.pt --out euroc-ensemble.pt
     python -m gyrodenoise.ensemble build --from-multirun multirun/train/<date> [--out ...]
+    python -m gyrodenoise.ensemble scale ens.pt --by 1.3 --fitted-by "..." --out ens.pt   # calibrate the spread
 
 Training K members with one command is a Hydra multirun over seeds; `experiment=ensemble` sweeps
 seeds 0-3 and builds `<sweep dir>/ensemble.pt` when the last run has finished:
@@ -109,6 +110,12 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     for p in paths:
         model, meta = load_model(p)
         if isinstance(model, EnsembleCorrection):
+            if model.spread_scale != 1.0:
+                warnings.warn(
+                    f"{p}: its spread_scale {model.spread_scale:g} was fitted for that ensemble and is not carried "
+                    "into the new one (set one with `python -m gyrodenoise.ensemble scale`)",
+                    stacklevel=2,
+                )
             members += list(model.members)
             cfgs += [dict(c) for c in meta["model"]["members"]]
             records += list(meta.get("members") or [member_record(meta["path"], meta)] * len(model))
@@ -140,6 +147,28 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
         "calibrated_val_aoe_deg": (sum(cal_vals) / len(cal_vals)) if cal_vals else None,
     }
     return EnsembleCorrection(members), {"name": "ensemble", "members": cfgs}, meta
+
+
+def scale_spread(
+    model_path: str | Path, scale: float, out: str | Path, fitted_by: str, command: str | None = None
+) -> Path:
+    """Write a copy of the ensemble file `model_path` whose std output is the members' std times `scale`
+    (replacing any earlier factor); `fitted_by` says where the factor comes from (kept in the metadata)."""
+    model, meta = load_model(model_path)
+    if not isinstance(model, EnsembleCorrection):
+        raise TypeError(f"{model_path}: a single model has no spread to scale; give an ensemble file")
+    if len(model) < 2:
+        raise ValueError(f"{model_path}: an ensemble of one member has no spread to scale")
+    cfg = {**dict(meta["model"]), "spread_scale": float(scale)}
+    scaled = EnsembleCorrection(list(model.members), scale)
+    meta = {k: v for k, v in meta.items() if k not in ("model", "path")}
+    meta["spread_scale"] = {
+        "value": float(scale),
+        "previous": model.spread_scale,
+        "fitted_by": fitted_by,
+        "command": command,
+    }
+    return save_model(scaled, cfg, out, meta)
 
 
 def multirun_members(sweep_dir: str | Path) -> list[Path]:
@@ -209,7 +238,23 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--out", type=Path, help="output file (default with --from-multirun: DIR/ensemble.pt)")
     b.add_argument("--name", help="name recorded in the metadata (default: the output file's stem)")
     b.add_argument("--allow-mixed", action="store_true", help="allow members from different datasets / sensors")
+    sc = sub.add_parser("scale", help="set the factor of an ensemble's spread (std output = members' std x S)")
+    sc.add_argument("model", help="ensemble file or shipped name")
+    sc.add_argument("--by", type=float, required=True, help="the factor S (1: the members' raw std)")
+    sc.add_argument(
+        "--fitted-by", required=True, help="where S comes from (a command, a result file): kept in the file"
+    )
+    sc.add_argument("--out", type=Path, required=True, help="output file (may be the input file: written atomically)")
     args = ap.parse_args(argv)
+    command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
+    if args.cmd == "scale":
+        try:
+            out = scale_spread(args.model, args.by, args.out, args.fitted_by, command)
+        except (FileNotFoundError, ValueError, TypeError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        print(f"wrote {out} (spread scale {args.by:g})")
+        return 0
     try:
         paths: list[str | Path] = list(args.models)
         if args.from_multirun:
@@ -219,7 +264,6 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("give --out FILE")
         if not paths:
             ap.error("give member model files or --from-multirun DIR")
-        command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
         build_ensemble(paths, out, args.name, args.allow_mixed, command)
     except (FileNotFoundError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)

@@ -15,7 +15,7 @@ Batch norm (eval mode) is folded into its convolution; dropout is the identity a
     w, s = sc.push_with_spread(imu_sample)  # an ensemble: mean and std over its members
 
 An ensemble streams as one state per member; the output is the members' mean and their sample
-standard deviation (K - 1 denominator), as `EnsembleCorrection.forward_with_spread`.
+standard deviation (K - 1 denominator) times its `spread_scale`, as `EnsembleCorrection.forward_with_spread`.
 """
 
 from __future__ import annotations
@@ -125,6 +125,7 @@ class StreamingCorrector:
         self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
         if isinstance(model, EnsembleCorrection):
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
+            self.spread_scale = model.spread_scale
             self.receptive_field = max(m.receptive_field for m in self.members)
             self.reset()
             return
@@ -188,10 +189,9 @@ class StreamingCorrector:
         self._pos = [ly.span - 1 for ly in self.layers]  # index of the newest row
 
     # ------------------------------------------------------------------ ensembles
-    @staticmethod
-    def _mean_std(outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def _mean_std(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         stack = np.stack(outs)
-        std = stack.std(0, ddof=1) if len(outs) > 1 else np.zeros_like(stack[0])
+        std = stack.std(0, ddof=1) * self.spread_scale if len(outs) > 1 else np.zeros_like(stack[0])
         return stack.mean(0), std
 
     def push_with_spread(self, sample) -> tuple[np.ndarray, np.ndarray | None]:

@@ -12,13 +12,17 @@ from gyrodenoise.models.ensemble import EnsembleCorrection
 def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
     """Build a model from plain config values (what checkpoints and shipped weights store).
 
-    name="ensemble" takes `members`, a list of such configs (see models/ensemble.py).
+    name="ensemble" takes `members`, a list of such configs, and optionally `spread_scale` (see
+    models/ensemble.py).
     """
     if name == "ensemble":
         members = kwargs.pop("members", None)
+        spread_scale = kwargs.pop("spread_scale", 1.0)
         if kwargs or not members:
-            raise ValueError(f"the ensemble model takes only a non-empty `members` list, got {sorted(kwargs)}")
-        return EnsembleCorrection([build_model(**dict(cfg)) for cfg in members])
+            raise ValueError(
+                f"the ensemble model takes a non-empty `members` list and `spread_scale`, got {sorted(kwargs)}"
+            )
+        return EnsembleCorrection([build_model(**dict(cfg)) for cfg in members], spread_scale)
     if name == "denoiser":
         return DilatedCNNDenoiser(**kwargs)
     if name == "calibrated":

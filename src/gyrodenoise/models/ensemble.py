@@ -7,8 +7,12 @@ agree where they were trained and disagree elsewhere make that spread a warning 
 unlike the training data; how well it predicts the actual error is measured by
 `gyrodenoise.uncertainty`.
 
-Stored like any model (`gyrodenoise.pretrained`): config {"name": "ensemble", "members": [cfg, ...]},
-state dict keys `members.<k>.<member key>`.
+The spread can carry a calibration factor, `spread_scale` (default 1): the std output is the
+members' sample std times it, fitted on flights the members did not see (`python -m
+gyrodenoise.ensemble scale`; how the shipped `euroc` got its factor: benchmarks/uncertainty_scale_cv.py).
+
+Stored like any model (`gyrodenoise.pretrained`): config {"name": "ensemble", "members": [cfg, ...],
+"spread_scale": s (absent: 1)}, state dict keys `members.<k>.<member key>`.
 """
 
 from __future__ import annotations
@@ -25,8 +29,12 @@ from gyrodenoise.models.denoiser import GyroCorrection
 class EnsembleCorrection(nn.Module):
     """Mean and spread of K `GyroCorrection` members (any mix of denoisers and calibrated models)."""
 
-    def __init__(self, members: Iterable[GyroCorrection]) -> None:
+    def __init__(self, members: Iterable[GyroCorrection], spread_scale: float = 1.0) -> None:
         super().__init__()
+        spread_scale = float(spread_scale)
+        if not (np.isfinite(spread_scale) and spread_scale > 0):
+            raise ValueError(f"spread_scale={spread_scale}: must be a positive number (1 = the members' raw std)")
+        self.spread_scale = spread_scale
         members = list(members)
         if not members:
             raise ValueError("an ensemble needs at least one member model")
@@ -54,13 +62,13 @@ class EnsembleCorrection(nn.Module):
         """(mean, std) over the members, each (B, N, 3) rad/s.
 
         std is the sample standard deviation (K - 1 in the denominator: the unbiased variance of
-        the members' spread); a single member has no spread and gets zeros.
+        the members' spread) times `spread_scale`; a single member has no spread and gets zeros.
         """
         out = self.member_outputs(imu)
         mean = out.mean(0)
         if len(self.members) == 1:
             return mean, torch.zeros_like(mean)
-        return mean, out.std(0, correction=1)
+        return mean, out.std(0, correction=1) * self.spread_scale
 
     @property
     def C_hat(self) -> torch.Tensor:
