@@ -136,6 +136,8 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
                 "s2",
                 "--null-draws",
                 "8",
+                "--gyro-noise-density",
+                str(BASE_NOISE),
                 "--out",
                 str(out),
             ]
@@ -143,6 +145,9 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
         == 0
     )
     rep = json.loads((out / "report.json").read_text())
+    # the simulator's truth is exact: it leaves the gyro's whole noise (and the vibration) in the residual
+    assert set(rep["truth_check"]) == {"s0", "s1", "s2"}
+    assert all(c["follows_gyro_bands_hz"] == [] for c in rep["truth_check"].values())
     (vib,) = [e for e in rep["named_effects"] if e["name"] == "vibration"]
     assert vib["variant"] == "band-limited"
     assert vib["params"]["bandwidth_hz"] > 0 and vib["datasheet"]["bandwidth_hz"]["unit"] == "Hz"
@@ -150,4 +155,5 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
     md = (out / "report.md").read_text()
     assert "vibration (band-limited)" in md and "spectral gap" in md
     assert "cannot lower the held-out residual RMS" in md
+    assert "## Is the ground truth independent of the gyro?" in md and "Caution: the ground truth" not in md
     assert "## Command" in md and "--holdout s2" in md

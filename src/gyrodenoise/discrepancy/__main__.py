@@ -16,12 +16,14 @@ import sys
 import time
 from pathlib import Path
 
+from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
+from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.workflow import run
-from gyrodenoise.paths import portable_command
+from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.sim.effects import EFFECTS
 
 
@@ -36,7 +38,7 @@ def _effects(s: str) -> list[str]:
 EXAMPLE = """example (EuRoC, as in reports/discrepancy_euroc):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
-      --network euroc --out reports/discrepancy_euroc
+      --network euroc --gyro-noise-density 1.6968e-4 --out reports/discrepancy_euroc
 """
 
 
@@ -120,6 +122,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="also regress the correction of a trained denoiser (shipped name such as euroc, or a .pt/.ckpt "
         "path) on the effect library (default: none)",
     )
+    p.add_argument(
+        "--gyro-noise-density",
+        type=float,
+        default=None,
+        metavar="SIGMA",
+        help="the gyro's datasheet white-noise density in rad/s/sqrt(Hz) (EuRoC's ADIS16448: 1.6968e-4); with it "
+        "the report checks per band whether a sequence's ground truth follows the gyro (default: no check)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed of the re-simulations (default: %(default)s)")
     p.add_argument(
         "--out",
@@ -144,7 +154,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         k, v = item.split("=", 1)
         gt[k] = v
     args.gt_files = gt
+    if args.gyro_noise_density is not None and not args.gyro_noise_density > 0:
+        p.error(f"--gyro-noise-density {args.gyro_noise_density}: must be positive (rad/s/sqrt(Hz))")
     return args
+
+
+def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
+    """Does each sequence's ground truth follow the gyro? (`truth_check`; flags only with the noise density)"""
+    out = {}
+    for n in names:
+        c = check_sequence(sequence_folder(args.root, n), args.gt_files.get(n), args.gyro_noise_density)
+        out[n] = {**c, "ground_truth": portable_path(c["ground_truth"]), "follows_gyro_bands_hz": followed_bands(c)}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -160,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
+    report["truth_check"] = truth_checks(args, [*args.fit, *args.holdout])
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
 
@@ -169,6 +191,9 @@ def main(argv: list[str] | None = None) -> int:
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)
     print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
+    followed = {n: c["follows_gyro_bands_hz"] for n, c in report["truth_check"].items() if c["follows_gyro_bands_hz"]}
+    if followed:
+        print(f"caution: the ground truth follows the gyro in {followed} (Hz); noise levels fitted there are too low")
     gb, ga = report["gap_before"], report["gap_after"]
     print(
         f"held-out residual RMS {gb['residual_rms_rad_s']:.4g} -> {ga['residual_rms_rad_s']:.4g} rad/s, "

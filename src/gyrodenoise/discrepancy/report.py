@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG  # noqa: E402
+from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO  # noqa: E402
 from gyrodenoise.discrepancy.workflow import NO_EFFECT  # noqa: E402
 from gyrodenoise.plots import save as save_figure  # noqa: E402
 
@@ -173,6 +174,62 @@ def _reconstruction_md(report: dict) -> list[str]:
     return lines + [""]
 
 
+def _truth_caution(report: dict) -> list[str]:
+    """One line under the verdict when the ground truth of a sequence follows the gyro (`truth_check`)."""
+    followed = {n: c["follows_gyro_bands_hz"] for n, c in (report.get("truth_check") or {}).items()}
+    followed = {n: b for n, b in followed.items() if b}
+    if not followed:
+        return []
+    where = "; ".join(f"{n}: " + ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in b) for n, b in followed.items())
+    return [
+        f"**Caution: the ground truth follows the gyro** ({where}): the residual there lacks part of the gyro's own "
+        'noise, so noise levels fitted on these sequences are too low (section "Is the ground truth independent of '
+        'the gyro?"). Prefer sequences whose truth comes from a tracker that measures orientation.',
+        "",
+    ]
+
+
+def _truth_check_md(report: dict) -> list[str]:
+    """The per-band table of `truth_check` (gyrodenoise.discrepancy.truth_check)."""
+    checks = report.get("truth_check")
+    if not checks:
+        return []
+    density = next(iter(checks.values())).get("noise_density")
+    lines = [
+        "## Is the ground truth independent of the gyro?",
+        "",
+        "Per band, on the ground truth's own samples: coherence of the truth's rate with the gyro (x/y/z), and "
+        + (
+            f"the residual's PSD over the datasheet white noise 2 sigma^2 (sigma = {density:g} rad/s/sqrt(Hz); "
+            "x/y/z). An independent truth leaves at least the gyro's noise in the residual (ratio >= ~1); a ratio "
+            f"below {FOLLOWS_RATIO:g} on any axis (marked *) says the truth follows the gyro there."
+            if density
+            else "the share of the gyro's power the truth reproduces. Without the sensor's noise density "
+            "(`--gyro-noise-density`) the check cannot tell a truth that follows the gyro from an exact one "
+            "(both are coherent with it) and flags nothing."
+        ),
+        "",
+    ]
+    heads = [f"{lo:g}-{hi:g} Hz" for lo, hi in BANDS_HZ]
+    lines += ["| sequence | truth rate | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
+    for name, c in checks.items():
+        cells = {b["band_hz"][0]: b for b in c["bands"]}
+        row = []
+        for lo, _ in BANDS_HZ:
+            b = cells.get(lo)
+            if b is None:
+                row.append("-")
+                continue
+            coh = "/".join(f"{x:.2f}" for x in b["coherence"])
+            if b.get("residual_over_noise") is not None:
+                ratio = "/".join(_fmt(x) for x in b["residual_over_noise"])
+                row.append(f"{coh}; {ratio}{' *' if b['follows_gyro'] else ''}")
+            else:
+                row.append(f"{coh}; {np.mean(b['reproduced_share']):+.2f}")
+        lines.append(f"| {name} | {c['truth_rate_hz']:.0f} Hz | " + " | ".join(row) + " |")
+    return lines + [""]
+
+
 def _min_drift(settings: dict) -> float:
     return float(settings.get("min_drift_deg", MIN_DRIFT_DEG))
 
@@ -284,6 +341,7 @@ def markdown(report: dict) -> str:
         f"**Verdict: {report['verdict']}.**",
         "",
     ]
+    lines += _truth_caution(report)
     if report["named_effects"]:
         lines += ["## Named effects (datasheet units, +- one standard error)", ""]
         lines += [
@@ -322,7 +380,8 @@ def markdown(report: dict) -> str:
             "(the data cannot separate these effects from the others; they were not tested).",
             "",
         ]
-    lines += _reconstruction_md(report) + _decisions_md(report) + _identifiability_md(report)
+    lines += _reconstruction_md(report) + _truth_check_md(report)
+    lines += _decisions_md(report) + _identifiability_md(report)
     gb, ga = report["gap_before"], report["gap_after"]
     lines += [
         "## Gap on held-out sequences",

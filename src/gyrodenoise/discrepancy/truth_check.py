@@ -1,0 +1,123 @@
+"""Is the ground truth independent of the gyro it judges?
+
+The workflow compares the gyro with the rate of the ground truth. That shows the gyro's errors only
+where the truth does not contain the gyro: a motion tracker's orientation does not; a batch estimate
+that fuses the same IMU does, wherever the IMU dominates it (EuRoC's Machine Hall flights, whose
+tracker measures position only). There, the residual gyro - truth lacks part of the gyro's own noise,
+and every noise level fitted on it is too low.
+
+Per sequence and frequency band this module measures, on the ground truth's own samples (the gyro
+averaged over each ground-truth interval against the finite rotation between consecutive poses):
+- the coherence of the two rates (information: 1 also where an exact truth sees real motion);
+- the share of the gyro's power the truth reproduces, 1 - PSD(gyro - truth) / PSD(gyro);
+- with the sensor's datasheet noise density sigma (rad/s/sqrt(Hz)), the median of the residual's PSD
+  over that of white noise of density sigma put through the same averaging (`white_reference`; flat
+  at 2 sigma^2 one-sided before it): an independent truth leaves at least the gyro's noise in the
+  residual (ratio >= ~1), so a ratio below FOLLOWS_RATIO says the truth follows the gyro in that band.
+  Without sigma the check cannot tell a truth that follows the gyro from an exact one, and flags nothing.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.data.readers import ImuData, find_groundtruth_file, read_groundtruth, read_imu
+
+BANDS_HZ = ((2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 80.0))
+NPERSEG_S = 2.5  # Welch segment
+NYQUIST_SHARE = 0.9  # bands end below this share of the truth's Nyquist frequency
+FOLLOWS_RATIO = 0.5  # residual PSD below half the datasheet noise: the gyro's noise is partly in the truth
+
+
+def interval_means(x: np.ndarray, t_ns: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
+    """(M - 1, 3) mean of the linearly interpolated samples x (N, 3) at t_ns over each interval of at_ns (M,)."""
+    step = np.diff(t_ns)[:, None] * 1e-9
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (x[1:] + x[:-1]) * step, 0)])  # exact integral
+    c = np.stack([np.interp(at_ns, t_ns, cum[:, k]) for k in range(3)], 1)
+    return np.diff(c, axis=0) / (np.diff(at_ns)[:, None] * 1e-9)
+
+
+def gyro_truth_pairs(
+    t_ns: np.ndarray, quat_xyzw: np.ndarray, imu: ImuData
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(gyro averaged over each ground-truth interval, truth's rate over it), both (M, 3) rad/s, and the indices
+    of those intervals, on the longest run of regular intervals inside the IMU record (a gap ends a run)."""
+    dt = np.diff(t_ns) * 1e-9
+    med = float(np.median(dt))
+    rot = Rotation.from_quat(quat_xyzw)
+    w_gt = (rot[:-1].inv() * rot[1:]).as_rotvec() / dt[:, None]
+    ok = (np.abs(dt - med) < 0.1 * med) & (t_ns[:-1] >= imu.t_ns[0]) & (t_ns[1:] <= imu.t_ns[-1])
+    idx = np.flatnonzero(ok)
+    if len(idx) == 0:
+        raise ValueError("no ground-truth interval inside the IMU record: do the two files cover the same time?")
+    run = max(np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1), key=len)
+    inside = np.clip(t_ns, imu.t_ns[0], imu.t_ns[-1])
+    return interval_means(imu.gyro, imu.t_ns, inside)[run], w_gt[run], run
+
+
+def white_reference(
+    noise_density: float, imu_t_ns: np.ndarray, gt_t_ns: np.ndarray, run: np.ndarray, seed: int = 0
+) -> np.ndarray:
+    """(M, 3) white gyro noise of `noise_density` (rad/s/sqrt(Hz)) at the IMU stamps, averaged over the same
+    ground-truth intervals as the gyro: what an exact, independent truth leaves in the residual. The averaging
+    low-passes it (at a truth rate equal to the IMU's, by cos^2(pi f / fs)), so the reference is simulated
+    rather than taken flat at 2 sigma^2."""
+    rate = 1e9 / float(np.median(np.diff(imu_t_ns)))
+    noise = np.random.default_rng(seed).standard_normal((len(imu_t_ns), 3)) * noise_density * np.sqrt(rate)
+    inside = np.clip(gt_t_ns, imu_t_ns[0], imu_t_ns[-1])
+    return interval_means(noise, imu_t_ns, inside)[run]
+
+
+def check_truth(
+    gyro: np.ndarray, truth: np.ndarray, fs: float, white: np.ndarray | None = None, noise_density: float | None = None
+) -> dict:
+    """Per band (BANDS_HZ below NYQUIST_SHARE of fs/2): coherence per axis, reproduced share per axis and, with
+    the simulated white-noise residual `white` (`white_reference`), the residual's PSD over its PSD per axis and
+    whether the truth follows the gyro."""
+    nper = min(int(NPERSEG_S * fs), len(gyro))
+    f, coh = signal.coherence(gyro, truth, fs, nperseg=nper, axis=0)
+    _, p_gyro = signal.welch(gyro - gyro.mean(0), fs, nperseg=nper, axis=0)
+    res = gyro - truth
+    _, p_res = signal.welch(res - res.mean(0), fs, nperseg=nper, axis=0)
+    p_white = signal.welch(white, fs, nperseg=nper, axis=0)[1] if white is not None else None
+    bands = []
+    for lo, hi in BANDS_HZ:
+        hi = float(min(hi, NYQUIST_SHARE * fs / 2))
+        m = (f >= lo) & (f < hi)
+        if m.sum() < 2:
+            continue
+        w = p_gyro[m] / p_gyro[m].sum(0)  # power-weighted: where the gyro has content
+        band = {
+            "band_hz": [lo, hi],
+            "coherence": (w * coh[m]).sum(0).tolist(),
+            "reproduced_share": (1 - p_res[m].sum(0) / p_gyro[m].sum(0)).tolist(),
+            "residual_over_noise": None,
+            "follows_gyro": None,
+        }
+        if p_white is not None:
+            ratio = np.median(p_res[m], axis=0) / np.median(p_white[m], axis=0)
+            band["residual_over_noise"] = ratio.tolist()
+            band["follows_gyro"] = bool(np.any(ratio < FOLLOWS_RATIO))
+        bands.append(band)
+    return {"truth_rate_hz": fs, "seconds": len(gyro) / fs, "noise_density": noise_density, "bands": bands}
+
+
+def check_sequence(mav0: str | Path, gt_file: str | Path | None = None, noise_density: float | None = None) -> dict:
+    """`check_truth` of one ASL sequence folder (`.../mav0`); `gt_file` relative to it (default: the usual files)."""
+    mav0 = Path(mav0)
+    imu = read_imu(mav0 / "imu0" / "data.csv")
+    gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
+    gt = read_groundtruth(gt_path)
+    gyro, truth, run = gyro_truth_pairs(gt.t_ns, gt.quat_xyzw, imu)
+    fs = 1e9 / float(np.median(np.diff(gt.t_ns)))
+    white = white_reference(noise_density, imu.t_ns, gt.t_ns, run) if noise_density else None
+    return {"ground_truth": str(gt_path), **check_truth(gyro, truth, fs, white, noise_density)}
+
+
+def followed_bands(check: dict) -> list[list[float]]:
+    """The bands [lo, hi] Hz where the check found the truth following the gyro."""
+    return [b["band_hz"] for b in check["bands"] if b.get("follows_gyro")]

@@ -1,0 +1,104 @@
+"""Does a ground truth follow the gyro it judges? (gyrodenoise.discrepancy.truth_check)"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.data.readers import ImuData
+from gyrodenoise.discrepancy.report import _truth_caution, _truth_check_md
+from gyrodenoise.discrepancy.truth_check import (
+    FOLLOWS_RATIO,
+    check_truth,
+    followed_bands,
+    gyro_truth_pairs,
+    white_reference,
+)
+from gyrodenoise.so3 import integrate_gyro
+
+RATE = 200.0
+DENSITY = 2e-3  # rad/s/sqrt(Hz)
+
+
+def recording(kind: str, seconds: float = 120.0, seed: int = 0):
+    """(IMU, truth stamps, truth quaternions): slow motion, a gyro with white noise of DENSITY, and a truth that
+    is exact ('exact'), a tracker's noisy orientation ('mocap') or the gyro itself integrated ('follows')."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * RATE)
+    t_ns = 1_000_000_000 + np.round(np.arange(n) * 1e9 / RATE).astype(np.int64)
+    t = (t_ns - t_ns[0]) * 1e-9
+    w = np.stack([0.4 * np.sin(2 * np.pi * 0.2 * t), 0.3 * np.cos(2 * np.pi * 0.3 * t), 0.2 * np.sin(0.5 * t)], 1)
+    gyro = w + DENSITY * np.sqrt(RATE) * rng.standard_normal((n, 3))
+    # the truth's rate over [t_k, t_k+1]: the true motion's, or the gyro's own (a fused estimate dominated by it)
+    step = 0.5 * (w[1:] + w[:-1]) if kind != "follows" else 0.5 * (gyro[1:] + gyro[:-1])
+    if kind == "follows":  # a little of the estimate's own error
+        step = step + 0.1 * DENSITY * np.sqrt(RATE) * rng.standard_normal(step.shape)
+    rates = np.concatenate([np.zeros((1, 3)), step])  # rates[k]: over [t_k-1, t_k]
+    truth = Rotation.from_matrix(integrate_gyro(np.eye(3), rates, np.full(n, 1 / RATE)))
+    if kind == "mocap":
+        truth = truth * Rotation.from_rotvec(1e-3 * rng.standard_normal((n, 3)))
+    imu = ImuData(t_ns, gyro, np.zeros((n, 3)), Path("imu.csv"))
+    return imu, t_ns, truth.as_quat()
+
+
+def run(kind: str, density: float | None = DENSITY) -> dict:
+    imu, gt_t, q = recording(kind)
+    gyro, truth, idx = gyro_truth_pairs(gt_t, q, imu)
+    white = white_reference(density, imu.t_ns, gt_t, idx) if density else None
+    return check_truth(gyro, truth, RATE, white, density)
+
+
+def test_an_exact_truth_leaves_the_gyro_noise_and_is_not_flagged():
+    c = run("exact")
+    ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
+    # the reference is put through the same averaging as the gyro: ~1 in every band, 40-80 Hz included
+    assert len(c["bands"]) == 5 and np.all((ratios > 0.7) & (ratios < 1.4)), ratios
+    assert followed_bands(c) == []
+
+
+def test_a_truth_made_from_the_gyro_is_flagged_in_every_band():
+    c = run("follows")
+    ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
+    assert np.all(ratios < 0.1 * FOLLOWS_RATIO), ratios
+    assert followed_bands(c) == [b["band_hz"] for b in c["bands"]]
+    assert min(c["bands"][0]["coherence"]) > 0.95  # the truth carries the gyro's noise
+
+
+def test_a_noisy_tracker_is_independent_and_without_the_density_nothing_is_flagged():
+    c = run("mocap")
+    assert followed_bands(c) == [] and min(c["bands"][-1]["residual_over_noise"]) > 10
+    c = run("follows", density=None)
+    assert followed_bands(c) == [] and all(b["follows_gyro"] is None for b in c["bands"])
+
+
+def test_gyro_truth_pairs_refuses_records_that_do_not_overlap():
+    imu, gt_t, q = recording("exact", seconds=5.0)
+    with pytest.raises(ValueError, match="cover the same time"):
+        gyro_truth_pairs(gt_t + 10**12, q, imu)
+
+
+def test_report_cautions_when_a_truth_follows_the_gyro():
+    flagged = {"truth_rate_hz": 200.0, "noise_density": DENSITY, "bands": run("follows")["bands"]}
+    clean = {"truth_rate_hz": 200.0, "noise_density": DENSITY, "bands": run("exact")["bands"]}
+    report = {
+        "fit_sequences": ["a"],
+        "holdout_sequences": ["b"],
+        "base_model": ["bias", "white_noise"],
+        "verdict": "no effect named",
+        "named_effects": [],
+        "not_identifiable": [],
+        "gap_before": {},
+        "gap_after": {},
+        "truth_check": {
+            "a": {**clean, "follows_gyro_bands_hz": followed_bands(clean)},
+            "b": {**flagged, "follows_gyro_bands_hz": followed_bands(flagged)},
+        },
+    }
+    caution = "\n".join(_truth_caution(report))
+    assert "Caution: the ground truth follows the gyro" in caution and "b: 2-5 Hz" in caution and "a:" not in caution
+    table = "\n".join(_truth_check_md(report))
+    rows = {line.split(" | ")[0]: line for line in table.splitlines() if line.startswith(("| a |", "| b |"))}
+    assert rows["| a"].count(" *") == 0 and rows["| b"].count(" *") == 5
