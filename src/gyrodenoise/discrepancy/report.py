@@ -200,9 +200,11 @@ def _truth_check_md(report: dict) -> list[str]:
         "",
         "Per band, on the ground truth's own samples: coherence of the truth's rate with the gyro (x/y/z), and "
         + (
-            f"the residual's PSD over the datasheet white noise 2 sigma^2 (sigma = {density:g} rad/s/sqrt(Hz); "
-            "x/y/z). An independent truth leaves at least the gyro's noise in the residual (ratio >= ~1); a ratio "
-            f"below {FOLLOWS_RATIO:g} on any axis (marked *) says the truth follows the gyro there."
+            "the residual's PSD over that of the datasheet white noise (sigma = "
+            f"{density:g} rad/s/sqrt(Hz)) averaged over the same ground-truth intervals (x/y/z). An independent "
+            "truth leaves at least the gyro's noise in the residual (ratio >= ~1); a ratio below "
+            f"{FOLLOWS_RATIO:g} on any axis (marked *) says the truth follows the gyro there: the gyro's noise, "
+            "and any error of it in that band, is partly in the truth and cannot be measured against it."
             if density
             else "the share of the gyro's power the truth reproduces. Without the sensor's noise density "
             "(`--gyro-noise-density`) the check cannot tell a truth that follows the gyro from an exact one "
@@ -222,7 +224,7 @@ def _truth_check_md(report: dict) -> list[str]:
                 continue
             coh = "/".join(f"{x:.2f}" for x in b["coherence"])
             if b.get("residual_over_noise") is not None:
-                ratio = "/".join(_fmt(x) for x in b["residual_over_noise"])
+                ratio = "/".join(f"{x:.2g}" for x in b["residual_over_noise"])
                 row.append(f"{coh}; {ratio}{' *' if b['follows_gyro'] else ''}")
             else:
                 row.append(f"{coh}; {np.mean(b['reproduced_share']):+.2f}")
