@@ -11,7 +11,6 @@ Writes OUT.md (Spearman per flight and pooled, reliability table), OUT.json and 
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import time
 from pathlib import Path
@@ -45,10 +44,10 @@ def main() -> None:
             raise SystemExit(f"{args.model}: a single model has no spread; give an ensemble")
         r = calibration(gyro, std, seq.dt, seq.rot, seq.gt_mask, window_s=args.window_s)
         results.append(r)
-        ratio = math.sqrt((r.actual**2).mean() / (r.predicted**2).mean())
+        ratio = r.summary()["rms_ratio"]
         rows.append([seq.name, str(len(r.actual)), f"{r.spearman:+.2f}", f"{ratio:.2f}"])
     allr = pooled(results)
-    ratio = math.sqrt((allr.actual**2).mean() / (allr.predicted**2).mean())
+    ratio = allr.summary()["rms_ratio"]
     rows.append(["**pooled**", str(len(allr.actual)), f"**{allr.spearman:+.2f}**", f"{ratio:.2f}"])
     bins = [
         [f"{b['rms_predicted_deg']:.4f}", f"{b['rms_actual_deg']:.4f}", str(b["n"])]

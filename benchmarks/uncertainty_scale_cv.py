@@ -37,10 +37,6 @@ COLLECTED = [Path("reports/accuracy_runs/euroc_cv7"), Path("reports/accuracy_run
 RULE = "benchmarks/queues/uncertainty_scale.txt"
 
 
-def rms_ratio(actual: np.ndarray, predicted: np.ndarray) -> float:
-    return math.sqrt(float(np.mean(actual**2)) / float(np.mean(predicted**2)))
-
-
 def score_fold(fold: int, runs: dict, window_s: float):
     """(row of numbers, calibration result) of fold `fold`'s 3-member ensemble on its held-out flight."""
     paths = fold_run_paths(runs, fold, SEEDS)
@@ -54,16 +50,17 @@ def score_fold(fold: int, runs: dict, window_s: float):
         models.append(model)
     gyro, std = predict_with_spread(EnsembleCorrection(models), seq.imu)
     cal = calibration(gyro, std, seq.dt, seq.rot, seq.gt_mask, window_s=window_s)
+    s = cal.summary()
     row = {
         "fold": fold,
         "flight": seq.name,
         "members": [f"ref_f{fold}_s{s}" for s in paths],
         "ensemble_aoe_deg": aoe_deg(seq, gyro),
-        "windows": len(cal.actual),
-        "spearman": cal.spearman,
-        "rms_actual_deg": math.degrees(math.sqrt(float(np.mean(cal.actual**2)))),
-        "rms_predicted_deg": math.degrees(math.sqrt(float(np.mean(cal.predicted**2)))),
-        "ratio": rms_ratio(cal.actual, cal.predicted),
+        "windows": s["windows"],
+        "spearman": s["spearman"],
+        "rms_actual_deg": s["rms_actual_deg"],
+        "rms_predicted_deg": s["rms_predicted_deg"],
+        "ratio": s["rms_ratio"],
     }
     print(f"fold {fold} {seq.name}: ratio {row['ratio']:.2f}, Spearman {row['spearman']:+.2f}", flush=True)
     return row, cal
@@ -155,7 +152,7 @@ def main() -> None:
         "pooled": {
             "windows": len(allr.actual),
             "spearman": allr.spearman,
-            "ratio": rms_ratio(allr.actual, allr.predicted),
+            "ratio": allr.summary()["rms_ratio"],
         },
         "out": str(args.out),
     }

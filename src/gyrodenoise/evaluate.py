@@ -228,7 +228,7 @@ def evaluate(cfg: DictConfig) -> dict:
         u = summary["uncertainty"]["pooled"]
         print(
             f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
-            f"RMS actual / predicted {u['rms_actual_deg'] / u['rms_predicted_deg']:.2f} ({u['windows']} windows)"
+            f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows)"
         )
     for w in warned:
         print(f"WARNING: {w}")

@@ -42,14 +42,16 @@ class CalibrationResult:
     def summary(self) -> dict:
         """JSON-ready numbers (degrees), without the per-window arrays."""
         rms = lambda a: float(np.degrees(np.sqrt(np.mean(a**2)))) if len(a) else float("nan")  # noqa: E731
+        rms_p, rms_a = rms(self.predicted), rms(self.actual)
         return {
             "windows": len(self.predicted),
             "window_s": self.window_s,
             "mode": self.mode,
             "spearman": self.spearman,
             "p_value": self.p_value,
-            "rms_predicted_deg": rms(self.predicted),
-            "rms_actual_deg": rms(self.actual),
+            "rms_predicted_deg": rms_p,
+            "rms_actual_deg": rms_a,
+            "rms_ratio": rms_a / rms_p if rms_p > 0 else float("inf"),  # 1 when calibrated
             "table": self.table,
         }
 
