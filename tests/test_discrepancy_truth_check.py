@@ -12,6 +12,7 @@ from gyrodenoise.data.readers import ImuData
 from gyrodenoise.discrepancy.report import _truth_caution, _truth_check_md
 from gyrodenoise.discrepancy.truth_check import (
     FOLLOWS_RATIO,
+    check_sequence,
     check_truth,
     followed_bands,
     gyro_truth_pairs,
@@ -102,3 +103,17 @@ def test_report_cautions_when_a_truth_follows_the_gyro():
     table = "\n".join(_truth_check_md(report))
     rows = {line.split(" | ")[0]: line for line in table.splitlines() if line.startswith(("| a |", "| b |"))}
     assert rows["| a"].count(" *") == 0 and rows["| b"].count(" *") == 5
+
+
+@pytest.mark.parametrize("mocap", ["ideal", "euroc-gt"])
+def test_the_independent_test_world_truths_are_not_flagged(mocap, tmp_path):
+    """Data this module did not make: gyrodenoise.testworld's integrating sensor (null preset: white noise of
+    1.6968e-4 rad/s/sqrt(Hz)) with an exact truth and with its EuRoC-like measured one (200 Hz, 0.01 deg)."""
+    from gyrodenoise.testworld import MOCAP_PRESETS, make_sequence
+
+    seq = make_sequence(tmp_path, "procedural", None, duration=60.0, seed=1, name="s", mocap=MOCAP_PRESETS[mocap])
+    c = check_sequence(seq.imu_file.parent.parent, noise_density=1.6968e-4)
+    ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
+    assert followed_bands(c) == [] and len(ratios) == 5
+    if mocap == "ideal":  # nothing but the sensor's noise in the residual: the reference matches it
+        assert np.all((ratios > 0.7) & (ratios < 1.5)), ratios
