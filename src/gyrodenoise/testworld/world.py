@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.testworld.asl import imu_csv, pose_csv, write_sequence
-from gyrodenoise.testworld.mocap import MocapConfig, MocapPoses, measure_poses
+from gyrodenoise.testworld.mocap import MocapConfig, MocapPoses, fuse_with_gyro, measure_poses
 from gyrodenoise.testworld.motion import MotionSource, ProceduralMotion
 from gyrodenoise.testworld.replay import EurocReplay
 from gyrodenoise.testworld.sensor import AccelModel, Bandwidth, ImuSamples, simulate_imu
@@ -108,6 +108,8 @@ def make_sequence(
     t_imu_end = imu.t[-1]
     first = motion.t_start + 0.2 + rng["phase"].uniform(0, 1.0 / mocap.rate_hz)
     poses = measure_poses(motion, mocap, first, min(t_imu_end, motion.t_end) - 0.2, t0_ns, rng["mocap"])
+    if mocap.fuse_tau_s > 0:
+        poses = fuse_with_gyro(poses, imu.t, imu.gyro, mocap.fuse_tau_s, (poses.stamp_ns - t0_ns) * 1e-9)
 
     truth = _truth(name, seed, preset, motion, eff, imu, poses, bw)
     path = write_sequence(
