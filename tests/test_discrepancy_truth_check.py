@@ -122,3 +122,35 @@ def test_the_independent_test_world_truths(mocap, tmp_path):
     assert followed_bands(c) == []
     if mocap == "ideal":  # nothing but the sensor's noise in the residual: the reference matches it
         assert np.all((ratios > 0.7) & (ratios < 1.5)), ratios
+
+
+def test_effects_judged_against_a_truth_that_follows_the_gyro_are_withheld():
+    from types import SimpleNamespace
+
+    from gyrodenoise.discrepancy.workflow import truth_free_vocabulary, withheld_by_truth
+
+    follows, clean = run("follows"), run("exact")
+    fit = [
+        SimpleNamespace(name="a", extra={"band": SimpleNamespace(f_max_hz=7.0)}),
+        SimpleNamespace(name="b", extra={"band": SimpleNamespace(f_max_hz=7.0)}),
+    ]
+    named = ["scale_factor", "quantization", "vibration"]
+    followed, withheld = withheld_by_truth(fit, {"a": clean, "b": follows}, named)
+    assert followed == {"b": [[2.0, 5.0], [5.0, 10.0]]}  # the bands that start inside b's compared band
+    assert withheld == ["scale_factor", "vibration"]  # quantization is read off the gyro's own values
+    # a truth that follows the gyro only above the compared band, or no check at all: nothing withheld
+    narrow = [SimpleNamespace(name="b", extra={"band": SimpleNamespace(f_max_hz=1.5)})]
+    assert withheld_by_truth(narrow, {"b": follows}, named) == ({}, [])
+    assert withheld_by_truth(fit, None, named) == ({}, [])
+    assert sorted(truth_free_vocabulary(["bias", "white_noise"], None)) == ["quantization", "saturation"]
+    assert truth_free_vocabulary(["bias"], ["scale_factor", "saturation"]) == ["saturation"]
+
+
+def test_report_says_what_was_withheld_and_why():
+    flagged = {"truth_rate_hz": 200.0, "noise_density": DENSITY, "bands": run("follows")["bands"]}
+    report = {"truth_check": {"b": {**flagged, "follows_gyro_bands_hz": followed_bands(flagged)}}}
+    report["truth_followed"] = {"fit_sequences": {"b": [[2.0, 5.0]]}, "withheld": ["scale_factor"]}
+    text = "\n".join(_truth_caution(report))
+    assert "not decided" in text and "withheld: scale_factor" in text and "quantization, saturation" in text
+    report["truth_followed"]["withheld"] = []
+    assert "cannot be seen in the residual" in "\n".join(_truth_caution(report))

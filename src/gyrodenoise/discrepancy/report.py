@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG  # noqa: E402
-from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO  # noqa: E402
+from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO, TRUTH_FREE  # noqa: E402
 from gyrodenoise.discrepancy.workflow import NO_EFFECT  # noqa: E402
 from gyrodenoise.plots import save as save_figure  # noqa: E402
 
@@ -181,12 +181,29 @@ def _truth_caution(report: dict) -> list[str]:
     if not followed:
         return []
     where = "; ".join(f"{n}: " + ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in b) for n, b in followed.items())
-    return [
+    lines = [
         f"**Caution: the ground truth follows the gyro** ({where}): the residual there lacks part of the gyro's own "
         'noise, so noise levels fitted on these sequences are too low (section "Is the ground truth independent of '
         'the gyro?"). Prefer sequences whose truth comes from a tracker that measures orientation.',
         "",
     ]
+    tf = report.get("truth_followed")
+    if tf:
+        what = (
+            "the selection was redone with the effects named from the gyro's own values only "
+            f"({', '.join(TRUTH_FREE)}); named against that truth and withheld: {', '.join(tf['withheld'])}"
+            if tf["withheld"]
+            else "none of the effects named here was judged against it, and an effect the truth follows cannot be "
+            "seen in the residual"
+        )
+        lines[-1:-1] = [
+            "",
+            f"Because a fit sequence's truth follows the gyro inside its compared band "
+            f"({', '.join(tf['fit_sequences'])}), the effects judged against the truth are not decided: {what}. "
+            "On the independent test world, a null sensor measured against such a truth gets effects named that it "
+            "does not have (benchmarks/results/discrepancy_fused_truth.md).",
+        ]
+    return lines
 
 
 def _truth_check_md(report: dict) -> list[str]:

@@ -31,6 +31,8 @@ BANDS_HZ = ((2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 80.0))
 NPERSEG_S = 2.5  # Welch segment
 NYQUIST_SHARE = 0.9  # bands end below this share of the truth's Nyquist frequency
 FOLLOWS_RATIO = 0.5  # residual PSD below half the datasheet noise: the gyro's noise is partly in the truth
+# effects named from the gyro's own values (its lattice, its plateaus), not from its residual against the truth
+TRUTH_FREE = ("quantization", "saturation")
 
 
 def interval_means(x: np.ndarray, t_ns: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
@@ -121,3 +123,19 @@ def check_sequence(mav0: str | Path, gt_file: str | Path | None = None, noise_de
 def followed_bands(check: dict) -> list[list[float]]:
     """The bands [lo, hi] Hz where the check found the truth following the gyro."""
     return [b["band_hz"] for b in check["bands"] if b.get("follows_gyro")]
+
+
+def followed_in_band(checks: dict[str, dict], f_max_hz: dict[str, float]) -> dict[str, list[list[float]]]:
+    """Per sequence of `checks`, the bands where its truth follows the gyro that start inside its compared band
+    [0, f_max_hz[name]] (the band the workflow's regressions see); sequences without such a band are left out."""
+    out = {}
+    for name, check in checks.items():
+        bands = [b for b in followed_bands(check) if b[0] < f_max_hz.get(name, float("inf"))]
+        if bands:
+            out[name] = bands
+    return out
+
+
+def truth_free(candidates: list[str]) -> list[str]:
+    """The candidates that can still be judged when the truth follows the gyro: those named from the gyro alone."""
+    return [c for c in candidates if c in TRUTH_FREE]

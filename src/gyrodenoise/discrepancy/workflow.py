@@ -28,6 +28,7 @@ from gyrodenoise.discrepancy.rank import (
 )
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
+from gyrodenoise.discrepancy.truth_check import TRUTH_FREE, followed_in_band, truth_free
 from gyrodenoise.sim.context import FitContext, SignalContext
 from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
 
@@ -214,6 +215,25 @@ def decide(
         thresholds = null.thresholds(bic_threshold)
     sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
     return sel_base, sel, null
+
+
+def withheld_by_truth(
+    fit: list[FitContext], truth_checks: dict[str, dict] | None, named: list[str]
+) -> tuple[dict[str, list[list[float]]], list[str]]:
+    """The fit sequences whose ground truth follows the gyro inside their compared band (`truth_check`), and the
+    named effects that were judged against that truth (all but those named from the gyro alone): a residual
+    against a truth that carries the gyro is the fusion's error, not the sensor's, so those effects must be
+    withheld and the selection redone with the truth-free candidates only. ({}, []) when nothing is followed."""
+    if not truth_checks:
+        return {}, []
+    f_max = {fc.name: fc.extra["band"].f_max_hz for fc in fit if "band" in fc.extra}
+    followed = followed_in_band({fc.name: truth_checks[fc.name] for fc in fit if fc.name in truth_checks}, f_max)
+    return followed, ([n for n in named if n not in TRUTH_FREE] if followed else [])
+
+
+def truth_free_vocabulary(base: list[str], candidates: list[str] | None) -> list[str]:
+    """The candidates left when the truth cannot judge: the truth-free ones of `candidates` (None: all)."""
+    return truth_free(candidates if candidates is not None else [n for n in EFFECTS if n not in base])
 
 
 def run(

@@ -19,7 +19,8 @@ import numpy as np
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import _below_practical, _steps
 from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
-from gyrodenoise.discrepancy.workflow import decide, gap
+from gyrodenoise.discrepancy.truth_check import check_sequence
+from gyrodenoise.discrepancy.workflow import decide, gap, truth_free_vocabulary, withheld_by_truth
 from gyrodenoise.testworld import MocapConfig, make_sequence
 from gyrodenoise.testworld.mocap import MOCAP_PRESETS
 
@@ -138,9 +139,11 @@ def run_world_case(
     mocap: str = "vicon",
     euroc_root: str | Path | None = None,
     smoothing_hz: float = 15.0,
+    noise_density: float | None = None,
 ) -> dict:
     """One scenario: 'none' (the null world), 'bandwidth' (null + a delaying sensor bandwidth) or a
-    key of WORLD_CASES at magnitude 0 (small) or 1 (large)."""
+    key of WORLD_CASES at magnitude 0 (small) or 1 (large). noise_density (rad/s/sqrt(Hz)): also run the CLI's
+    ground-truth check and withhold what was judged against a truth that follows the gyro, as the CLI does."""
     case = None if effect == "none" else (BANDWIDTH_CASE if effect == "bandwidth" else WORLD_CASES[effect])
     spec = "" if case is None else case.specs[magnitude]
     bw = "integrate" if case is None else case.bandwidth
@@ -148,6 +151,13 @@ def run_world_case(
     fit = [load_fit_context(root, FIT_FLIGHT)]
     hold = [load_fit_context(root, HOLDOUT_FLIGHT)]
     sel_base, sel, null = decide(fit, hold, null_draws=null_draws, seed=seed)
+    followed, withheld = {}, []
+    if noise_density:
+        checks = {FIT_FLIGHT: check_sequence(Path(root) / FIT_FLIGHT / "mav0", noise_density=noise_density)}
+        followed, withheld = withheld_by_truth(fit, checks, list(sel.named))
+        if withheld:
+            vocabulary = truth_free_vocabulary(["bias", "white_noise"], None)
+            sel_base, sel, null = decide(fit, hold, candidates=vocabulary, null_draws=null_draws, seed=seed)
     out = {
         "effect": effect,
         "magnitude": magnitude,
@@ -165,6 +175,8 @@ def run_world_case(
         # a named time offset against a sensor low-pass of the same delay: separable on this motion?
         "delay_or_lowpass": sel.delay_or_lowpass,
         "equivalences": sel.equivalences,
+        "truth_followed": followed,
+        "withheld": withheld,
     }
     if null is not None:
         out["null_thresholds"] = {k: float(v) for k, v in null.thresholds(10.0).items()}
