@@ -105,15 +105,26 @@ def test_report_cautions_when_a_truth_follows_the_gyro():
     assert rows["| a"].count(" *") == 0 and rows["| b"].count(" *") == 5
 
 
-@pytest.mark.parametrize("mocap", ["ideal", "euroc-gt", "euroc-fused"])
-def test_the_independent_test_world_truths(mocap, tmp_path):
+@pytest.mark.parametrize(
+    "mocap, effects",
+    [
+        ("ideal", None),
+        ("euroc-gt", None),
+        ("euroc-fused", None),
+        ("ideal", "time_offset=5ms"),
+        ("euroc-fused", "time_offset=5ms"),
+    ],
+)
+def test_the_independent_test_world_truths(mocap, effects, tmp_path):
     """Data this module did not make: gyrodenoise.testworld's integrating sensor (null preset: white noise of
     1.6968e-4 rad/s/sqrt(Hz)) with an exact truth, its EuRoC-like measured one (200 Hz, 0.01 deg), and a
-    tracker fused with the gyro by a 5-s complementary filter (as EuRoC's Machine Hall truth is made)."""
+    tracker fused with the gyro by a 5-s complementary filter (as EuRoC's Machine Hall truth is made); with a
+    5-ms time offset too, which the check must align before it compares (motion x delay would hide the fusion)."""
     from gyrodenoise.testworld import MOCAP_PRESETS, make_sequence
 
-    seq = make_sequence(tmp_path, "procedural", None, duration=60.0, seed=1, name="s", mocap=MOCAP_PRESETS[mocap])
+    seq = make_sequence(tmp_path, "procedural", effects, duration=60.0, seed=1, name="s", mocap=MOCAP_PRESETS[mocap])
     c = check_sequence(seq.imu_file.parent.parent, noise_density=1.6968e-4)
+    assert c["lag_s"] == pytest.approx(0.005 if effects else 0.0, abs=2e-4)
     ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
     assert len(ratios) == 5
     if mocap == "euroc-fused":  # the truth carries the gyro: every band flagged

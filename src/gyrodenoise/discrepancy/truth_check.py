@@ -7,7 +7,9 @@ tracker measures position only). There, the residual gyro - truth lacks part of 
 and every noise level fitted on it is too low.
 
 Per sequence and frequency band this module measures, on the ground truth's own samples (the gyro
-averaged over each ground-truth interval against the finite rotation between consecutive poses):
+averaged over each ground-truth interval against the finite rotation between consecutive poses, after
+shifting the IMU stamps by the lag that minimises their difference: a time offset would otherwise leave
+motion x delay in the residual and hide a truth that follows the gyro):
 - the coherence of the two rates (information: 1 also where an exact truth sees real motion);
 - the share of the gyro's power the truth reproduces, 1 - PSD(gyro - truth) / PSD(gyro);
 - with the sensor's datasheet noise density sigma (rad/s/sqrt(Hz)), the median of the residual's PSD
@@ -22,7 +24,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
+from scipy import optimize, signal
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.data.readers import ImuData, find_groundtruth_file, read_groundtruth, read_imu
@@ -30,6 +32,7 @@ from gyrodenoise.data.readers import ImuData, find_groundtruth_file, read_ground
 BANDS_HZ = ((2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 80.0))
 NPERSEG_S = 2.5  # Welch segment
 NYQUIST_SHARE = 0.9  # bands end below this share of the truth's Nyquist frequency
+MAX_LAG_S, LAG_GRID_S = 0.05, 0.002  # the time offsets the check aligns before it compares
 FOLLOWS_RATIO = 0.5  # residual PSD below half the datasheet noise: the gyro's noise is partly in the truth
 # effects named from the gyro's own values (its lattice, its plateaus), not from its residual against the truth
 TRUTH_FREE = ("quantization", "saturation")
@@ -114,10 +117,29 @@ def check_sequence(mav0: str | Path, gt_file: str | Path | None = None, noise_de
     imu = read_imu(mav0 / "imu0" / "data.csv")
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     gt = read_groundtruth(gt_path)
+    lag_ns = best_lag_ns(gt.t_ns, gt.quat_xyzw, imu)
+    imu = ImuData(imu.t_ns - lag_ns, imu.gyro, imu.acc, imu.path)
     gyro, truth, run = gyro_truth_pairs(gt.t_ns, gt.quat_xyzw, imu)
     fs = 1e9 / float(np.median(np.diff(gt.t_ns)))
     white = white_reference(noise_density, imu.t_ns, gt.t_ns, run) if noise_density else None
-    return {"ground_truth": str(gt_path), **check_truth(gyro, truth, fs, white, noise_density)}
+    return {"ground_truth": str(gt_path), "lag_s": lag_ns * 1e-9, **check_truth(gyro, truth, fs, white, noise_density)}
+
+
+def best_lag_ns(t_ns: np.ndarray, quat_xyzw: np.ndarray, imu: ImuData, max_lag_s: float = MAX_LAG_S) -> int:
+    """The shift of the IMU stamps (ns, subtracted) that minimises the residual gyro - truth: a time offset
+    leaves motion x delay in the residual, which would hide a truth that follows the gyro from the check."""
+
+    def power(lag_s: float) -> float:
+        shifted = ImuData(imu.t_ns - int(round(lag_s * 1e9)), imu.gyro, imu.acc, imu.path)
+        gyro, truth, _ = gyro_truth_pairs(t_ns, quat_xyzw, shifted)
+        r = gyro - truth
+        return float(np.mean((r - r.mean(0)) ** 2))
+
+    step = LAG_GRID_S
+    grid = np.arange(-max_lag_s, max_lag_s + step / 2, step)
+    k = int(np.argmin([power(x) for x in grid]))
+    res = optimize.minimize_scalar(power, bounds=(grid[k] - step, grid[k] + step), method="bounded")
+    return int(round(float(res.x if res.fun < power(grid[k]) else grid[k]) * 1e9))
 
 
 def followed_bands(check: dict) -> list[list[float]]:
