@@ -203,9 +203,9 @@ def main(argv: list[str] | None = None) -> int:
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)
     print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
-    followed = {n: c["follows_gyro_bands_hz"] for n, c in report["truth_check"].items() if c["follows_gyro_bands_hz"]}
-    if followed:
-        print(f"caution: the ground truth follows the gyro in {followed} (Hz); noise levels fitted there are too low")
+    flagged = {n: c["follows_gyro_bands_hz"] for n, c in checks.items() if c["follows_gyro_bands_hz"]}
+    if flagged:
+        print(f"caution: the ground truth follows the gyro in {flagged} (Hz); noise levels fitted there are too low")
     gb, ga = report["gap_before"], report["gap_after"]
     print(
         f"held-out residual RMS {gb['residual_rms_rad_s']:.4g} -> {ga['residual_rms_rad_s']:.4g} rad/s, "
