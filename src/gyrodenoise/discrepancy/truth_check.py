@@ -46,16 +46,26 @@ def interval_means(x: np.ndarray, t_ns: np.ndarray, at_ns: np.ndarray) -> np.nda
     return np.diff(c, axis=0) / (np.diff(at_ns)[:, None] * 1e-9)
 
 
-def gyro_truth_pairs(
-    t_ns: np.ndarray, quat_xyzw: np.ndarray, imu: ImuData
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(gyro averaged over each ground-truth interval, truth's rate over it), both (M, 3) rad/s, and the indices
-    of those intervals, on the longest run of regular intervals inside the IMU record (a gap ends a run)."""
+def truth_rates(t_ns: np.ndarray, quat_xyzw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(truth's rate over each interval between consecutive poses (M - 1, 3) rad/s, whether the interval is
+    regular (M - 1,): within 10% of the median, not a gap)."""
     dt = np.diff(t_ns) * 1e-9
     med = float(np.median(dt))
     rot = Rotation.from_quat(quat_xyzw)
-    w_gt = (rot[:-1].inv() * rot[1:]).as_rotvec() / dt[:, None]
-    ok = (np.abs(dt - med) < 0.1 * med) & (t_ns[:-1] >= imu.t_ns[0]) & (t_ns[1:] <= imu.t_ns[-1])
+    return (rot[:-1].inv() * rot[1:]).as_rotvec() / dt[:, None], np.abs(dt - med) < 0.1 * med
+
+
+def gyro_truth_pairs(
+    t_ns: np.ndarray,
+    quat_xyzw: np.ndarray,
+    imu: ImuData,
+    rates: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(gyro averaged over each ground-truth interval, truth's rate over it), both (M, 3) rad/s, and the indices
+    of those intervals, on the longest run of regular intervals inside the IMU record (a gap ends a run).
+    `rates`: `truth_rates(t_ns, quat_xyzw)` when the caller already has them."""
+    w_gt, regular = rates if rates is not None else truth_rates(t_ns, quat_xyzw)
+    ok = regular & (t_ns[:-1] >= imu.t_ns[0]) & (t_ns[1:] <= imu.t_ns[-1])
     idx = np.flatnonzero(ok)
     if len(idx) == 0:
         raise ValueError("no ground-truth interval inside the IMU record: do the two files cover the same time?")
@@ -129,17 +139,20 @@ def best_lag_ns(t_ns: np.ndarray, quat_xyzw: np.ndarray, imu: ImuData, max_lag_s
     """The shift of the IMU stamps (ns, subtracted) that minimises the residual gyro - truth: a time offset
     leaves motion x delay in the residual, which would hide a truth that follows the gyro from the check."""
 
+    rates = truth_rates(t_ns, quat_xyzw)  # the truth does not move with the lag: computed once
+
     def power(lag_s: float) -> float:
         shifted = ImuData(imu.t_ns - int(round(lag_s * 1e9)), imu.gyro, imu.acc, imu.path)
-        gyro, truth, _ = gyro_truth_pairs(t_ns, quat_xyzw, shifted)
+        gyro, truth, _ = gyro_truth_pairs(t_ns, quat_xyzw, shifted, rates)
         r = gyro - truth
         return float(np.mean((r - r.mean(0)) ** 2))
 
     step = LAG_GRID_S
     grid = np.arange(-max_lag_s, max_lag_s + step / 2, step)
-    k = int(np.argmin([power(x) for x in grid]))
+    powers = [power(x) for x in grid]
+    k = int(np.argmin(powers))
     res = optimize.minimize_scalar(power, bounds=(grid[k] - step, grid[k] + step), method="bounded")
-    return int(round(float(res.x if res.fun < power(grid[k]) else grid[k]) * 1e9))
+    return int(round(float(res.x if res.fun < powers[k] else grid[k]) * 1e9))
 
 
 def followed_bands(check: dict) -> list[list[float]]:
@@ -156,8 +169,3 @@ def followed_in_band(checks: dict[str, dict], f_max_hz: dict[str, float]) -> dic
         if bands:
             out[name] = bands
     return out
-
-
-def truth_free(candidates: list[str]) -> list[str]:
-    """The candidates that can still be judged when the truth follows the gyro: those named from the gyro alone."""
-    return [c for c in candidates if c in TRUTH_FREE]

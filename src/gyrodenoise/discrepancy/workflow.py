@@ -28,7 +28,7 @@ from gyrodenoise.discrepancy.rank import (
 )
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
-from gyrodenoise.discrepancy.truth_check import TRUTH_FREE, followed_in_band, truth_free
+from gyrodenoise.discrepancy.truth_check import TRUTH_FREE, followed_in_band
 from gyrodenoise.sim.context import FitContext, SignalContext
 from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
 
@@ -232,8 +232,8 @@ def withheld_by_truth(
 
 
 def truth_free_vocabulary(base: list[str], candidates: list[str] | None) -> list[str]:
-    """The candidates left when the truth cannot judge: the truth-free ones of `candidates` (None: all)."""
-    return truth_free(candidates if candidates is not None else [n for n in EFFECTS if n not in base])
+    """The candidates left when the truth cannot judge: those of `candidates` (None: all) named from the gyro alone."""
+    return [c for c in (candidates if candidates is not None else EFFECTS) if c in TRUTH_FREE and c not in base]
 
 
 def run(
