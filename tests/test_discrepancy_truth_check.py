@@ -135,26 +135,59 @@ def test_the_independent_test_world_truths(mocap, effects, tmp_path):
         assert np.all((ratios > 0.7) & (ratios < 1.5)), ratios
 
 
-def test_effects_judged_against_a_truth_that_follows_the_gyro_are_withheld():
+def _contexts(names: str, f_max_hz: float = 7.0) -> list:
     from types import SimpleNamespace
 
-    from gyrodenoise.discrepancy.workflow import truth_free_vocabulary, withheld_by_truth
+    return [SimpleNamespace(name=n, extra={"band": SimpleNamespace(f_max_hz=f_max_hz)}) for n in names]
+
+
+def test_effects_judged_against_a_truth_that_follows_the_gyro_are_withheld():
+    from gyrodenoise.discrepancy.workflow import truth_free_vocabulary, truth_rule
 
     follows, clean = run("follows"), run("exact")
-    fit = [
-        SimpleNamespace(name="a", extra={"band": SimpleNamespace(f_max_hz=7.0)}),
-        SimpleNamespace(name="b", extra={"band": SimpleNamespace(f_max_hz=7.0)}),
-    ]
     named = ["scale_factor", "quantization", "vibration"]
-    followed, withheld = withheld_by_truth(fit, {"a": clean, "b": follows}, named)
-    assert followed == {"b": [[2.0, 5.0], [5.0, 10.0]]}  # the bands that start inside b's compared band
-    assert withheld == ["scale_factor", "vibration"]  # quantization is read off the gyro's own values
+    rule = truth_rule(_contexts("ab"), _contexts("h"), {"a": clean, "b": follows, "h": clean})
+    assert rule.fit_followed == {"b": [[2.0, 5.0], [5.0, 10.0]]}  # the bands that start inside b's compared band
+    assert not rule.decided and rule.withheld(named) == ["scale_factor", "vibration"]  # quantization: gyro's values
+    assert "not decided (it follows the gyro on b)" in rule.note()
     # a truth that follows the gyro only above the compared band, or no check at all: nothing withheld
-    narrow = [SimpleNamespace(name="b", extra={"band": SimpleNamespace(f_max_hz=1.5)})]
-    assert withheld_by_truth(narrow, {"b": follows}, named) == ({}, [])
-    assert withheld_by_truth(fit, None, named) == ({}, [])
+    assert truth_rule(_contexts("b", 1.5), _contexts("h"), {"b": follows}).withheld(named) == []
+    assert truth_rule(_contexts("ab"), _contexts("h"), None).withheld(named) == []
+    assert truth_rule(_contexts("ab"), _contexts("h"), None).note() == ""
     assert sorted(truth_free_vocabulary(["bias", "white_noise"], None)) == ["quantization", "saturation"]
     assert truth_free_vocabulary(["bias"], ["scale_factor", "saturation"]) == ["saturation"]
+
+
+def test_held_out_truths_that_follow_the_gyro_are_set_aside_or_leave_the_effects_undecided():
+    from gyrodenoise.discrepancy.workflow import truth_rule, with_truth_rule
+
+    follows, clean = run("follows"), run("exact")
+    named = ["scale_factor", "quantization"]
+    # one held-out truth follows: it is set aside, the other judges the transfer, the effects are decided
+    some = truth_rule(_contexts("a"), _contexts("gh"), {"a": clean, "g": follows, "h": clean})
+    assert some.holdout_followed == {"g": [[2.0, 5.0], [5.0, 10.0]]} and some.holdout_kept == ["h"]
+    assert some.decided and some.withheld(named) == [] and "held-out g set aside" in some.note()
+    # every held-out truth follows: nothing independent to judge transfer on, so not decided (gaps on all)
+    every = truth_rule(_contexts("a"), _contexts("g"), {"a": clean, "g": follows})
+    assert every.holdout_kept == ["g"] and not every.decided and every.withheld(named) == ["scale_factor"]
+    assert "not decided (it follows the gyro on g)" in every.note()
+
+    calls = []
+
+    def select(hold, candidates):  # what the selection was run on, and what it would name
+        calls.append(([fc.name for fc in hold], candidates))
+        return len(calls), named if candidates is None else [c for c in named if c in candidates]
+
+    fit, hold = _contexts("a"), _contexts("gh")
+    result, rule, withheld = with_truth_rule(select, fit, hold, {"a": clean, "g": follows, "h": clean}, [], None)
+    assert calls == [(["g", "h"], None), (["h"], None)] and result == 2 and withheld == []  # rerun on h alone
+    calls.clear()
+    result, rule, withheld = with_truth_rule(select, fit, _contexts("g"), {"a": clean, "g": follows}, [], None)
+    assert calls[1][0] == ["g"] and sorted(calls[1][1]) == ["quantization", "saturation"]  # truth-free rerun
+    assert withheld == ["scale_factor"] and not rule.decided
+    calls.clear()
+    with_truth_rule(select, fit, hold, {"a": clean, "g": clean, "h": clean}, [], None)
+    assert len(calls) == 1  # nothing followed: one selection
 
 
 def test_report_says_what_was_withheld_and_why():
@@ -165,3 +198,11 @@ def test_report_says_what_was_withheld_and_why():
     assert "not decided" in text and "withheld: scale_factor" in text and "quantization, saturation" in text
     report["truth_followed"]["withheld"] = []
     assert "cannot be seen in the residual" in "\n".join(_truth_caution(report))
+    # a held-out truth that follows the gyro: set aside when another is left, else the transfer is not judged
+    aside = {"fit_sequences": {}, "holdout_sequences": {"b": [[2.0, 5.0]]}, "holdout_used": ["c"], "withheld": []}
+    report["truth_followed"] = {**aside, "decided": True}
+    text = "\n".join(_truth_caution(report))
+    assert "held-out b was set aside" in text and "not decided" not in text
+    report["truth_followed"] = {**aside, "holdout_used": ["b"], "decided": False}
+    text = "\n".join(_truth_caution(report))
+    assert "every held-out sequence's truth follows the gyro" in text and "not decided" in text

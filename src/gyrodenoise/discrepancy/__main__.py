@@ -22,7 +22,7 @@ from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
-from gyrodenoise.discrepancy.workflow import run, truth_free_vocabulary, withheld_by_truth
+from gyrodenoise.discrepancy.workflow import run, with_truth_rule
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.sim.effects import EFFECTS
 
@@ -177,20 +177,16 @@ def main(argv: list[str] | None = None) -> int:
         return [load_fit_context(args.root, n, args.gt_files.get(n), args.knot_spacing) for n in names]
 
     fit, holdout = load(args.fit), load(args.holdout)
-    report, arrays = run(
-        fit, holdout, args.base, args.candidates, args.bic_threshold, args.min_gain, args.seed, args.null_draws
-    )
+
+    def select(hold: list, candidates: list[str] | None) -> tuple[tuple[dict, dict], list[str]]:
+        out = run(fit, hold, args.base, candidates, args.bic_threshold, args.min_gain, args.seed, args.null_draws)
+        return out, [e["name"] for e in out[0]["named_effects"]]
+
     checks = truth_checks(args, [*args.fit, *args.holdout])
-    followed, withheld = withheld_by_truth(fit, checks, [e["name"] for e in report["named_effects"]])
-    if withheld:  # judged against a truth that carries the gyro: select again among the truth-free effects
-        vocabulary = truth_free_vocabulary(args.base, args.candidates)
-        report, arrays = run(
-            fit, holdout, args.base, vocabulary, args.bic_threshold, args.min_gain, args.seed, args.null_draws
-        )
-    if followed:
-        names = ", ".join(followed)
-        report["verdict"] += f"; effects judged against the ground truth: not decided (it follows the gyro on {names})"
-        report["truth_followed"] = {"fit_sequences": followed, "withheld": withheld}
+    (report, arrays), rule, withheld = with_truth_rule(select, fit, holdout, checks, args.base, args.candidates)
+    if rule.note():
+        report["verdict"] += "; " + rule.note()
+        report["truth_followed"] = rule.summary(withheld)
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     report["truth_check"] = checks

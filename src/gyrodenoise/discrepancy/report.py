@@ -189,6 +189,27 @@ def _truth_caution(report: dict) -> list[str]:
     ]
     tf = report.get("truth_followed")
     if tf:
+        lines[-1:-1] = ["", _truth_rule_md(tf)]
+    return lines
+
+
+def _truth_rule_md(tf: dict) -> str:
+    """What the ground-truth rule (`workflow.TruthRule`) did, in one paragraph."""
+    fit_f, hold_f = tf.get("fit_sequences") or {}, tf.get("holdout_sequences") or {}
+    aside = [n for n in hold_f if n not in tf.get("holdout_used", [])]
+    text = []
+    if aside:
+        text.append(
+            f"The held-out {', '.join(aside)} {'was' if len(aside) == 1 else 'were'} set aside: "
+            "the practical minimum and the gaps below use the other held-out sequences only."
+        )
+    if fit_f or (hold_f and not aside):
+        where = (
+            f"a fit sequence's truth follows the gyro inside its compared band ({', '.join(fit_f)})"
+            if fit_f
+            else f"every held-out sequence's truth follows the gyro inside its compared band ({', '.join(hold_f)}), "
+            "so the transfer of an effect cannot be judged and the gaps below are measured against such truths"
+        )
         what = (
             "the selection was redone with the effects named from the gyro's own values only "
             f"({', '.join(TRUTH_FREE)}); named against that truth and withheld: {', '.join(tf['withheld'])}"
@@ -196,14 +217,12 @@ def _truth_caution(report: dict) -> list[str]:
             else "none of the effects named here was judged against it, and an effect the truth follows cannot be "
             "seen in the residual"
         )
-        lines[-1:-1] = [
-            "",
-            f"Because a fit sequence's truth follows the gyro inside its compared band "
-            f"({', '.join(tf['fit_sequences'])}), the effects judged against the truth are not decided: {what}. "
-            "On the independent test world, a null sensor measured against such a truth gets effects named that it "
-            "does not have (benchmarks/results/discrepancy_fused_truth.md).",
-        ]
-    return lines
+        text.append(
+            f"Because {where}, the effects judged against the truth are not decided: {what}. On the independent "
+            "test world, a null sensor measured against such a truth gets effects named that it does not have "
+            "(benchmarks/results/discrepancy_fused_truth.md)."
+        )
+    return " ".join(text)
 
 
 def _truth_check_md(report: dict) -> list[str]:
@@ -315,6 +334,13 @@ def _below_practical_md(report: dict) -> list[str]:
         "| effect | delta BIC | threshold | share of the fit residual | closed (held-out) |",
         "|---|---|---|---|---|",
     ]
+    tf = report.get("truth_followed") or {}
+    if tf and not tf.get("decided", True):
+        lines[1:1] = [
+            "",
+            "Against a ground truth that follows the gyro (see the caution under the verdict) these are not decided "
+            "either: a residual that lacks the gyro's own noise cannot say what an effect would close.",
+        ]
     for c in rows:
         lines.append(
             f"| {_label(c)} | {c['delta_bic']:.1f} | {c['threshold']:.1f} | {100 * c.get('gain', 0.0):.2f}% | "

@@ -20,7 +20,7 @@ from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import _below_practical, _steps
 from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
 from gyrodenoise.discrepancy.truth_check import check_sequence
-from gyrodenoise.discrepancy.workflow import decide, gap, truth_free_vocabulary, withheld_by_truth
+from gyrodenoise.discrepancy.workflow import decide, gap, with_truth_rule
 from gyrodenoise.testworld import MocapConfig, make_sequence
 from gyrodenoise.testworld.mocap import MOCAP_PRESETS
 
@@ -150,14 +150,19 @@ def run_world_case(
     truth = make_world(root, spec, seed, duration_s, bw, mocap, euroc_root, smoothing_hz=smoothing_hz)
     fit = [load_fit_context(root, FIT_FLIGHT)]
     hold = [load_fit_context(root, HOLDOUT_FLIGHT)]
-    sel_base, sel, null = decide(fit, hold, null_draws=null_draws, seed=seed)
-    followed, withheld = {}, []
+    checks = None
     if noise_density:
-        checks = {FIT_FLIGHT: check_sequence(Path(root) / FIT_FLIGHT / "mav0", noise_density=noise_density)}
-        followed, withheld = withheld_by_truth(fit, checks, list(sel.named))
-        if withheld:
-            vocabulary = truth_free_vocabulary(["bias", "white_noise"], None)
-            sel_base, sel, null = decide(fit, hold, candidates=vocabulary, null_draws=null_draws, seed=seed)
+        checks = {
+            n: check_sequence(Path(root) / n / "mav0", noise_density=noise_density)
+            for n in (FIT_FLIGHT, HOLDOUT_FLIGHT)
+        }
+
+    def select(h: list, candidates: list[str] | None) -> tuple[tuple, list[str]]:
+        d = decide(fit, h, candidates=candidates, null_draws=null_draws, seed=seed)
+        return d, list(d[1].named)
+
+    (sel_base, sel, null), rule, withheld = with_truth_rule(select, fit, hold, checks, ["bias", "white_noise"], None)
+    hold = [fc for fc in hold if fc.name in rule.holdout_kept]
     out = {
         "effect": effect,
         "magnitude": magnitude,
@@ -175,7 +180,8 @@ def run_world_case(
         # a named time offset against a sensor low-pass of the same delay: separable on this motion?
         "delay_or_lowpass": sel.delay_or_lowpass,
         "equivalences": sel.equivalences,
-        "truth_followed": followed,
+        "truth_followed": rule.fit_followed,
+        "holdout_truth_followed": rule.holdout_followed,
         "withheld": withheld,
     }
     if null is not None:
