@@ -206,3 +206,27 @@ def test_report_says_what_was_withheld_and_why():
     report["truth_followed"] = {**aside, "holdout_used": ["b"], "decided": False}
     text = "\n".join(_truth_caution(report))
     assert "every held-out sequence's truth follows the gyro" in text and "not decided" in text
+
+
+def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribution(monkeypatch):
+    from types import SimpleNamespace
+
+    from gyrodenoise.discrepancy import workflow
+
+    nulls = []
+
+    def fake_null(sel_base, fit, candidates, draws, seed):
+        nulls.append(candidates)
+        return SimpleNamespace(thresholds=lambda floor: {})
+
+    monkeypatch.setattr(workflow, "null_distribution", fake_null)
+    monkeypatch.setattr(workflow, "select_effects", lambda *a, **k: "selection")
+    cache: dict = {}
+    fit = _contexts("a")
+    workflow.decide(fit, _contexts("gh"), null_draws=5, null_cache=cache)
+    workflow.decide(fit, _contexts("h"), null_draws=5, null_cache=cache)  # held-out set aside: same null
+    assert nulls == [None]
+    workflow.decide(fit, _contexts("h"), candidates=["quantization"], null_draws=5, null_cache=cache)
+    workflow.decide(fit, _contexts("h"), null_draws=5, seed=1, null_cache=cache)
+    workflow.decide(fit, _contexts("h"), null_draws=5)  # no cache: computed again
+    assert nulls == [None, ["quantization"], None, None]

@@ -178,8 +178,11 @@ def main(argv: list[str] | None = None) -> int:
 
     fit, holdout = load(args.fit), load(args.holdout)
 
+    null_cache: dict = {}  # a second selection on other held-out sequences reuses the null distribution
+
     def select(hold: list, candidates: list[str] | None) -> tuple[tuple[dict, dict], list[str]]:
-        out = run(fit, hold, args.base, candidates, args.bic_threshold, args.min_gain, args.seed, args.null_draws)
+        a = args
+        out = run(fit, hold, a.base, candidates, a.bic_threshold, a.min_gain, a.seed, a.null_draws, null_cache)
         return out, [e["name"] for e in out[0]["named_effects"]]
 
     checks = truth_checks(args, [*args.fit, *args.holdout])

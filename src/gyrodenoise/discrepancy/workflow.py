@@ -206,17 +206,24 @@ def decide(
     min_gain: float = MIN_GAIN,
     null_draws: int = DRAWS,
     seed: int = 0,
+    null_cache: dict | None = None,
 ) -> tuple[Selection, Selection, NullDistribution | None]:
     """The base model, the null distribution of every candidate's delta BIC under it (`null.py`;
     null_draws = 0: none, the fixed `bic_threshold` decides) and the greedy selection with those
     thresholds and the practical minimum `min_gain` on the held-out sequences.
+    `null_cache`: a dict kept by a caller that decides again on the same fit sequences with other held-out
+    ones; the null distribution depends on the fit sequences only, so it is computed once per candidate list.
     Returns (base selection, final selection, null distribution)."""
     base = list(base)
     sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold, holdout=holdout)
     null = None
     thresholds = None
     if null_draws > 0:
-        null = null_distribution(sel_base, fit, candidates, null_draws, seed)
+        key = (tuple(base), None if candidates is None else tuple(candidates), null_draws, seed)
+        cache = null_cache if null_cache is not None else {}
+        if key not in cache:
+            cache[key] = null_distribution(sel_base, fit, candidates, null_draws, seed)
+        null = cache[key]
         thresholds = null.thresholds(bic_threshold)
     sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
     return sel_base, sel, null
@@ -312,10 +319,11 @@ def run(
     min_gain: float = MIN_GAIN,
     seed: int = 0,
     null_draws: int = DRAWS,
+    null_cache: dict | None = None,
 ) -> tuple[dict, dict]:
-    """Steps (1)-(5). Returns (report dict, arrays for the plots)."""
+    """Steps (1)-(5). Returns (report dict, arrays for the plots). `null_cache`: see `decide`."""
     base = list(base)
-    sel_base, sel, null = decide(fit, holdout, base, candidates, bic_threshold, min_gain, null_draws, seed)
+    sel_base, sel, null = decide(fit, holdout, base, candidates, bic_threshold, min_gain, null_draws, seed, null_cache)
     gap_before = gap(sel_base, holdout, seed)
     gap_after = gap(sel, holdout, seed)
     named = []

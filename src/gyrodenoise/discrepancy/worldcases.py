@@ -157,8 +157,10 @@ def run_world_case(
             for n in (FIT_FLIGHT, HOLDOUT_FLIGHT)
         }
 
+    null_cache: dict = {}
+
     def select(h: list, candidates: list[str] | None) -> tuple[tuple, list[str]]:
-        d = decide(fit, h, candidates=candidates, null_draws=null_draws, seed=seed)
+        d = decide(fit, h, candidates=candidates, null_draws=null_draws, seed=seed, null_cache=null_cache)
         return d, list(d[1].named)
 
     (sel_base, sel, null), rule, withheld = with_truth_rule(select, fit, hold, checks, ["bias", "white_noise"], None)
