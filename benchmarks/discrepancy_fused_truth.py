@@ -90,7 +90,7 @@ def main() -> None:
         "",
         "Reading: against a truth that carries the gyro, the residual is the fusion's own error, not the sensor's: "
         "the selection names effects the sensor does not have (column 3), and a hidden effect the truth follows is "
-        "not seen. The rule (`discrepancy.workflow.TruthRule`, the CLI with `--gyro-noise-density`): when "
+        "not seen. The rule (`discrepancy.truth_rule`, the CLI with `--gyro-noise-density`): when "
         "a fit flight's truth follows the gyro inside its compared band, or every held-out flight's does, the "
         "effects judged against the truth are withheld and the selection is redone with those named from the "
         "gyro's own values (quantization, saturation) only (column 4); the verdict says the rest is not decided. "

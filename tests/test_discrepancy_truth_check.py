@@ -142,7 +142,7 @@ def _contexts(names: str, f_max_hz: float = 7.0) -> list:
 
 
 def test_effects_judged_against_a_truth_that_follows_the_gyro_are_withheld():
-    from gyrodenoise.discrepancy.workflow import truth_free_vocabulary, truth_rule
+    from gyrodenoise.discrepancy.truth_rule import truth_free_vocabulary, truth_rule
 
     follows, clean = run("follows"), run("exact")
     named = ["scale_factor", "quantization", "vibration"]
@@ -159,7 +159,7 @@ def test_effects_judged_against_a_truth_that_follows_the_gyro_are_withheld():
 
 
 def test_held_out_truths_that_follow_the_gyro_are_set_aside_or_leave_the_effects_undecided():
-    from gyrodenoise.discrepancy.workflow import truth_rule, with_truth_rule
+    from gyrodenoise.discrepancy.truth_rule import truth_rule, with_truth_rule
 
     follows, clean = run("follows"), run("exact")
     named = ["scale_factor", "quantization"]

@@ -22,7 +22,8 @@ from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
-from gyrodenoise.discrepancy.workflow import run, with_truth_rule
+from gyrodenoise.discrepancy.truth_rule import with_truth_rule
+from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.sim.effects import EFFECTS
 

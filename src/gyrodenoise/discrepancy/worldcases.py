@@ -20,7 +20,8 @@ from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import _below_practical, _steps
 from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
 from gyrodenoise.discrepancy.truth_check import check_sequence
-from gyrodenoise.discrepancy.workflow import decide, gap, with_truth_rule
+from gyrodenoise.discrepancy.truth_rule import with_truth_rule
+from gyrodenoise.discrepancy.workflow import decide, gap
 from gyrodenoise.testworld import MocapConfig, make_sequence
 from gyrodenoise.testworld.mocap import MOCAP_PRESETS
 

@@ -1,0 +1,100 @@
+"""The ground-truth rule: what the discrepancy workflow may decide when a truth follows the gyro.
+
+A residual gyro - truth against a truth that carries the gyro (`truth_check`) is the fusion's error, not the
+sensor's. Effects judged against such a truth on a fit sequence cannot be named; their transfer cannot be judged
+on such a held-out sequence, which is set aside while another is left. Effects read off the gyro's own values
+(`truth_check.TRUTH_FREE`) are unaffected.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+from gyrodenoise.discrepancy.truth_check import TRUTH_FREE, followed_in_band
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS
+
+T = TypeVar("T")
+
+
+@dataclass
+class TruthRule:
+    """What the ground-truth check (`truth_check`) lets the workflow decide. A residual against a truth that
+    carries the gyro is the fusion's error, not the sensor's: effects judged against such a truth on a fit
+    sequence cannot be named, and their transfer cannot be judged on such a held-out sequence."""
+
+    fit_followed: dict[str, list[list[float]]]  # fit sequences whose truth follows the gyro in their compared band
+    holdout_followed: dict[str, list[list[float]]]  # the same among the held-out sequences
+    holdout_kept: list[str]  # held-out sequences the practical minimum and the gaps use
+
+    @property
+    def decided(self) -> bool:
+        """Effects judged against the truth can be decided: no fit truth follows the gyro and at least one
+        held-out truth does not (the rest are set aside)."""
+        return not self.fit_followed and any(n not in self.holdout_followed for n in self.holdout_kept)
+
+    def withheld(self, named: list[str]) -> list[str]:
+        """The named effects that were judged against the truth (all but those named from the gyro alone)
+        when the truth cannot decide them."""
+        return [] if self.decided else [n for n in named if n not in TRUTH_FREE]
+
+    def note(self) -> str:
+        """What the verdict must add ('' when nothing was followed)."""
+        if self.fit_followed or (self.holdout_followed and not self.decided):
+            where = self.fit_followed or self.holdout_followed
+            return f"effects judged against the ground truth: not decided (it follows the gyro on {', '.join(where)})"
+        if self.holdout_followed:
+            return f"held-out {', '.join(self.holdout_followed)} set aside (its ground truth follows the gyro)"
+        return ""
+
+    def summary(self, withheld: list[str]) -> dict:
+        return {
+            "fit_sequences": self.fit_followed,
+            "holdout_sequences": self.holdout_followed,
+            "holdout_used": self.holdout_kept,
+            "decided": self.decided,
+            "withheld": withheld,
+        }
+
+
+def truth_rule(fit: list[FitContext], holdout: list[FitContext], truth_checks: dict[str, dict] | None) -> TruthRule:
+    """The sequences whose ground truth follows the gyro inside their compared band (`truth_check`; the bands are
+    those the selection estimated, so call it after one), and the held-out sequences left to judge transfer on:
+    the others, or all of them when every held-out truth follows the gyro (the gaps are still shown)."""
+    checks = truth_checks or {}
+    f_max = {fc.name: fc.extra["band"].f_max_hz for fc in [*fit, *holdout] if "band" in fc.extra}
+
+    def followed(fcs: list[FitContext]) -> dict[str, list[list[float]]]:
+        return followed_in_band({fc.name: checks[fc.name] for fc in fcs if fc.name in checks}, f_max)
+
+    fit_f, hold_f = followed(fit), followed(holdout)
+    kept = [fc.name for fc in holdout if fc.name not in hold_f] or [fc.name for fc in holdout]
+    return TruthRule(fit_f, hold_f, kept)
+
+
+def with_truth_rule(
+    select: Callable[[list[FitContext], list[str] | None], tuple[T, list[str]]],
+    fit: list[FitContext],
+    holdout: list[FitContext],
+    truth_checks: dict[str, dict] | None,
+    base: list[str],
+    candidates: list[str] | None,
+) -> tuple[T, TruthRule, list[str]]:
+    """Run `select(held-out sequences, candidates) -> (result, named effects)`, then apply the ground-truth rule:
+    held-out sequences whose truth follows the gyro are set aside, and when the truth cannot decide (`TruthRule`)
+    the effects named against it are withheld and the selection is redone with the truth-free candidates.
+    Returns (result, rule, withheld effects)."""
+    result, named = select(holdout, candidates)
+    rule = truth_rule(fit, holdout, truth_checks)
+    withheld = rule.withheld(named)
+    kept = [fc for fc in holdout if fc.name in rule.holdout_kept]
+    if withheld or len(kept) < len(holdout):
+        result, _ = select(kept, truth_free_vocabulary(base, candidates) if withheld else candidates)
+    return result, rule, withheld
+
+
+def truth_free_vocabulary(base: list[str], candidates: list[str] | None) -> list[str]:
+    """The candidates left when the truth cannot judge: those of `candidates` (None: all) named from the gyro alone."""
+    return [c for c in (candidates if candidates is not None else EFFECTS) if c in TRUTH_FREE and c not in base]
