@@ -170,7 +170,10 @@ def test_held_out_truths_that_follow_the_gyro_are_set_aside_or_leave_the_effects
     # every held-out truth follows: nothing independent to judge transfer on, so not decided (gaps on all)
     every = truth_rule(_contexts("a"), _contexts("g"), {"a": clean, "g": follows})
     assert every.holdout_kept == ["g"] and not every.decided and every.withheld(named) == ["scale_factor"]
-    assert "not decided (it follows the gyro on g)" in every.note()
+    assert "not decided (it follows the gyro on every held-out sequence (g))" in every.note()
+    both = truth_rule(_contexts("a"), _contexts("gh"), {"a": follows, "g": follows, "h": clean})
+    assert both.note().startswith("effects judged against the ground truth: not decided (it follows the gyro on a)")
+    assert both.note().endswith("; held-out g set aside (its ground truth follows the gyro)")
 
     calls = []
 
@@ -206,6 +209,9 @@ def test_report_says_what_was_withheld_and_why():
     report["truth_followed"] = {**aside, "holdout_used": ["b"], "decided": False}
     text = "\n".join(_truth_caution(report))
     assert "every held-out sequence's truth follows the gyro" in text and "not decided" in text
+    report["truth_followed"]["fit_sequences"] = {"a": [[2.0, 5.0]]}
+    text = "\n".join(_truth_caution(report))
+    assert "compared band (a) and every held-out sequence's truth follows the gyro" in text
 
 
 def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribution(monkeypatch):

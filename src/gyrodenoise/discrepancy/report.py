@@ -203,13 +203,15 @@ def _truth_rule_md(tf: dict) -> str:
             f"The held-out {', '.join(aside)} {'was' if len(aside) == 1 else 'were'} set aside: "
             "the practical minimum and the gaps below use the other held-out sequences only."
         )
-    if fit_f or (hold_f and not aside):
-        where = (
-            f"a fit sequence's truth follows the gyro inside its compared band ({', '.join(fit_f)})"
-            if fit_f
-            else f"every held-out sequence's truth follows the gyro inside its compared band ({', '.join(hold_f)}), "
+    reasons = (
+        [f"a fit sequence's truth follows the gyro inside its compared band ({', '.join(fit_f)})"] if fit_f else []
+    )
+    if hold_f and not aside:
+        reasons.append(
+            f"every held-out sequence's truth follows the gyro inside its compared band ({', '.join(hold_f)}), "
             "so the transfer of an effect cannot be judged and the gaps below are measured against such truths"
         )
+    if reasons:
         what = (
             "the selection was redone with the effects named from the gyro's own values only "
             f"({', '.join(TRUTH_FREE)}); named against that truth and withheld: {', '.join(tf['withheld'])}"
@@ -218,9 +220,9 @@ def _truth_rule_md(tf: dict) -> str:
             "seen in the residual"
         )
         text.append(
-            f"Because {where}, the effects judged against the truth are not decided: {what}. On the independent "
-            "test world, a null sensor measured against such a truth gets effects named that it does not have "
-            "(benchmarks/results/discrepancy_fused_truth.md)."
+            f"Because {' and '.join(reasons)}, the effects judged against the truth are not decided: {what}. On the "
+            "independent test world, a null sensor measured against such a truth gets effects named that it does "
+            "not have (benchmarks/results/discrepancy_fused_truth.md)."
         )
     return " ".join(text)
 

@@ -42,12 +42,17 @@ class TruthRule:
 
     def note(self) -> str:
         """What the verdict must add ('' when nothing was followed)."""
-        if self.fit_followed or (self.holdout_followed and not self.decided):
-            where = self.fit_followed or self.holdout_followed
-            return f"effects judged against the ground truth: not decided (it follows the gyro on {', '.join(where)})"
-        if self.holdout_followed:
-            return f"held-out {', '.join(self.holdout_followed)} set aside (its ground truth follows the gyro)"
-        return ""
+        aside = [n for n in self.holdout_followed if n not in self.holdout_kept]
+        where = [", ".join(self.fit_followed)] if self.fit_followed else []
+        if self.holdout_followed and not aside:
+            where.append(f"every held-out sequence ({', '.join(self.holdout_followed)})")
+        parts = []
+        if where:
+            on = " and on ".join(where)
+            parts.append(f"effects judged against the ground truth: not decided (it follows the gyro on {on})")
+        if aside:
+            parts.append(f"held-out {', '.join(aside)} set aside (its ground truth follows the gyro)")
+        return "; ".join(parts)
 
     def summary(self, withheld: list[str]) -> dict:
         return {
