@@ -236,3 +236,27 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
     workflow.decide(fit, _contexts("h"), null_draws=5, seed=1, null_cache=cache)
     workflow.decide(fit, _contexts("h"), null_draws=5)  # no cache: computed again
     assert nulls == [None, ["quantization"], None, None]
+
+
+def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_path):
+    """End to end on data the workflow did not make (gyrodenoise.testworld, null sensor): the fit flight and one
+    held-out flight measured by a Vicon-like tracker, a second held-out flight by the tracker fused with the gyro.
+    The fused one is set aside; the verdict is decided on the other."""
+    import json
+
+    from gyrodenoise.discrepancy.__main__ import main
+    from gyrodenoise.testworld import MOCAP_PRESETS, make_sequence
+
+    for name, seed, mocap in (("fit", 1, "vicon"), ("clean", 2, "vicon"), ("fused", 3, "euroc-fused")):
+        make_sequence(tmp_path / "data", "procedural", None, duration=40.0, seed=seed, name=name,
+                      mocap=MOCAP_PRESETS[mocap])  # fmt: skip
+    args = ["--root", str(tmp_path / "data"), "--fit", "fit", "--holdout", "clean", "fused", "--null-draws", "0"]
+    args += ["--candidates", "scale_factor,quantization", "--gyro-noise-density", "1.6968e-4"]
+    assert main([*args, "--out", str(tmp_path / "out")]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    tf = report["truth_followed"]
+    assert list(tf["holdout_sequences"]) == ["fused"] and tf["holdout_used"] == ["clean"] and tf["decided"]
+    assert report["holdout_sequences"] == ["clean"] and list(report["gap_after"]["per_sequence"]) == ["clean"]
+    assert report["verdict"].endswith("held-out fused set aside (its ground truth follows the gyro)")
+    assert "not decided" not in report["verdict"]
+    assert "The held-out fused was set aside" in (tmp_path / "out" / "report.md").read_text()
