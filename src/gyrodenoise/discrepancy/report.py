@@ -208,8 +208,8 @@ def _truth_rule_md(tf: dict) -> str:
     )
     if hold_f and not aside:
         reasons.append(
-            f"every held-out sequence's truth follows the gyro inside its compared band ({', '.join(hold_f)}), "
-            "so the transfer of an effect cannot be judged and the gaps below are measured against such truths"
+            f"every held-out sequence's truth follows the gyro inside its compared band ({', '.join(hold_f)}; so the "
+            "transfer of an effect cannot be judged, and the gaps below are measured against such truths)"
         )
     if reasons:
         what = (
