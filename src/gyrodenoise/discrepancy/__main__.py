@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from gyrodenoise.data.sequence import sequence_folder
-from gyrodenoise.discrepancy.compare import load_fit_context
+from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
@@ -40,6 +40,7 @@ EXAMPLE = """example (EuRoC, as in reports/discrepancy_euroc):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
       --network euroc --gyro-noise-density 1.6968e-4 --out reports/discrepancy_euroc
+each sequence held out once, verdicts side by side: python -m gyrodenoise.discrepancy.splits --help
 """
 
 
@@ -174,8 +175,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
 
-    def load(names):
-        return [load_fit_context(args.root, n, args.gt_files.get(n), args.knot_spacing) for n in names]
+    left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
+
+    def load(names: list[str]) -> list:
+        out = []
+        for n in names:
+            fcs, left = load_fit_contexts(args.root, n, args.gt_files.get(n), args.knot_spacing)
+            out += fcs
+            left_out.extend(left)
+        return out
 
     fit, holdout = load(args.fit), load(args.holdout)
 
@@ -194,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     report["truth_check"] = checks
+    report["ground_truth_gaps"] = {"max_gap_s": MAX_GT_GAP_S, "min_stretch_s": MIN_STRETCH_S, "left_out": left_out}
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
 

@@ -58,6 +58,7 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
                 "gap_before": {k: report["gap_before"][k] for k in GAPS},
                 "gap_after": {k: report["gap_after"][k] for k in GAPS},
                 "wall_time_s": report["wall_time_s"],
+                "machine": report["machine"],
             }
         )
     return rows
@@ -81,7 +82,7 @@ def summary_md(rows: list[dict], agree: dict, command: str) -> str:
     lines = [
         "# The discrepancy workflow over leave-one-out splits",
         "",
-        f"`{command}`",
+        f"`{command}` ({rows[0]['machine']}; per split's wall time in the table).",
         "",
         "| held out | fitted | verdict | residual RMS (rad/s) | 10-s drift (deg) | Allan gap | spectral gap "
         "| wall (s) |",
