@@ -9,11 +9,66 @@ import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.data.readers import DataFormatError, find_groundtruth_file, read_groundtruth, read_imu
+from gyrodenoise.data.readers import (
+    DataFormatError,
+    GroundTruthData,
+    ImuData,
+    find_groundtruth_file,
+    read_groundtruth,
+    read_imu,
+)
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 from gyrodenoise.so3 import integrate_gyro
+
+MAX_GT_GAP_S = 0.25  # a longer ground-truth gap splits a sequence: a spline cannot bridge it at hand-held rates
+MIN_STRETCH_S = 10.0  # shorter gap-free stretches are left out (and listed): too short for spectra and drift
+
+
+def gap_free_stretches(t_ns: np.ndarray, max_gap_s: float = MAX_GT_GAP_S) -> list[slice]:
+    """Index ranges of the ground truth between its gaps longer than `max_gap_s`."""
+    cut = np.flatnonzero(np.diff(t_ns) * 1e-9 > max_gap_s) + 1
+    edges = np.concatenate([[0], cut, [len(t_ns)]])
+    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def load_fit_contexts(
+    root: str | Path,
+    name: str,
+    gt_file: str | None = None,
+    knot_spacing: float = 0.05,
+    margin_s: float = 0.5,
+    max_gap_s: float = MAX_GT_GAP_S,
+    min_stretch_s: float = MIN_STRETCH_S,
+) -> tuple[list[FitContext], list[dict]]:
+    """The sequence as the detector sees it, split at ground-truth gaps longer than `max_gap_s` (TUM-VI's mocap
+    occlusions: a spline through them invents the motion, and its rate there would dominate the residual).
+    Returns (one context per gap-free stretch of at least `min_stretch_s` after the margins, named
+    'NAME@A-Bs' when the sequence is split; the stretches left out, with why). A sequence without such gaps
+    gives one context named NAME."""
+    mav0 = sequence_folder(root, name)
+    gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
+    imu = read_imu(mav0 / "imu0" / "data.csv")
+    gt = read_groundtruth(gt_path)
+    stretches = gap_free_stretches(gt.t_ns, max_gap_s)
+    if len(stretches) == 1:
+        return [_context(name, name, imu, gt, gt_path, knot_spacing, margin_s)], []
+    out, left = [], []
+    for s in stretches:
+        a, b = ((gt.t_ns[s.start], gt.t_ns[s.stop - 1]) - imu.t_ns[0]) * 1e-9
+        label = f"{name}@{a:.1f}-{b:.1f}s"
+        if b - a - 2 * margin_s < min_stretch_s:
+            left.append({"sequence": name, "stretch": label, "seconds": float(b - a), "why": "too short"})
+            continue
+        part = GroundTruthData(gt.t_ns[s], gt.pos[s], gt.quat_xyzw[s], gt.path)
+        out.append(_context(label, name, imu, part, gt_path, knot_spacing, margin_s))
+    if not out:
+        raise DataFormatError(
+            f"{gt_path}: no stretch between ground-truth gaps longer than {max_gap_s} s lasts {min_stretch_s} s; "
+            "the sequence cannot be compared (lower the minimum or allow longer gaps)."
+        )
+    return out, left
 
 
 def load_fit_context(
@@ -23,20 +78,35 @@ def load_fit_context(
     knot_spacing: float = 0.05,
     margin_s: float = 0.5,
 ) -> FitContext:
+    """One context for the whole sequence (`load_fit_contexts`); refuses a ground truth with long gaps."""
+    fcs, left = load_fit_contexts(root, name, gt_file, knot_spacing, margin_s)
+    if len(fcs) > 1 or left:
+        raise DataFormatError(
+            f"{name}: the ground truth has gaps longer than {MAX_GT_GAP_S} s, which a spline cannot bridge; "
+            "use load_fit_contexts, which splits the sequence at them."
+        )
+    return fcs[0]
+
+
+def _context(
+    name: str,
+    sequence: str,
+    imu: ImuData,
+    gt: GroundTruthData,
+    gt_path: Path,
+    knot_spacing: float,
+    margin_s: float,
+) -> FitContext:
     """IMU samples inside the ground-truth span (minus `margin_s` at each end, where the spline is
     less reliable), with the true rate, angular acceleration and specific force from a smooth fit
     of the ground truth evaluated at the IMU stamps. Time 0 is the sequence's first IMU sample."""
-    mav0 = sequence_folder(root, name)
-    gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
-    imu = read_imu(mav0 / "imu0" / "data.csv")
-    gt = read_groundtruth(gt_path)
     t_gt = (gt.t_ns - gt.t_ns[0]) * 1e-9
     traj = SmoothTrajectory.fit(t_gt, gt.quat_xyzw, gt.pos, knot_spacing, t0_ns=int(gt.t_ns[0]), source=str(gt_path))
     t_imu = (imu.t_ns - traj.t0_ns) * 1e-9
     keep = (t_imu >= traj.t_start + margin_s) & (t_imu <= traj.t_end - margin_s)
     if keep.sum() < 100:
         raise DataFormatError(
-            f"{gt_path}: fewer than 100 IMU samples of {mav0 / 'imu0' / 'data.csv'} fall inside the "
+            f"{gt_path}: fewer than 100 IMU samples of {imu.path} fall inside the "
             "ground-truth span. Both files must share one clock (ns)."
         )
     t = t_imu[keep]
@@ -60,6 +130,7 @@ def load_fit_context(
             # the ground truth around its own fit, for the trusted band (`reconstruction.estimate_band`)
             **gt_fit_residual(traj, t_gt, gt.quat_xyzw, margin_s),
             "knot_spacing": knot_spacing,
+            "sequence": sequence,  # the recording this stretch is part of
         },
     )
 

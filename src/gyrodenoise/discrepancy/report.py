@@ -171,7 +171,25 @@ def _reconstruction_md(report: dict) -> list[str]:
             f"(rad/s)^2/Hz; fitted level of the reconstruction error relative to its estimate from the ground truth: "
             f"{_fmt_fixed(rec['nuisance_level'], 2)}.",
         ]
-    return lines + [""]
+    return lines + [""] + _gt_gaps_md(report)
+
+
+def _gt_gaps_md(report: dict) -> list[str]:
+    """How sequences were split at ground-truth gaps (`compare.load_fit_contexts`), and what was left out."""
+    g = report.get("ground_truth_gaps")
+    names = [*report.get("fit_sequences", []), *report.get("holdout_sequences", [])]
+    if not g or not any("@" in n for n in names):
+        return []
+    left = g.get("left_out") or []
+    lines = [
+        f"Sequences whose ground truth has gaps longer than {g['max_gap_s']:g} s (a spline cannot bridge them) are "
+        f"split there into the stretches named NAME@A-Bs above (seconds since the first IMU sample); stretches "
+        f"shorter than {g['min_stretch_s']:g} s are left out: "
+        + ("; ".join(f"{x['stretch']} ({x['seconds']:.1f} s)" for x in left) if left else "none")
+        + ".",
+        "",
+    ]
+    return lines
 
 
 def _truth_caution(report: dict) -> list[str]:

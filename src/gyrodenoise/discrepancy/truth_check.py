@@ -39,11 +39,13 @@ TRUTH_FREE = ("quantization", "saturation")
 
 
 def interval_means(x: np.ndarray, t_ns: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
-    """(M - 1, 3) mean of the linearly interpolated samples x (N, 3) at t_ns over each interval of at_ns (M,)."""
+    """(M - 1, 3) mean of the linearly interpolated samples x (N, 3) at t_ns over each interval of at_ns (M,);
+    NaN for an empty interval (stamps clipped to the IMU record: callers keep only intervals inside it)."""
     step = np.diff(t_ns)[:, None] * 1e-9
     cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (x[1:] + x[:-1]) * step, 0)])  # exact integral
     c = np.stack([np.interp(at_ns, t_ns, cum[:, k]) for k in range(3)], 1)
-    return np.diff(c, axis=0) / (np.diff(at_ns)[:, None] * 1e-9)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.diff(c, axis=0) / (np.diff(at_ns)[:, None] * 1e-9)
 
 
 def truth_rates(t_ns: np.ndarray, quat_xyzw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

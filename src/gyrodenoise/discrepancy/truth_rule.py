@@ -64,18 +64,29 @@ class TruthRule:
         }
 
 
+def sequence_of(fc: FitContext) -> str:
+    """The recording a context comes from (a stretch between ground-truth gaps carries its recording's name)."""
+    return fc.extra.get("sequence", fc.name)
+
+
 def truth_rule(fit: list[FitContext], holdout: list[FitContext], truth_checks: dict[str, dict] | None) -> TruthRule:
     """The sequences whose ground truth follows the gyro inside their compared band (`truth_check`; the bands are
     those the selection estimated, so call it after one), and the held-out sequences left to judge transfer on:
-    the others, or all of them when every held-out truth follows the gyro (the gaps are still shown)."""
+    the others, or all of them when every held-out truth follows the gyro (the gaps are still shown). Checks and
+    results are per recording (`sequence_of`), not per stretch."""
     checks = truth_checks or {}
-    f_max = {fc.name: fc.extra["band"].f_max_hz for fc in [*fit, *holdout] if "band" in fc.extra}
+    f_max: dict[str, float] = {}
+    for fc in [*fit, *holdout]:
+        if "band" in fc.extra:  # a recording's widest compared band over its stretches
+            f_max[sequence_of(fc)] = max(f_max.get(sequence_of(fc), 0.0), fc.extra["band"].f_max_hz)
 
     def followed(fcs: list[FitContext]) -> dict[str, list[list[float]]]:
-        return followed_in_band({fc.name: checks[fc.name] for fc in fcs if fc.name in checks}, f_max)
+        names = dict.fromkeys(sequence_of(fc) for fc in fcs)
+        return followed_in_band({n: checks[n] for n in names if n in checks}, f_max)
 
     fit_f, hold_f = followed(fit), followed(holdout)
-    kept = [fc.name for fc in holdout if fc.name not in hold_f] or [fc.name for fc in holdout]
+    hold_names = list(dict.fromkeys(sequence_of(fc) for fc in holdout))
+    kept = [n for n in hold_names if n not in hold_f] or hold_names
     return TruthRule(fit_f, hold_f, kept)
 
 
@@ -94,7 +105,7 @@ def with_truth_rule(
     result, named = select(holdout, candidates)
     rule = truth_rule(fit, holdout, truth_checks)
     withheld = rule.withheld(named)
-    kept = [fc for fc in holdout if fc.name in rule.holdout_kept]
+    kept = [fc for fc in holdout if sequence_of(fc) in rule.holdout_kept]
     if withheld or len(kept) < len(holdout):
         result, _ = select(kept, truth_free_vocabulary(base, candidates) if withheld else candidates)
     return result, rule, withheld
