@@ -23,18 +23,24 @@ class MocapConfig:
     # the tracker with this time constant (a complementary filter), so it follows the gyro, noise and errors
     # included, above ~1 / (2 pi tau) Hz, as a batch estimate that fuses the IMU does (EuRoC's Machine Hall)
     fuse_tau_s: float = 0.0
+    # > 0: occlusions (the tracker loses the body) start at this rate per minute, each lasting a time drawn
+    # uniformly from occlusion_s; no pose is written inside one (TUM-VI's mocap has 0.04-2 s gaps)
+    occlusions_per_min: float = 0.0
+    occlusion_s: tuple[float, float] = (0.3, 2.0)
 
 
 # "vicon": raw motion capture as in the EuRoC rooms; "euroc-gt": like the released EuRoC ground truth, a
 # 200 Hz batch estimate whose scatter about a 15 Hz smooth replay is ~0.01 deg / 0.03 mm; "tumvi": the
 # 120 Hz mocap of TUM-VI; "ideal": exact poses (isolates the trajectory reconstruction from noise); "euroc-fused":
-# a Vicon-like tracker fused with the gyro (5-s complementary filter) and written at 200 Hz
+# a Vicon-like tracker fused with the gyro (5-s complementary filter) and written at 200 Hz; "tumvi-occluded":
+# "tumvi" with occlusions (4 per minute, 0.3-2 s each)
 MOCAP_PRESETS: dict[str, MocapConfig] = {
     "vicon": MocapConfig(),
     "euroc-gt": MocapConfig(200.0, float(np.deg2rad(0.01)), 3e-5, 0.0),
     "tumvi": MocapConfig(120.0, float(np.deg2rad(0.2)), 1e-3, 1e-4),
     "ideal": MocapConfig(100.0, 0.0, 0.0, 0.0),
     "euroc-fused": MocapConfig(200.0, float(np.deg2rad(0.2)), 1e-3, 1e-4, fuse_tau_s=5.0),
+    "tumvi-occluded": MocapConfig(120.0, float(np.deg2rad(0.2)), 1e-3, 1e-4, occlusions_per_min=4.0),
 }
 
 
@@ -67,12 +73,18 @@ def measure_poses(
     kin = motion.evaluate(t)
     dtheta = cfg.orientation_noise_rad * rng.normal(size=(n, 3))
     dpos = cfg.position_noise_m * rng.normal(size=(n, 3))
+    seen, occlusions = np.ones(n, dtype=bool), []
+    if cfg.occlusions_per_min > 0:  # drawn after the noise: the other presets' draws are unchanged
+        occlusions = occlusion_spans(t_first, t_last, cfg.occlusions_per_min, cfg.occlusion_s, rng)
+        for a, b in occlusions:
+            seen &= ~((stamp_rel * 1e-9 > a) & (stamp_rel * 1e-9 < b))
     return MocapPoses(
-        t=t,
-        stamp_ns=t0_ns + stamp_rel,
-        pos=kin.pos + dpos,
-        rot=kin.rot * Rotation.from_rotvec(dtheta),
+        t=t[seen],
+        stamp_ns=t0_ns + stamp_rel[seen],
+        pos=(kin.pos + dpos)[seen],
+        rot=(kin.rot * Rotation.from_rotvec(dtheta))[seen],
         info={
+            "occlusions_s": occlusions,
             "rate_hz": cfg.rate_hz,
             "orientation_noise_deg": float(np.rad2deg(cfg.orientation_noise_rad)),
             "position_noise_m": cfg.position_noise_m,
@@ -84,6 +96,21 @@ def measure_poses(
             "realised_jitter_s": float(jitter.std()),
         },
     )
+
+
+def occlusion_spans(
+    t_first: float, t_last: float, per_min: float, length_s: tuple[float, float], rng: np.random.Generator
+) -> list[list[float]]:
+    """[start, end] s of occlusions: starts a Poisson process of `per_min` per minute, lengths uniform in
+    `length_s`; none within 1 s of either end (a recording starts and ends with the body in view)."""
+    spans, t = [], t_first + 1.0
+    while True:
+        t += rng.exponential(60.0 / per_min)
+        end = t + rng.uniform(*length_s)
+        if end > t_last - 1.0:
+            return spans
+        spans.append([float(t), float(end)])
+        t = end
 
 
 def fuse_with_gyro(
