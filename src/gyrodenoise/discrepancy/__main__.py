@@ -21,6 +21,7 @@ from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fi
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_json, write_report
+from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule
 from gyrodenoise.discrepancy.workflow import run
@@ -209,8 +210,10 @@ def main(argv: list[str] | None = None) -> int:
         report["network"] = network_effects(args.network, fit + holdout, args.bic_threshold)
     report["wall_time_s"] = time.time() - t0
     report["machine"] = f"{platform.node()}, {os.cpu_count()} CPU threads"
+    report["simulator_model"] = "error_model.yaml"  # the fitted model, for the simulator (`sim_model`)
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)
+    write_simulator_model(out / "error_model.yaml", report)
     print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
     flagged = {n: c["follows_gyro_bands_hz"] for n, c in checks.items() if c["follows_gyro_bands_hz"]}
     if flagged:

@@ -174,6 +174,19 @@ def _reconstruction_md(report: dict) -> list[str]:
     return lines + [""] + _gt_gaps_md(report)
 
 
+def _simulator_model_md(report: dict) -> list[str]:
+    """Where the fitted model is written for the simulator (`sim_model`)."""
+    name = report.get("simulator_model")
+    if not name:
+        return []
+    return [
+        f"The model with the named effects, as a simulator configuration: `{name}` (SI units; the turn-on bias "
+        "as the fit sequences' mean and spread): `python -m gyrodenoise.train dataset=sim "
+        f"dataset.generation.error_model_file=<this folder>/{name}` simulates with it.",
+        "",
+    ]
+
+
 def _gt_gaps_md(report: dict) -> list[str]:
     """How sequences were split at ground-truth gaps (`compare.load_fit_contexts`), and what was left out."""
     g = report.get("ground_truth_gaps")
@@ -470,6 +483,7 @@ def markdown(report: dict) -> str:
         "gyro with the model's prediction; the Allan and spectral gaps compare measured with re-simulated "
         "residuals (the spectral gap after removing the deterministic prediction from both).",
         "",
+        *_simulator_model_md(report),
         *_band_words(report),
         "## Selection steps (greedy forward selection, BIC)",
         "",

@@ -66,13 +66,27 @@ def ensure_generated(generation: Mapping, names: list[str], cache_dir: str | Pat
     return root
 
 
+def with_error_model_file(gen: dict) -> dict:
+    """`error_model_file` (a discrepancy run's error_model.yaml) replaces `error_model` and `bias_jitter_rad_s` by
+    the file's content, so the cache key follows the model, not the path; absent or null: unchanged."""
+    path = gen.pop("error_model_file", None)
+    if path is None:
+        return gen
+    from gyrodenoise.discrepancy.sim_model import load_error_model
+
+    gen["error_model"], jitter = load_error_model(path)
+    if jitter is not None:
+        gen["bias_jitter_rad_s"] = float(jitter)
+    return gen
+
+
 class SimDataModule(ImuDataModule):
     """ImuDataModule over simulated sequences generated on first use (see module docstring)."""
 
     def __init__(self, generation: Mapping, root: str | None = None, cache_dir: str | None = None, **kwargs) -> None:
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
-        gen = json.loads(json.dumps(dict(generation)))  # plain data for hashing
+        gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
         if root:  # an explicit folder: generate the missing sequences there
             data_root = Path(root)
             for name in names:

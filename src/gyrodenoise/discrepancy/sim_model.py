@@ -1,0 +1,69 @@
+"""The model a discrepancy run ends with, as a simulator configuration.
+
+The workflow names the missing effects and re-simulates with them to show the gap shrink; this writes that
+model (the base model's fitted levels plus the named effects' parameters, SI units) in the format of the
+simulated dataset's `generation` settings, so the next simulation includes the effects the data asked for:
+
+    python -m gyrodenoise.train dataset=sim dataset.generation.error_model_file=REPORT_DIR/error_model.yaml
+
+The turn-on bias is the mean over the fit sequences, and its spread between them becomes `bias_jitter_rad_s`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from gyrodenoise.atomic import write_text
+from gyrodenoise.sim.effects import EFFECTS, effect_from_config
+
+
+def simulator_model(report: dict) -> dict:
+    """{'error_model': [{name, units: si, params}], 'bias_jitter_rad_s': ..., 'source': ...} from a report dict;
+    every entry is checked to build (`sim.effects.effect_from_config`)."""
+    entries = []
+    jitter = 0.0
+    for name, params in (report.get("base_params") or {}).items():
+        params = dict(params)
+        if name == "bias":  # per sequence in the data; the simulator draws it around the mean
+            per_seq = np.asarray(params.pop("bias_per_sequence", [params["bias"]]), dtype=float)
+            params["bias"] = per_seq.mean(0).tolist()
+            jitter = float(per_seq.std(0, ddof=1).mean()) if len(per_seq) > 1 else 0.0
+        entries.append(_entry(name, params))
+    for e in report.get("named_effects") or []:
+        entries.append(_entry(e["name"], e["params"]))
+    return {
+        "error_model": entries,
+        "bias_jitter_rad_s": jitter,
+        "source": f"{report.get('command', 'python -m gyrodenoise.discrepancy')}: {report.get('verdict', '')}",
+    }
+
+
+def _entry(name: str, params: dict) -> dict:
+    keep = {k: v for k, v in params.items() if k in EFFECTS[name].DEFAULTS}  # fit-only keys (errors) left out
+    entry = {"name": name, "units": "si", "params": keep}
+    effect_from_config(entry)  # raises on anything the simulator would not accept
+    return entry
+
+
+def write_simulator_model(path: str | Path, report: dict) -> Path:
+    return write_text(path, yaml.safe_dump(simulator_model(report), sort_keys=False))
+
+
+def load_error_model(path: str | Path) -> tuple[list[dict], float | None]:
+    """(error_model entries, bias_jitter_rad_s or None) of a file written by `write_simulator_model` (or any YAML
+    with an `error_model` list)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"error model file {path} not found (written by python -m gyrodenoise.discrepancy)")
+    data = yaml.safe_load(path.read_text())
+    if not isinstance(data, dict) or not isinstance(data.get("error_model"), list):
+        raise ValueError(f"{path}: expected a mapping with an 'error_model' list of {{name, units, params}} entries")
+    for entry in data["error_model"]:
+        try:
+            effect_from_config(entry)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{path}: error model entry {entry!r}: {err}") from None
+    return data["error_model"], data.get("bias_jitter_rad_s")

@@ -1,0 +1,52 @@
+"""A discrepancy run's model as a simulator configuration (gyrodenoise.discrepancy.sim_model)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrodenoise.discrepancy.sim_model import load_error_model, simulator_model, write_simulator_model
+from gyrodenoise.sim.dataset import generate_sequence, with_error_model_file
+
+REPORT = {
+    "command": "python -m gyrodenoise.discrepancy ...",
+    "verdict": "named: vibration, time_offset, quantization",
+    "base_params": {
+        "bias": {"bias": [0.01, 0.02, 0.03], "bias_per_sequence": [[0.01, 0.02, 0.03], [0.03, 0.04, 0.05]]},
+        "white_noise": {"density": [2e-4, 4e-4, 4e-4]},
+    },
+    "named_effects": [
+        {"name": "vibration", "params": {"frequency_hz": 1.4, "amplitude": [5e-4, 2e-3, 1e-3], "bandwidth_hz": 1.75}},
+        {"name": "time_offset", "params": {"delta": -3.8e-4}},
+        {"name": "quantization", "params": {"step": 6.98e-4}},
+    ],
+}
+
+
+def test_the_fitted_model_becomes_a_simulator_configuration(tmp_path):
+    model = simulator_model(REPORT)
+    names = [e["name"] for e in model["error_model"]]
+    assert names == ["bias", "white_noise", "vibration", "time_offset", "quantization"]
+    assert model["error_model"][0]["params"] == {"bias": [0.02, 0.03, 0.04]}  # the mean; the spread below
+    assert model["bias_jitter_rad_s"] == pytest.approx(np.std([0.01, 0.03], ddof=1))
+    path = write_simulator_model(tmp_path / "error_model.yaml", REPORT)
+    entries, jitter = load_error_model(path)
+    assert entries == model["error_model"] and jitter == pytest.approx(model["bias_jitter_rad_s"])
+    # the simulated dataset reads it in place of its own list, and the cache key follows the content
+    gen = with_error_model_file({"seed": 0, "duration_s": 6.0, "error_model": [], "error_model_file": str(path)})
+    assert gen["error_model"] == entries and "error_model_file" not in gen
+    assert with_error_model_file({"error_model": [], "error_model_file": None}) == {"error_model": []}
+    seq = generate_sequence(tmp_path / "sim", "hand_00", gen)  # the simulator accepts every entry
+    assert (seq / "mav0" / "imu0" / "data.csv").is_file()
+
+
+def test_a_bad_error_model_file_is_refused_with_its_path(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.yaml"):
+        load_error_model(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("error_model:\n  - {name: white_noise, units: si, params: {sigma: 1}}\n")
+    with pytest.raises(ValueError, match="bad.yaml.*white_noise"):
+        load_error_model(bad)
+    bad.write_text("just text\n")
+    with pytest.raises(ValueError, match="'error_model' list"):
+        load_error_model(bad)
