@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrodenoise.discrepancy.sim_model import load_error_model, simulator_model, write_simulator_model
+from gyrodenoise.discrepancy.sim_model import simulator_model, write_simulator_model
 from gyrodenoise.sim.dataset import generate_sequence, with_error_model_file
+from gyrodenoise.sim.error_model_file import load_error_model
 
 REPORT = {
     "command": "python -m gyrodenoise.discrepancy ...",

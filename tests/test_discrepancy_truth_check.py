@@ -260,7 +260,7 @@ def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_p
     assert report["verdict"].endswith("held-out fused set aside (its ground truth follows the gyro)")
     assert "not decided" not in report["verdict"]
     assert "The held-out fused was set aside" in (tmp_path / "out" / "report.md").read_text()
-    from gyrodenoise.discrepancy.sim_model import load_error_model
+    from gyrodenoise.sim.error_model_file import load_error_model
 
     entries, _ = load_error_model(tmp_path / "out" / "error_model.yaml")  # the fitted model, for the simulator
     assert [e["name"] for e in entries][:2] == ["bias", "white_noise"]

@@ -18,6 +18,7 @@ import numpy as np
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.sim.effects import Bias, Effect, effect_from_config
+from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
 
@@ -72,8 +73,6 @@ def with_error_model_file(gen: dict) -> dict:
     path = gen.pop("error_model_file", None)
     if path is None:
         return gen
-    from gyrodenoise.discrepancy.sim_model import load_error_model
-
     gen["error_model"], jitter = load_error_model(path)
     if jitter is not None:
         gen["bias_jitter_rad_s"] = float(jitter)
