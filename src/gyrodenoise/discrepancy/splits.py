@@ -38,6 +38,9 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     return args, rest
 
 
+GAPS = ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10", "psd_gap_log10")
+
+
 def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[dict]:
     """Run the workflow once per held-out sequence; returns the per-split summaries."""
     rows = []
@@ -62,9 +65,6 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
             }
         )
     return rows
-
-
-GAPS = ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10", "psd_gap_log10")
 
 
 def agreement(rows: list[dict]) -> dict:
