@@ -225,7 +225,7 @@ def _truth_caution(report: dict) -> list[str]:
 
 
 def _truth_rule_md(tf: dict) -> str:
-    """What the ground-truth rule (`workflow.TruthRule`) did, in one paragraph."""
+    """What the ground-truth rule (`truth_rule.TruthRule`) did, in one paragraph."""
     fit_f, hold_f = tf.get("fit_sequences") or {}, tf.get("holdout_sequences") or {}
     aside = [n for n in hold_f if n not in tf.get("holdout_used", [])]
     text = []

@@ -54,6 +54,10 @@ class TruthRule:
             parts.append(f"held-out {', '.join(aside)} set aside (its ground truth follows the gyro)")
         return "; ".join(parts)
 
+    def kept(self, holdout: list[FitContext]) -> list[FitContext]:
+        """The held-out contexts the practical minimum and the gaps use (`holdout_kept`, per recording)."""
+        return [fc for fc in holdout if sequence_of(fc) in self.holdout_kept]
+
     def summary(self, withheld: list[str]) -> dict:
         return {
             "fit_sequences": self.fit_followed,
@@ -105,7 +109,7 @@ def with_truth_rule(
     result, named = select(holdout, candidates)
     rule = truth_rule(fit, holdout, truth_checks)
     withheld = rule.withheld(named)
-    kept = [fc for fc in holdout if sequence_of(fc) in rule.holdout_kept]
+    kept = rule.kept(holdout)
     if withheld or len(kept) < len(holdout):
         result, _ = select(kept, truth_free_vocabulary(base, candidates) if withheld else candidates)
     return result, rule, withheld

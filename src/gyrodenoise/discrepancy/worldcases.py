@@ -20,7 +20,7 @@ from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import _below_practical, _steps
 from gyrodenoise.discrepancy.identifiability import random_walk_identifiability
 from gyrodenoise.discrepancy.truth_check import check_sequence
-from gyrodenoise.discrepancy.truth_rule import sequence_of, with_truth_rule
+from gyrodenoise.discrepancy.truth_rule import with_truth_rule
 from gyrodenoise.discrepancy.workflow import decide, gap
 from gyrodenoise.testworld import MocapConfig, make_sequence
 from gyrodenoise.testworld.mocap import MOCAP_PRESETS
@@ -165,7 +165,7 @@ def run_world_case(
         return d, list(d[1].named)
 
     (sel_base, sel, null), rule, withheld = with_truth_rule(select, fit, hold, checks, ["bias", "white_noise"], None)
-    hold = [fc for fc in hold if sequence_of(fc) in rule.holdout_kept]
+    hold = rule.kept(hold)
     out = {
         "effect": effect,
         "magnitude": magnitude,
