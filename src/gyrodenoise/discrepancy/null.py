@@ -23,7 +23,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gyrodenoise.discrepancy.rank import Selection, per_sequence_refit, score_step
+from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
+from gyrodenoise.discrepancy.rank import Selection, score_step
 from gyrodenoise.discrepancy.reconstruction import draw_error
 from gyrodenoise.sim.context import FitContext, SignalContext
 from gyrodenoise.sim.effects import EFFECTS, WhiteNoise

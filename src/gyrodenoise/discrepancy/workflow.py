@@ -17,15 +17,9 @@ import numpy as np
 from gyrodenoise.allan import allan_taus, pooled_allan
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
+from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
 from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
-from gyrodenoise.discrepancy.rank import (
-    MIN_DRIFT_DEG,
-    MIN_GAIN,
-    Selection,
-    per_sequence_refit,
-    residuals_after,
-    select_effects,
-)
+from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG, MIN_GAIN, Selection, residuals_after, select_effects
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.sim.context import FitContext, SignalContext

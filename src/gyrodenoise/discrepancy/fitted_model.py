@@ -1,0 +1,254 @@
+"""The selected model (`Selection`), its parameters (with standard errors) and its prediction on another sequence.
+
+`fill_params` turns the greedy selection's fit (`rank.select_effects`) into effect parameters: the
+regression effects' coefficients, the stochastic effects' levels (white noise, random walk, the
+refitted band-limited vibration, the sensor low-pass's corner), and the effects named from the data
+directly (quantization lattice, saturation plateau). `per_sequence_refit` predicts the residual of a
+sequence the model was not fitted on: sensor constants kept, per-sequence nuisances refitted there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gyrodenoise.discrepancy.design import (
+    Design,
+    FitResult,
+    band_edges,
+    band_limited,
+    fit_rows,
+    nuisance_of,
+    residuals_after,
+    row_masks,
+    sensor_view,
+    set_saturation_mask,
+)
+from gyrodenoise.discrepancy.spectral import BandFit, FloorShapeFit, FloorShapeProfile, fit_band, fit_floor
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS, Effect, Quantization, Saturation
+
+QUANT_LATTICE_FRACTION = 0.95  # share of samples on one lattice for quantization to be named
+
+__all__ = ["Selection", "fill_params", "per_sequence_refit", "predict"]
+
+
+@dataclass
+class Selection:
+    base: list[str]
+    selected: list[str]  # base regression effects + named ones, in order of addition
+    named: list[str]  # effects added on top of the base model (regression + stochastic)
+    steps: list[dict]
+    not_identifiable: list[str]
+    effects: dict[str, Effect]  # all candidate instances (nonlinear parameters set)
+    fitted: dict[str, Effect] = field(default_factory=dict)  # named + base with fitted parameters
+    params: dict[str, dict] = field(default_factory=dict)
+    se: dict[str, dict] = field(default_factory=dict)
+    sigma: np.ndarray | None = None
+    saturation: dict | None = None
+    design: Design | None = None
+    result: FitResult | None = None
+    band: BandFit | None = None  # band-limited vibration (spectral fit on the final residual)
+    floor_shape: FloorShapeFit | None = None  # named sensor low-pass
+    identifiability: dict[str, dict] = field(default_factory=dict)  # candidate -> numbers (first step)
+    thresholds: dict[str, float] = field(default_factory=dict)  # candidate -> delta BIC it had to clear
+    # a named time offset against a sensor low-pass of the same delay (`identifiability.delay_or_lowpass`):
+    # separable or not, and which one the data preferred when separable
+    delay_or_lowpass: dict | None = None
+
+    @property
+    def equivalences(self) -> list[str]:
+        """Named effects that this motion cannot tell from another (sentences for the report)."""
+        d = self.delay_or_lowpass
+        return [d["sentence"]] if d is not None and not d["separable"] else []
+
+    @property
+    def below_practical(self) -> list[dict]:
+        """Candidates of the last step that clear their threshold but not the practical minimum: there
+        (statistically), too small to matter (what they close on the held-out sequences is recorded)."""
+        last = next((st for st in reversed(self.steps) if "candidates" in st), None)
+        if last is None or last.get("added"):
+            return []
+        return [
+            c
+            for c in last["candidates"]
+            if c.get("threshold") is not None and c["delta_bic"] >= c["threshold"] and c["effect"] not in self.named
+        ]
+
+    @property
+    def band_vibration(self) -> bool:
+        """Whether the named vibration is the band-limited (stochastic) variant."""
+        return "vibration" in self.selected and self.effects["vibration"].stochastic
+
+    @property
+    def corner_hz(self) -> float | None:
+        """Corner of the named sensor low-pass (None: not named)."""
+        return float(self.effects["sensor_bandwidth"].params["corner_hz"]) if "sensor_bandwidth" in self.named else None
+
+
+def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
+    """Parameters with standard errors for the selected effects, and the stochastic ones."""
+    design, res = sel.design, sel.result
+    se_all = res.se()
+    for name in sel.selected:
+        e = sel.effects[name]
+        if e.stochastic:
+            continue
+        idx = design.cols[name]
+        p, s = e.params_from_fit(res.coef[idx], se_all[idx])
+        sel.params[name], sel.se[name] = p, s
+    no_rw = [n for n in sel.selected if n != "bias_random_walk"]
+    resid_no_rw = residuals_after(design, res, no_rw)
+    resid_all = residuals_after(design, res, sel.selected)
+    # stochastic effects: white noise always (base or named); random walk if selected; quantisation
+    wn = EFFECTS["white_noise"]()
+    sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
+    corner = sel.corner_hz
+    if band_limited(fcs) or corner is not None or nuisance_of(fcs) is not None:
+        # the level of the floor in the trusted band (at 0 Hz under a named low-pass): first
+        # differences would read the reconstruction error or the low-pass's droop instead
+        c, c_se = fit_floor(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), corner, nuisance_of(fcs))
+        dens = np.sqrt(c / 2)
+        sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
+    if corner is not None:
+        # the corner stays the selection's (spectrum and motion together); its standard error from
+        # the curvature of the floor's profile on the final residual
+        prof = FloorShapeProfile(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs))
+        sel.floor_shape = prof.fit(corner) if prof.ok else None
+        se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
+        sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}
+        sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(se)}
+    if sel.band_vibration:
+        # the band refitted on the final residual, with standard errors; the white-noise level is
+        # its floor (the first-difference estimate above would include the band's power)
+        v = sel.effects["vibration"].params  # the selection step's fit: the start
+        start = [(float(v["frequency_hz"]), float(v["bandwidth_hz"]))]
+        band = fit_band(
+            resid_all,
+            fcs[0].rate_hz,
+            row_masks(fcs),
+            with_errors=True,
+            starts=start,
+            bands=band_edges(fcs),
+            floor_corner_hz=corner,
+            nuisance=nuisance_of(fcs),
+        )
+        if band is not None:  # None: no excess left to start from; keep the selection step's fit
+            sel.band = band
+            sel.params["vibration"], sel.se["vibration"] = band.params()
+            sel.effects["vibration"].params.update(sel.params["vibration"])
+            sel.params["white_noise"] = {"density": band.white_noise_density}
+            dens_se = band.floor_se / (2 * np.sqrt(2 * np.maximum(band.floor, 1e-300)))
+            sel.se["white_noise"] = {"density": dens_se}
+        else:
+            sel.params["vibration"] = {k: v.copy() for k, v in sel.effects["vibration"].params.items()}
+            sel.se["vibration"] = {}
+    if "white_noise" not in sel.base and "white_noise" in sel.effects:
+        sel.named.append("white_noise")
+    if "bias_random_walk" in sel.selected:
+        if nuisance_of(fcs) is None:
+            p, s = sel.effects["bias_random_walk"].estimate(fcs, resid_no_rw)
+        else:
+            # a reconstructed true rate adds the derivative of a noisy angle, whose Allan variance
+            # swamps the walk's at the cluster times a flight offers: read K from the knots instead
+            p, s = _walk_from_knots(sel)
+        sel.params["bias_random_walk"], sel.se["bias_random_walk"] = p, s
+    if "quantization" in sel.effects and "quantization" not in sel.base:
+        q, frac = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
+        sigma_min = float(np.min(sel.sigma))
+        # a lattice that holds nearly every sample, with a step not far below the noise
+        if frac >= QUANT_LATTICE_FRACTION and q > 1e-3 * sigma_min:
+            sel.named.append("quantization")
+            sel.params["quantization"], sel.se["quantization"] = {"step": np.asarray(q)}, {"step": np.asarray(0.0)}
+    sat = sel.saturation
+    if sat is not None and "saturation" not in sel.base:
+        if sat["plateau_samples"] >= Saturation.MIN_PLATEAU and sat["beyond_samples"] >= Saturation.MIN_PLATEAU:
+            sel.named.append("saturation")
+            sel.params["saturation"], sel.se["saturation"] = (
+                {"limit": np.asarray(sat["limit"])},
+                {"limit": np.asarray(0.0)},
+            )
+        elif sat["beyond_samples"] < Saturation.MIN_PLATEAU:
+            sel.not_identifiable = sorted({*sel.not_identifiable, "saturation"})
+    for name in sel.base:
+        if name == "quantization":
+            q, _ = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
+            sel.params[name], sel.se[name] = {"step": np.asarray(q)}, {"step": np.asarray(0.0)}
+    if "white_noise" not in sel.base and "white_noise" not in sel.named:
+        del sel.params["white_noise"], sel.se["white_noise"]  # not part of this model
+    for name, p in sel.params.items():
+        kw = {k: v for k, v in p.items() if k in EFFECTS[name].DEFAULTS}
+        sel.fitted[name] = EFFECTS[name](**kw)
+
+
+def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
+    """Rate random walk K per axis from the fitted random-walk knots: the increments of the bias
+    path between knots h apart have variance K^2 h, less their estimation variance (from the fit's
+    covariance). Returns ({'density'}, {'density'} standard error)."""
+    e, design, res = sel.effects["bias_random_walk"], sel.design, sel.result
+    h = e.knot_spacing_s
+    cov = np.zeros((design.p, design.p))
+    cov[np.ix_(res.idx, res.idx)] = res.cov
+    k2, k2_se = np.zeros(3), np.zeros(3)
+    for a in range(3):
+        incs, noise = [], []
+        for cols in np.atleast_2d(design.cols["bias_random_walk"]):
+            nk = len(cols) // 3
+            c = cols[a * nk : (a + 1) * nk]
+            path = np.concatenate([[0.0], res.coef[c]])  # the first knot is the bias itself
+            D = np.zeros((nk, nk))  # increments as a linear map of the knot coefficients
+            D[np.arange(nk), np.arange(nk)] = 1.0
+            D[np.arange(1, nk), np.arange(nk - 1)] = -1.0
+            incs.append(np.diff(path))
+            noise.append(np.diag(D @ cov[np.ix_(c, c)] @ D.T))
+        d, v = np.concatenate(incs), np.concatenate(noise)
+        k2[a] = max(float(np.mean(d**2 - v)), 0.0) / h
+        k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.mean(d**2)) / h
+    k = np.sqrt(k2)
+    se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+    return {"density": k}, {"density": se}
+
+
+def predict(
+    design: Design,
+    res: FitResult,
+    effects: dict[str, Effect],
+    names: list[str],
+    sigma: np.ndarray,
+    fc: FitContext,
+    sat_limit: float | None = None,
+) -> np.ndarray:
+    """Deterministic prediction (N, 3) of the residual of a sequence not used for fitting: sensor
+    constants from `res`; per-sequence nuisances (bias, random-walk knots, vibration phase)
+    refitted on this sequence, in its trusted band (`fit_rows`)."""
+    glob = [n for n in names if not effects[n].per_sequence and not effects[n].stochastic]
+    local = [n for n in names if effects[n].per_sequence and not effects[n].stochastic]
+    pred = np.zeros((len(fc.t), 3))
+    for n in glob:
+        pred += np.einsum("nik,k->ni", effects[n].columns(fc), res.coef[design.cols[n]])
+    if local:
+        cols = [effects[n].columns(fc) for n in local]
+        X = (np.concatenate(cols, 2) / sigma[None, :, None]).reshape(3 * len(fc.t), -1)
+        r = ((fc.residual - pred) / sigma).reshape(-1)
+        if sat_limit is not None:
+            set_saturation_mask([fc], sat_limit, sigma)
+        Xr, rr = fit_rows(fc, X, r)
+        coef, *_ = np.linalg.lstsq(Xr, rr, rcond=None)
+        pred += (X @ coef).reshape(-1, 3) * sigma
+    if sat_limit is not None:  # the output cannot exceed the range
+        pred = np.clip(fc.omega + pred, -sat_limit, sat_limit) - fc.omega
+    return pred
+
+
+def per_sequence_refit(sel: Selection, fc: FitContext, names: list[str] | None = None) -> np.ndarray:
+    """Deterministic prediction (N, 3) of the residual gyro - true rate of a sequence not used for
+    fitting (`predict`), through the named sensor low-pass if any: the model's gyro is
+    fc.omega + prediction."""
+    names = sel.selected if names is None else names
+    sat = sel.params.get("saturation")
+    view = sensor_view(fc, sel.corner_hz)
+    pred = predict(
+        sel.design, sel.result, sel.effects, names, sel.sigma, view, None if sat is None else float(sat["limit"])
+    )
+    return pred + (view.omega - fc.omega)
