@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +76,13 @@ def test_train_two_epochs(asl_root, tmp_path):
         "logger=none",
         f"hydra.run.dir={run_dir}",
     ]
-    run_train(args, cwd=tmp_path, timeout=300)
+    proc = run_train(args, cwd=tmp_path, timeout=300)
+    # what the run printed is also in its folder (Hydra's log file stayed empty before), table included
+    log = (run_dir / "train.log").read_text()
+    assert "test sequences (my_imu" in proc.stdout and "test sequences (my_imu" in log and "| walk_3 |" in log
+    assert "calibrated AOE 3D" in log  # the baseline fitted on the same data, beside the model
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["command"].startswith("python -m gyrodenoise.train dataset=asl_folder ")
     model, meta = load_model(run_dir / "model.pt")
     assert meta["dataset"] == "my_imu" and meta["train_seqs"] == ["walk_1", "walk_2"]
     assert abs(meta["rate_hz"] - RATE) < 1e-6

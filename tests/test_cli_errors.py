@@ -20,6 +20,7 @@ def test_train_with_missing_data_folder_prints_one_line(tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert "MH_01_easy" in proc.stderr and "not found" in proc.stderr and "Set dataset.root" in proc.stderr
     assert "Traceback" not in proc.stderr
+    assert "error: " in (tmp_path / "run" / "train.log").read_text()  # the run folder says why it is empty
 
 
 @pytest.mark.parametrize("error", [DataFormatError("imu.csv, line 3: 4 fields"), FileNotFoundError("x.pt: no file")])

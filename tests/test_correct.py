@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -246,3 +247,27 @@ def test_checks_api_warns_with_warning_class(tmp_path):
     rec.gyro[:] *= 100
     with pytest.raises(SanityCheckError, match="deg/s"):
         run_checks(rec, 200.0)
+
+
+def test_non_number_field_says_what_to_do(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    f = write_asl(tmp_path / "imu.csv", t_ns, gyro, acc)
+    lines = f.read_text().splitlines()
+    fields = lines[199].split(",")
+    fields[3] = "abc"
+    lines[199] = ",".join(fields)
+    f.write_text("\n".join(lines) + "\n")
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:200: column 4 is 'abc'", "fix or remove")
+
+
+def test_default_output_folder_is_under_outputs(tmp_path, model_file, capsys, monkeypatch):
+    # an ASL sequence folder gives its name; the files land under outputs/, which git ignores
+    seq = tmp_path / "data" / "MY_SEQ" / "mav0" / "imu0"
+    seq.mkdir(parents=True)
+    write_asl(seq / "data.csv", *synth())
+    monkeypatch.chdir(tmp_path)
+    code, out, _ = run([tmp_path / "data" / "MY_SEQ", "-m", model_file], capsys)
+    assert code == 0
+    folder = tmp_path / "outputs" / "correct" / "MY_SEQ"
+    assert (folder / "imu_corrected.csv").is_file() and (folder / "correct_summary.json").is_file()
+    assert str(Path("outputs", "correct", "MY_SEQ", "imu_corrected.csv")) in out

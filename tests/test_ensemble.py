@@ -343,6 +343,15 @@ def test_model_not_beating_calibrated_warns(tmp_path, capsys):
         calibrated_model(0), {"name": "calibrated"}, tmp_path / "n.pt", {**meta, "calibrated_model": "runs/cal.pt"}
     )
     assert "'runs/cal.pt' instead" in not_better_warning(load_model(named)[1])
+    # a training run records the file name beside model.pt: the advice gives the path where it is
+    save_model(calibrated_model(0), {"name": "calibrated"}, tmp_path / "run" / "calibrated.pt", {"rate_hz": 200.0})
+    beside = save_model(
+        calibrated_model(0),
+        {"name": "calibrated"},
+        tmp_path / "run" / "model.pt",
+        {**meta, "calibrated_model": "calibrated.pt"},
+    )
+    assert f"{tmp_path / 'run' / 'calibrated.pt'}' instead" in not_better_warning(load_model(beside)[1])
 
     with pytest.warns(ModelQualityWarning, match="did not beat"):  # what evaluate does on loading
         load_checked(str(bad))

@@ -73,7 +73,14 @@ def test_cli(tiny, tmp_path, capsys):
     pytest.importorskip("onnxscript")
     pytest.importorskip("onnxruntime")
     model_file = save_model(tiny, {"name": "denoiser", **TINY}, tmp_path / "tiny.pt")
-    main([str(model_file), "--onnx", str(tmp_path / "out.onnx"), "--pt2", str(tmp_path / "out.pt2")])
+    assert main([str(model_file), "--onnx", str(tmp_path / "out.onnx"), "--pt2", str(tmp_path / "out.pt2")]) == 0
     out = capsys.readouterr().out
     assert (tmp_path / "out.onnx").is_file() and (tmp_path / "out.pt2").is_file()
     assert "onnxruntime vs PyTorch" in out
+
+
+def test_cli_error_is_one_line(tmp_path, capsys):
+    # a model that is not there: `error: ...` naming it and status 2, not a traceback
+    assert main([str(tmp_path / "missing.pt"), "--onnx", str(tmp_path / "out.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "missing.pt" in err and not (tmp_path / "out.onnx").exists()

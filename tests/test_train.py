@@ -61,6 +61,9 @@ def test_seeded_runs_are_reproducible(root, tmp_path):
     assert meta["beats_calibrated"] == safety["beats_calibrated"] and (tmp_path / "a" / "calibrated.pt").is_file()
     table = format_test_table(a["test"])
     assert "| c |" in table and "| **average** |" in table and "nan" not in table
+    with_cal = format_test_table(a["test"], safety["calibrated_test_aoe_deg_per_sequence"])
+    assert "calibrated AOE 3D" in with_cal and "nan" not in with_cal
+    assert f"{safety['calibrated_test_aoe_deg']:.2f} |" in with_cal.splitlines()[-1]  # the average row
 
 
 def test_ckpt_path_resumes(root, tmp_path):

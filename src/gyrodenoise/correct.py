@@ -9,8 +9,8 @@ any CSV with --columns (7 header names or 1-based numbers, in the order t,wx,wy,
 the units of the file. Sanity checks run first (gyrodenoise.data.checks): units, time unit, rate
 against the model's training rate, |acc| = g at rest, gaps and duplicated stamps.
 
-Output (in --out-dir): `imu_corrected.csv`, the corrected gyro with the accelerometer, in the ASL
-format (ns, rad/s, m/s^2) that the loaders read (an ensemble model adds 3 columns
+Output (in --out-dir, default outputs/correct/<recording>): `imu_corrected.csv`, the corrected gyro with
+the accelerometer, in the ASL format (ns, rad/s, m/s^2) that the loaders read (an ensemble model adds 3 columns
 `w_std_x,w_std_y,w_std_z [rad s^-1]`: the per-sample spread of its members, the uncertainty of the
 corrected gyro; the loaders read the first 7 columns); `orientation.txt`, the open-loop orientation
 R_n = R_{n-1} exp(w_n dt_n) in TUM format (`t[s] tx ty tz qx qy qz qw`, translation zero), starting
@@ -67,6 +67,16 @@ def find_imu_file(path: str | Path) -> Path:
                 return p / sub
         raise FileNotFoundError(f"{p}: folder without mav0/imu0/data.csv, imu0/data.csv or data.csv.")
     return p
+
+
+def default_out_dir(imu_file: Path) -> Path:
+    """outputs/correct/<recording>: the ASL sequence folder's name (SEQ/mav0/imu0/data.csv), else the file's stem."""
+    parts = imu_file.resolve().parts
+    if len(parts) >= 4 and parts[-3:-1] == ("mav0", "imu0"):
+        return Path("outputs", "correct", parts[-4])
+    if len(parts) >= 3 and parts[-2] == "imu0":
+        return Path("outputs", "correct", parts[-3])
+    return Path("outputs", "correct", imu_file.stem)
 
 
 def correct_gyro(
@@ -157,7 +167,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("input", help="IMU CSV file, or an ASL sequence folder (with mav0/imu0/data.csv)")
     ap.add_argument("-m", "--model", default="euroc", help="shipped model name or .pt/.ckpt path (default: euroc)")
-    ap.add_argument("-o", "--out-dir", type=Path, default=Path("corrected"), help="output folder (default: corrected)")
+    ap.add_argument(
+        "-o",
+        "--out-dir",
+        type=Path,
+        help="output folder (default: outputs/correct/NAME, NAME the ASL sequence folder or the file's stem)",
+    )
     ap.add_argument("--out-csv", type=Path, help="corrected IMU CSV (default: OUT_DIR/imu_corrected.csv)")
     ap.add_argument("--out-tum", type=Path, help="orientation, TUM format (default: OUT_DIR/orientation.txt)")
     ap.add_argument(
@@ -208,8 +223,9 @@ def main(argv: list[str] | None = None) -> int:
     model_warning = not_better_warning(meta)
     for w in [*([model_warning] if model_warning else []), *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
-    out_csv = args.out_csv or args.out_dir / "imu_corrected.csv"
-    out_tum = args.out_tum or args.out_dir / "orientation.txt"
+    out_dir = args.out_dir or default_out_dir(path)
+    out_csv = args.out_csv or out_dir / "imu_corrected.csv"
+    out_tum = args.out_tum or out_dir / "orientation.txt"
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
     write_text(out_tum, tum_text(res.rec.t_ns, res.R))
     delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)

@@ -35,6 +35,7 @@ from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.pretrained import ModelQualityWarning, load_model, not_better_warning, training_overlap_warning
@@ -96,9 +97,13 @@ def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]
     def cell(a: tuple[float, float]) -> str:
         return f"{math.degrees(a[0]):.2f}/{math.degrees(a[1]):.2f}"
 
-    rows = [[name, *[cell(r["aoe"][m]) for m in METHODS]] for name, r in results.items()]
+    # a variant of a sequence (e.g. V1_01 against its original ground truth) is listed, not averaged
+    rows = [
+        [name if name in averaged else f"{name}, not in the average", *[cell(r["aoe"][m]) for m in METHODS]]
+        for name, r in results.items()
+    ]
     avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in METHODS]
-    rows.append(["average", *[cell(a) for a in avg]])
+    rows.append([f"average of {len(averaged)}", *[cell(a) for a in avg]])
     return rows
 
 
@@ -228,7 +233,8 @@ def evaluate(cfg: DictConfig) -> dict:
         u = summary["uncertainty"]["pooled"]
         print(
             f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
-            f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows)"
+            f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows; above 1 the spread "
+            "underestimates the error: `python -m gyrodenoise.ensemble scale` fits a factor on data with ground truth)"
         )
     for w in warned:
         print(f"WARNING: {w}")
@@ -238,7 +244,9 @@ def evaluate(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
 def main(cfg: DictConfig) -> None:
-    with user_errors():
+    with console_to_job_log(), user_errors(), warnings.catch_warnings():
+        # the command prints these after its table (the `warned` lines); once is enough
+        warnings.simplefilter("ignore", ModelQualityWarning)
         evaluate(cfg)
 
 

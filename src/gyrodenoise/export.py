@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import sys
 from pathlib import Path
 
 import torch
@@ -101,7 +102,7 @@ def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET) ->
     return path
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     quiet_library_notices()
     ap = argparse.ArgumentParser(
         prog="python -m gyrodenoise.export",
@@ -115,16 +116,21 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     if not (args.onnx or args.pt2):
         ap.error("give at least one of --onnx PATH, --pt2 PATH")
-    model, _ = load_model(args.model)
-    if args.pt2:
-        print(f"wrote {export_pt2(model, args.pt2)}")
-    if args.onnx:
-        export_onnx(model, args.onnx, args.opset)
-        msg = f"wrote {args.onnx}"
-        if not args.no_check:
-            err = onnx_parity(model, args.onnx)
-            msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s over {', '.join(output_names(model))})"
-        print(msg)
+    try:
+        model, _ = load_model(args.model)
+        if args.pt2:
+            print(f"wrote {export_pt2(model, args.pt2)}")
+        if args.onnx:
+            export_onnx(model, args.onnx, args.opset)
+            msg = f"wrote {args.onnx}"
+            if not args.no_check:
+                err = onnx_parity(model, args.onnx)
+                msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s over {', '.join(output_names(model))})"
+            print(msg)
+    except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> float:
@@ -145,4 +151,4 @@ def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> floa
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

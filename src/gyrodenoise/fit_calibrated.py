@@ -14,7 +14,6 @@ and on the test sequences when `test=true` and they exist. Config `fit_calibrate
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -25,7 +24,8 @@ from omegaconf import DictConfig, OmegaConf
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated
 from gyrodenoise.cli_errors import user_errors
-from gyrodenoise.paths import portable_command
+from gyrodenoise.job_log import console_to_job_log
+from gyrodenoise.paths import invoked_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
 
@@ -47,7 +47,7 @@ def fit(cfg: DictConfig) -> dict:
         dm.setup("test")
         scores["test"] = evaluate_on(model, dm.test_part)
     means = {g: float(np.mean(list(per_seq.values()))) for g, per_seq in scores.items()}
-    command = Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:])
+    command = invoked_command("fit_calibrated")
     summary = {
         "command": command,
         **dm.model_meta(),
@@ -80,7 +80,7 @@ def fit(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="fit_calibrated")
 def main(cfg: DictConfig) -> float:
-    with user_errors():
+    with console_to_job_log(), user_errors():
         summary = fit(cfg)
     return summary["aoe_deg"].get("val", math.nan)
 

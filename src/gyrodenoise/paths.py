@@ -10,7 +10,8 @@ folder, else as given.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+import sys
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 
@@ -36,6 +37,16 @@ def portable_command(args: Iterable[str]) -> str:
         key, sep, value = a.rpartition("=") if "=" in a and not a.startswith("/") else ("", "", a)
         out.append(key + sep + portable_path(value) if value.startswith("/") else a)
     return " ".join(out)
+
+
+def invoked_command(module: str, argv: Sequence[str] | None = None) -> str:
+    """The command line as the user typed it: `python -m gyrodenoise.<module> ...` when run as a module
+    (sys.argv[0] is then the module's file), the console script's name otherwise; paths made portable."""
+    argv = list(sys.argv if argv is None else argv)
+    prog = Path(argv[0]).name if argv else module
+    if prog.endswith(".py"):
+        prog = f"python -m gyrodenoise.{module}"
+    return f"{prog} {portable_command(argv[1:])}".rstrip()
 
 
 def portable_tree(obj):

@@ -105,6 +105,10 @@ def not_better_warning(meta: dict) -> str | None:
     if model_val is not None and cal_val is not None:
         numbers = f" (validation AOE {float(model_val):.2f} deg vs {float(cal_val):.2f} deg)"
     instead = meta.get("calibrated_model")
+    if instead and meta.get("path") and not Path(instead).is_absolute():
+        # recorded as a file name beside the model file: say where it is
+        beside = Path(meta["path"]).parent / instead
+        instead = str(beside) if beside.is_file() else instead
     if not instead and meta.get("dataset") and f"{meta['dataset']}-calibrated" in available_models():
         instead = f"{meta['dataset']}-calibrated"
     advice = (

@@ -11,7 +11,6 @@ shipped-model format) and summary.json (wall time, best validation and test metr
 from __future__ import annotations
 
 import math
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -29,9 +28,10 @@ from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cli_errors import user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
+from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.notices import quiet_library_notices
-from gyrodenoise.paths import portable_command, portable_path, portable_tree
+from gyrodenoise.paths import invoked_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
 
@@ -63,15 +63,22 @@ def flat_hparams(cfg: DictConfig) -> dict:
     return out
 
 
-def format_test_table(test: dict[str, float]) -> str:
-    """Per-sequence test AOE of the trained model next to the raw IMU, as a markdown table."""
+def format_test_table(test: dict[str, float], calibrated: dict[str, float] | None = None) -> str:
+    """Per-sequence test AOE of the trained model next to the raw IMU and, when given ({sequence: AOE}),
+    the calibrated baseline fitted on the same data, as a markdown table."""
     names = sorted(k.split("/", 2)[2] for k in test if k.startswith("test/aoe_deg/"))
+    header = ["sequence", "model AOE 3D/yaw (deg)", "raw IMU AOE 3D (deg)"]
+    if calibrated:
+        header.append("calibrated AOE 3D (deg)")
     rows = []
     for n in [*names, None]:
         suffix = f"/{n}" if n else ""
         cells = [test.get(f"test/{k}{suffix}", math.nan) for k in ("aoe_deg", "aoe_yaw_deg", "raw_imu_aoe_deg")]
         rows.append([n or "**average**", f"{cells[0]:.2f}/{cells[1]:.2f}", f"{cells[2]:.2f}"])
-    return markdown_table(["sequence", "model AOE 3D/yaw (deg)", "raw IMU AOE 3D (deg)"], rows)
+        if calibrated:
+            cal = calibrated.get(n, math.nan) if n else sum(calibrated.values()) / len(calibrated)
+            rows[-1].append(f"{cal:.2f}")
+    return markdown_table(header, rows)
 
 
 def calibrated_baseline(cfg: DictConfig, dm, module: DenoiserModule, out_dir: Path) -> dict:
@@ -168,6 +175,9 @@ def train(cfg: DictConfig) -> dict:
         alternative, module = module, DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+    steps = ["validation", *(["test"] if cfg.get("test") else [])]
+    baseline = cfg.get("calibrated_baseline") and cfg.model.name != "calibrated"
+    print(f"scoring on {' and '.join(steps)}{', then the calibrated baseline' if baseline else ''} (seconds)")
     val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
     test, test_other = {}, {}
     if cfg.get("test"):
@@ -179,7 +189,7 @@ def train(cfg: DictConfig) -> dict:
     safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
 
     summary = {
-        "command": Path(sys.argv[0]).name + " " + portable_command(sys.argv[1:]),
+        "command": invoked_command("train"),
         "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
         "config": portable_tree(OmegaConf.to_container(cfg, resolve=True)),
         "seed": cfg.get("seed"),
@@ -217,7 +227,12 @@ def train(cfg: DictConfig) -> dict:
     picked = best_path if cfg.select == "best_val" and best_path else f"final weights, epoch {trainer.current_epoch}"
     print(f"\nvalidation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({picked})")
     if test:
-        print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{format_test_table(test)}", end="")
+        table = format_test_table(test, safety.get("calibrated_test_aoe_deg_per_sequence"))
+        print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{table}", end="")
+        print(
+            f"(each cut to 1 + a multiple of {dm.block} samples, as the loss needs: the last digit can differ from "
+            "`python -m gyrodenoise.evaluate`, which scores them whole)"
+        )
     print(f"outputs in {out_dir}")
     for lg in trainer.loggers:
         if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
@@ -228,7 +243,7 @@ def train(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
-    with user_errors():
+    with console_to_job_log(), user_errors():
         summary = train(cfg)
     # the value an Optuna sweep minimises
     return summary["val"].get("val/aoe_deg")

@@ -158,7 +158,10 @@ def read_imu_csv(
             rows.append([float(fields[i]) for i in idx[1:]])
         except ValueError:
             bad = next(i for i in idx if not _is_number(fields[i]))
-            raise DataFormatError(f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number.") from None
+            raise DataFormatError(
+                f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number; fix or remove that line, "
+                "or check --columns/--delimiter."
+            ) from None
         line_numbers.append(lineno)
     if not rows:
         raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")

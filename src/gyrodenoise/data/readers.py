@@ -120,7 +120,9 @@ def read_csv_table(
                 try:
                     float(f)
                 except ValueError:
-                    raise DataFormatError(f"{path}:{lineno}: column {col} is {f!r}, not a number.") from None
+                    raise DataFormatError(
+                        f"{path}:{lineno}: column {col} is {f!r}, not a number; fix or remove that line."
+                    ) from None
         raise
     t_ns = np.array(stamps, dtype=np.int64)
     lines = np.array(line_numbers)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise.atomic import write_text
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.sim.effects import Bias, Effect, effect_from_config
@@ -60,10 +61,15 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
 def ensure_generated(generation: Mapping, names: list[str], cache_dir: str | Path | None = None) -> Path:
     """The data-set folder, generating the sequences that are not there yet."""
     root = Path(cache_dir or default_cache_dir()) / f"sim-{generation_key(generation, names)}"
-    for name in names:
-        if not (root / name / "mav0" / "imu0" / "data.csv").is_file():
-            generate_sequence(root, name, generation)
-    (root / "generation.json").write_text(json.dumps({"generation": generation, "names": names}, indent=2))
+    missing = [n for n in names if not (root / n / "mav0" / "imu0" / "data.csv").is_file()]
+    if missing:  # tens of seconds: say what the wait is for, and where the data go
+        print(f"simulating {len(missing)} sequence(s) into {root} (once: later runs with these settings read them)")
+    for name in missing:
+        generate_sequence(root, name, generation)
+    record = json.dumps({"generation": generation, "names": names}, indent=2)
+    settings = root / "generation.json"
+    if not settings.is_file() or settings.read_text() != record:
+        write_text(settings, record)
     return root
 
 

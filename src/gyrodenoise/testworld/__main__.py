@@ -23,8 +23,13 @@ from gyrodenoise.testworld.world import make_sequence
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="python -m gyrodenoise.testworld",
-        description=__doc__.split("\n")[1],
-        epilog="effects (datasheet units; 'a:b:c' gives per-axis values):\n" + describe(),
+        description=__doc__.split("\n\n")[0]
+        + " An IMU and a motion-capture truth made independently of gyrodenoise.sim, to test the discrepancy"
+        " workflow on data it did not generate; see src/gyrodenoise/testworld/README.md.",
+        epilog="examples:\n"
+        + __doc__.split("\n\n")[1].rstrip()
+        + "\n\neffects (datasheet units; 'a:b:c' gives per-axis values):\n"
+        + describe(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", type=Path, required=True, help="folder that receives <name>/mav0/... and <name>/truth.json")
@@ -33,7 +38,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--duration", type=float, default=None, help="seconds of IMU data (default: 60 procedural, all euroc)"
     )
     p.add_argument("--seed", type=int, default=0, help="one seed, one sensor: effect values depend on it only")
-    p.add_argument("--preset", default="null", choices=sorted(PRESETS), help="base effects (default null)")
+    p.add_argument(
+        "--preset",
+        default="null",
+        choices=sorted(PRESETS),
+        help="base effects before --effects: null = a constant 1 deg/s bias and ADIS16448-like white noise "
+        "(what the discrepancy workflow's base model holds), none = a perfect gyro (default null)",
+    )
     p.add_argument("--effects", default="", help="comma-separated NAME=VALUE or NAME.PARAM=VALUE items")
     p.add_argument("--name", default=None, help="sequence folder name (default: the EuRoC name or procedural_s<seed>)")
     p.add_argument("--bandwidth", default="integrate", help="integrate|integrate-trailing|butterN:FHz|besselN:FHz")

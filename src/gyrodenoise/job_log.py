@@ -1,0 +1,71 @@
+"""What a Hydra command prints also goes to its run folder's log (`<output dir>/<job name>.log`).
+
+Hydra's log file receives only Python `logging` records, and the commands here report by printing (the
+progress lines, the result tables, warnings, `error:` lines), so the file stayed empty. `console_to_job_log`
+copies stdout and stderr into it while the command runs: a run on a cluster or in the background keeps its
+console next to its outputs. Redrawn progress bars (text with carriage returns, only on a terminal) are not
+copied; the plain progress lines printed without a terminal are.
+"""
+
+from __future__ import annotations
+
+import io
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TextIO
+
+from hydra.core.hydra_config import HydraConfig
+
+
+class _Tee(io.TextIOBase):
+    """A text stream that writes to the console and, without bar redraws, to a log file."""
+
+    def __init__(self, console: TextIO, log: TextIO) -> None:
+        self.console, self.log = console, log
+
+    def write(self, s: str) -> int:
+        self.console.write(s)
+        if "\r" not in s:
+            self.log.write(s)
+        return len(s)
+
+    def flush(self) -> None:
+        self.console.flush()
+        self.log.flush()
+
+    def isatty(self) -> bool:  # the progress bar decides bars vs plain lines by the console
+        return self.console.isatty()
+
+    def fileno(self) -> int:
+        return self.console.fileno()
+
+    @property
+    def encoding(self) -> str:  # type: ignore[override]
+        return getattr(self.console, "encoding", "utf-8")
+
+
+def job_log_path() -> Path | None:
+    """Hydra's log file of the running job, or None outside a Hydra command."""
+    if not HydraConfig.initialized():
+        return None
+    hc = HydraConfig.get()
+    return Path(hc.runtime.output_dir) / f"{hc.job.name}.log"
+
+
+@contextmanager
+def console_to_job_log(path: Path | None = None) -> Iterator[Path | None]:
+    """Copy stdout and stderr into `path` (default: the Hydra job's log file) while the block runs."""
+    path = path or job_log_path()
+    if path is None:
+        yield None
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", encoding="utf-8", buffering=1) as log:
+        out, err = sys.stdout, sys.stderr
+        sys.stdout, sys.stderr = _Tee(out, log), _Tee(err, log)
+        try:
+            yield path
+        finally:
+            sys.stdout, sys.stderr = out, err

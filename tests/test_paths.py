@@ -1,0 +1,17 @@
+"""The command line a run records: as the user typed it, with portable paths."""
+
+from pathlib import Path
+
+from gyrodenoise.paths import invoked_command, portable_path
+
+
+def test_module_run_is_recorded_as_python_dash_m():
+    argv = [str(Path("/somewhere/site-packages/gyrodenoise/train.py")), "experiment=sim_quick", "seed=1"]
+    assert invoked_command("train", argv) == "python -m gyrodenoise.train experiment=sim_quick seed=1"
+
+
+def test_console_script_keeps_its_name_and_paths_become_portable():
+    home_file = Path.home() / "data" / "euroc"
+    cmd = invoked_command("train", ["/usr/bin/gyrodenoise-train", f"dataset.root={home_file}"])
+    assert cmd == f"gyrodenoise-train dataset.root={portable_path(home_file)}" and str(home_file) not in cmd
+    assert invoked_command("train", ["/x/train.py"]) == "python -m gyrodenoise.train"
