@@ -81,12 +81,15 @@ def format_test_table(test: dict[str, float], calibrated: dict[str, float] | Non
     return markdown_table(header, rows)
 
 
+def wants_calibrated_baseline(cfg: DictConfig) -> bool:
+    """Whether the run fits the calibrated baseline beside its model (not when the model is that baseline)."""
+    return bool(cfg.get("calibrated_baseline")) and cfg.model.name != "calibrated"
+
+
 def calibrated_baseline(cfg: DictConfig, dm, module: DenoiserModule, out_dir: Path) -> dict:
     """The safety net: the 12-parameter calibrated baseline fitted on the same training data with the
     same loss (seconds), scored on the same validation ("val" group: the held-out flight under
     cross-validation) and test sequences; whether the trained model beats it on validation."""
-    if cfg.model.name == "calibrated":
-        return {}
     start = time.time()
     cal = fit_calibrated(dm.train_part, loss=OmegaConf.to_container(cfg.loss, resolve=True))
     cal_path = out_dir / "calibrated.pt"
@@ -176,7 +179,7 @@ def train(cfg: DictConfig) -> dict:
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     steps = ["validation", *(["test"] if cfg.get("test") else [])]
-    baseline = cfg.get("calibrated_baseline") and cfg.model.name != "calibrated"
+    baseline = wants_calibrated_baseline(cfg)
     print(f"scoring on {' and '.join(steps)}{', then the calibrated baseline' if baseline else ''} (seconds)")
     val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
     test, test_other = {}, {}
@@ -186,7 +189,7 @@ def train(cfg: DictConfig) -> dict:
             test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
     val_raw_final, test_raw_final = _score_without_callbacks(cfg, dm, raw_final) if raw_final is not None else ({}, {})
 
-    safety = calibrated_baseline(cfg, dm, module, out_dir) if cfg.get("calibrated_baseline") else {}
+    safety = calibrated_baseline(cfg, dm, module, out_dir) if baseline else {}
 
     summary = {
         "command": invoked_command("train"),
