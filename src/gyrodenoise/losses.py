@@ -39,9 +39,9 @@ class IncrementLoss(torch.nn.Module):
         gt, m = dR, mask
         for j in self.increments:
             while est.shape[1] > dR.shape[1] * self.base // j:  # pair up until blocks span j samples
-                est = est[:, 0::2] @ est[:, 1::2]
-                gt = gt[:, 0::2] @ gt[:, 1::2]
-                m = m[:, 0::2] & m[:, 1::2]
+                est = so3.tree_product(est, 1)
+                gt = so3.tree_product(gt, 1)
+                m = m.unflatten(1, (-1, 2)).all(-1)
             yield j, so3.log(gt @ est.transpose(-1, -2)), m
 
     def forward(self, w_hat, dt, dR, mask) -> torch.Tensor:

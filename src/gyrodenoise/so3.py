@@ -21,90 +21,93 @@ from scipy.spatial.transform import Rotation
 _SMALL = 1e-6  # below this angle (rad) the Taylor branches are exact to float64 precision
 
 
+def _linear_maps() -> dict[str, torch.Tensor]:
+    """Constant matrices that turn index-by-index formulas into one matmul each.
+
+    Indexing one entry at a time (R[..., i, j]) costs an operator, and its gradient a zero-filled copy of
+    the whole tensor, per entry: the training loss's log and exp were ~900 operators per step, which is
+    what a GPU step waits for. As matmuls with these constants they are ~450 (same values to float64
+    rounding: tests/test_so3.py checks them against scipy).
+    """
+
+    def e(i: int, j: int) -> torch.Tensor:  # R[i, j] as a row-major (9,) selector
+        return torch.nn.functional.one_hot(torch.tensor(3 * i + j), 9).double()
+
+    hat = torch.zeros(3, 9, dtype=torch.float64)  # hat(phi).flatten() == phi @ hat
+    for i, j, k, sign in [(0, 1, 2, -1), (0, 2, 1, 1), (1, 0, 2, 1), (1, 2, 0, -1), (2, 0, 1, -1), (2, 1, 0, 1)]:
+        hat[k, 3 * i + j] = sign
+    tr = e(0, 0) + e(1, 1) + e(2, 2)
+    # Shepperd's branches: branch b (largest of w, x, y, z) gives 4 q_b (w, x, y, z) = R.flatten() @ A_b + c_b
+    branches = [
+        [tr, e(2, 1) - e(1, 2), e(0, 2) - e(2, 0), e(1, 0) - e(0, 1)],
+        [e(2, 1) - e(1, 2), 2 * e(0, 0) - tr, e(0, 1) + e(1, 0), e(0, 2) + e(2, 0)],
+        [e(0, 2) - e(2, 0), e(0, 1) + e(1, 0), 2 * e(1, 1) - tr, e(1, 2) + e(2, 1)],
+        [e(1, 0) - e(0, 1), e(0, 2) + e(2, 0), e(1, 2) + e(2, 1), 2 * e(2, 2) - tr],
+    ]
+    quat = torch.stack([col for branch in branches for col in branch], dim=1)  # (9, 16)
+    quat_const = torch.eye(4, dtype=torch.float64).flatten()  # the 1 of "1 + tr" and "1 + 2 R_kk - tr"
+    choice = torch.stack([tr, e(0, 0), e(1, 1), e(2, 2)], dim=1)  # (9, 4): which q_b^2 is largest
+    return {"hat": hat, "quat": quat, "quat_const": quat_const, "choice": choice}
+
+
+_MAPS = _linear_maps()
+_MAPS_ON: dict[tuple, dict[str, torch.Tensor]] = {}
+
+
+def _maps(like: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The constants on `like`'s device and dtype, copied once (a copy per call would sync a GPU)."""
+    key = (like.dtype, like.device)
+    if key not in _MAPS_ON:
+        _MAPS_ON[key] = {k: v.to(dtype=like.dtype, device=like.device) for k, v in _MAPS.items()}
+    return _MAPS_ON[key]
+
+
 def hat(phi: torch.Tensor) -> torch.Tensor:
     """Skew-symmetric matrix of (..., 3) vectors: hat(a) @ b == cross(a, b)."""
-    x, y, z = phi.unbind(-1)
-    o = torch.zeros_like(x)
-    return torch.stack([o, -z, y, z, o, -x, -y, x, o], dim=-1).reshape(*phi.shape[:-1], 3, 3)
+    return (phi @ _maps(phi)["hat"]).unflatten(-1, (3, 3))
 
 
 def exp(phi: torch.Tensor) -> torch.Tensor:
-    """Exponential map (..., 3) rotation vectors -> (..., 3, 3) rotation matrices (Rodrigues)."""
-    theta2 = (phi * phi).sum(-1)
+    """Exponential map (..., 3) rotation vectors -> (..., 3, 3) rotation matrices (Rodrigues).
+
+    R = I + a hat(phi) + b hat(phi)^2 with hat(phi)^2 = phi phi^T - theta^2 I, so
+    R = (1 - b theta^2) I + a hat(phi) + b phi phi^T.
+    """
+    theta2 = (phi * phi).sum(-1)[..., None, None]
     small = theta2 < _SMALL**2
-    theta2_safe = torch.where(small, torch.ones_like(theta2), theta2)
+    theta2_safe = torch.where(small, 1.0, theta2)
     theta = theta2_safe.sqrt()
-    a = torch.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, torch.sin(theta) / theta)
-    b = torch.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - torch.cos(theta)) / theta2_safe)
-    K = hat(phi)
-    eye = torch.eye(3, dtype=phi.dtype, device=phi.device).expand(K.shape)
-    K2 = phi[..., :, None] * phi[..., None, :] - theta2[..., None, None] * eye  # hat(phi)^2, no matmul
-    return eye + a[..., None, None] * K + b[..., None, None] * K2
+    # Taylor terms beyond theta^2 are below float64 resolution for theta < _SMALL
+    a = torch.where(small, 1.0 - theta2 / 6.0, torch.sin(theta) / theta)
+    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / theta2_safe)
+    eye = torch.eye(3, dtype=phi.dtype, device=phi.device)
+    return (1.0 - b * theta2) * eye + a * hat(phi) + b * (phi[..., :, None] * phi[..., None, :])
+
+
+def _quat_wxyz(R: torch.Tensor) -> torch.Tensor:
+    """Unit quaternions (..., 4) in (w, x, y, z) order with w >= 0, by Shepperd's method: the
+    quaternion is built from the largest of (w, x, y, z), so no branch divides by a small number and
+    angles near pi stay accurate."""
+    maps = _maps(R)
+    flat = R.flatten(-2)
+    branches = (flat @ maps["quat"] + maps["quat_const"]).unflatten(-1, (4, 4))
+    choice = (flat @ maps["choice"]).argmax(-1)
+    q = torch.gather(branches, -2, choice[..., None, None].expand(*choice.shape, 1, 4)).squeeze(-2)
+    return q * torch.where(q[..., :1] < 0, -1.0, 1.0) / q.norm(dim=-1, keepdim=True)
 
 
 def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4), (x, y, z, w), w >= 0.
-
-    Shepperd's method: build the quaternion from the largest of (w, x, y, z) so that no branch
-    divides by a small number, which keeps angles near pi accurate.
-    """
-    m = R
-    tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    cands = torch.stack([tr, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], dim=-1)
-    choice = cands.argmax(-1)
-    # 4*q_k^2 for the chosen component; clamp keeps sqrt away from 0 where the branch is unused
-    qw = torch.stack(
-        [
-            1 + tr,
-            m[..., 2, 1] - m[..., 1, 2],
-            m[..., 0, 2] - m[..., 2, 0],
-            m[..., 1, 0] - m[..., 0, 1],
-        ],
-        -1,
-    )
-    qx = torch.stack(
-        [
-            m[..., 2, 1] - m[..., 1, 2],
-            1 + 2 * m[..., 0, 0] - tr,
-            m[..., 0, 1] + m[..., 1, 0],
-            m[..., 0, 2] + m[..., 2, 0],
-        ],
-        -1,
-    )
-    qy = torch.stack(
-        [
-            m[..., 0, 2] - m[..., 2, 0],
-            m[..., 0, 1] + m[..., 1, 0],
-            1 + 2 * m[..., 1, 1] - tr,
-            m[..., 1, 2] + m[..., 2, 1],
-        ],
-        -1,
-    )
-    qz = torch.stack(
-        [
-            m[..., 1, 0] - m[..., 0, 1],
-            m[..., 0, 2] + m[..., 2, 0],
-            m[..., 1, 2] + m[..., 2, 1],
-            1 + 2 * m[..., 2, 2] - tr,
-        ],
-        -1,
-    )
-    # rows: candidate branch (w, x, y, z); each row is 4*q_k*(w, x, y, z)
-    rows = torch.stack([qw, qx, qy, qz], dim=-2)  # (..., branch, component) in (w,x,y,z) order
-    idx = choice[..., None, None].expand(*choice.shape, 1, 4)
-    q_wxyz = torch.gather(rows, -2, idx).squeeze(-2)
-    q_wxyz = q_wxyz / q_wxyz.norm(dim=-1, keepdim=True)
-    q_wxyz = torch.where(q_wxyz[..., :1] < 0, -q_wxyz, q_wxyz)
-    return torch.cat([q_wxyz[..., 1:], q_wxyz[..., :1]], dim=-1)
+    """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4), (x, y, z, w), w >= 0 (Shepperd)."""
+    return _quat_wxyz(R).roll(-1, dims=-1)
 
 
 def log(R: torch.Tensor) -> torch.Tensor:
     """Logarithm map (..., 3, 3) -> (..., 3) rotation vectors with norm in [0, pi]."""
-    q = matrix_to_quat(R)
-    v, w = q[..., :3], q[..., 3]
+    q = _quat_wxyz(R)
+    w, v = q[..., 0], q[..., 1:]
     s2 = (v * v).sum(-1)
     small = s2 < _SMALL**2
-    s = torch.where(small, torch.ones_like(s2), s2).sqrt()
+    s = torch.where(small, 1.0, s2).sqrt()
     # angle / sin(angle/2) = 2 atan2(s, w) / s; Taylor for s -> 0 (w -> 1)
     factor = torch.where(small, 2.0 / w - 2.0 * s2 / (3.0 * w**3), 2.0 * torch.atan2(s, w) / s)
     return v * factor[..., None]
@@ -118,7 +121,9 @@ def tree_product(R: torch.Tensor, levels: int) -> torch.Tensor:
     right-multiplied integration needs.
     """
     for _ in range(levels):
-        R = R[..., 0::2, :, :] @ R[..., 1::2, :, :]
+        # unbind, not R[..., 0::2] and R[..., 1::2]: its gradient is one stack, not two zero-filled copies
+        even, odd = R.unflatten(-3, (-1, 2)).unbind(-3)
+        R = even @ odd
     return R
 
 
