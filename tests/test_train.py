@@ -9,6 +9,7 @@ import torch
 from _asl import write_asl_sequence
 
 from gyrodenoise.config import compose_config
+from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.train import format_test_table, train
 
 
@@ -135,6 +136,58 @@ def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):
             torch.testing.assert_close(v, ckpt["state_dict"][f"model.{k}"])
     # ... with batch-norm statistics recomputed for it (not the averaged ones the checkpoint holds)
     assert all(not torch.allclose(shipped[k], ckpt["state_dict"][f"model.{k}"]) for k in stats)
+
+
+def test_best_val_with_ema_scores_the_checkpoint_it_keeps(root, tmp_path):
+    """select=best_val with callbacks=ema: the figures recorded are those of the checkpoint kept, not of the
+    final averaged weights that the run's averaging callback would swap in during a post-fit validation."""
+    from hydra.utils import instantiate
+
+    from gyrodenoise.pretrained import load_model
+    from gyrodenoise.train import _score_without_callbacks
+
+    cfg = config(root, tmp_path / "emabest", "callbacks=ema", "select=best_val", "calibrated_baseline=false")
+    s = train(cfg)
+    dm = instantiate(cfg.dataset)
+    kept = DenoiserModule.from_config(cfg)
+    kept.model = load_model(tmp_path / "emabest" / "model.pt")[0]
+    val, test = _score_without_callbacks(cfg, dm, kept)
+    assert val["val/aoe_deg"] == pytest.approx(s["val"]["val/aoe_deg"], rel=1e-6)
+    assert test["test/aoe_deg"] == pytest.approx(s["test"]["test/aoe_deg"], rel=1e-6)
+    meta = torch.load(tmp_path / "emabest" / "model.pt", weights_only=True)["meta"]
+    assert meta["val_aoe_deg"] == s["val"]["val/aoe_deg"]
+    assert s["selected"].endswith(".ckpt") and "best-epoch" in s["selected"]
+
+
+def test_best_val_without_any_validation_says_so(root, tmp_path, capsys):
+    s = train(
+        config(
+            root,
+            tmp_path / "noval",
+            "select=best_val",
+            "trainer.check_val_every_n_epoch=50",
+            "calibrated_baseline=false",
+        )
+    )
+    out = capsys.readouterr().out
+    assert "warning: select=best_val, but no validation ran" in out
+    assert s["selection"] == "best_val" and "no best checkpoint" in s["selected"] and s["best_checkpoint"] == ""
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("select=best", "select='best'"),
+        ("optim.scheduler.name=cosine", "optim.scheduler.name='cosine'"),
+        ("model.act=foo", "model.act='foo'"),
+    ],
+)
+def test_bad_choices_fail_before_the_fit(root, tmp_path, override, message):
+    from gyrodenoise.cli_errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        train(config(root, tmp_path / "bad", override))
+    assert not (tmp_path / "bad" / "checkpoints").exists()  # nothing trained
 
 
 def test_recompute_batch_norm_averages_the_batch_statistics():

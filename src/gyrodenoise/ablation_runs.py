@@ -55,14 +55,22 @@ class Run:
     def curve(self) -> list[tuple[int, float]]:
         """(epoch, val AOE) of the validations during fitting, from the CSV log when there is one.
 
-        The last val row of the log is the post-fit validation of the best checkpoint: left out.
+        Runs before 2026-11-24 also logged the post-fit validation of the kept model, at epoch index = the
+        number of epochs: left out (a validation during the fit has a smaller index).
         """
         path = self.path / "csv" / "metrics.csv"
         if not path.is_file():
             return []
+        epochs = self.summary.get("epochs")
         with open(path, newline="") as fh:
-            rows = [r for r in csv.DictReader(fh) if r.get(METRICS["val"])]
-        return [(int(float(r["epoch"])) + 1, float(r[METRICS["val"]])) for r in rows[:-1]]
+            rows = [r for r in csv.DictReader(fh) if r.get(METRICS["val"]) and r.get("epoch")]
+        if epochs is None:  # no summary: the older layout, whose last validation row is the post-fit one
+            rows = rows[:-1]
+        return [
+            (int(float(r["epoch"])) + 1, float(r[METRICS["val"]]))
+            for r in rows
+            if epochs is None or int(float(r["epoch"])) < epochs
+        ]
 
     def metric(self, split: str) -> float:
         """'val' / 'test': AOE (deg) of the best checkpoint; 'val_last': the last validation AOE of the

@@ -15,7 +15,12 @@ from contextlib import contextmanager
 
 from gyrodenoise.data.readers import DataFormatError
 
-USER_ERRORS = (DataFormatError, FileNotFoundError)
+
+class ConfigError(ValueError):
+    """A config value the command cannot run with (e.g. `select=best`), found before any work is done."""
+
+
+USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError)
 
 
 @contextmanager

@@ -21,11 +21,15 @@ AXES = ("roll", "pitch", "yaw")
 def orientation_figure(t: np.ndarray, R_gt: np.ndarray, estimates: dict[str, np.ndarray], title: str = ""):
     """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6)."""
     fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    gt = np.degrees(np.unwrap(rpy_of(R_gt), axis=0))
+    rpy_gt = rpy_of(R_gt)
+    gt = np.unwrap(rpy_gt, axis=0)
+    # each estimate on the ground truth's 360-degree branch, sample by sample: unwrapped on their own, the
+    # series can end up whole turns apart (near pitch +-90 deg roll and yaw jump), which hides the error
+    on_branch = {name: gt + _wrap(rpy_of(R) - rpy_gt) for name, R in estimates.items()}
     for k, ax in enumerate(axs):
-        ax.plot(t, gt[:, k], "k", lw=1.5, label="ground truth")
-        for name, R in estimates.items():
-            ax.plot(t, np.degrees(np.unwrap(rpy_of(R), axis=0))[:, k], lw=1, label=name)
+        ax.plot(t, np.degrees(gt[:, k]), "k", lw=1.5, label="ground truth")
+        for name, rpy in on_branch.items():
+            ax.plot(t, np.degrees(rpy[:, k]), lw=1, label=name)
         ax.set_ylabel(f"{AXES[k]} (deg)")
         ax.grid(alpha=0.3)
     axs[0].legend(loc="best", fontsize=8)
@@ -33,6 +37,11 @@ def orientation_figure(t: np.ndarray, R_gt: np.ndarray, estimates: dict[str, np.
     axs[0].set_title(title)
     fig.tight_layout()
     return fig
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles (rad) wrapped to [-pi, pi)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def error_figure(t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):

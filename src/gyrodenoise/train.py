@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
-from gyrodenoise.cli_errors import user_errors
+from gyrodenoise.cli_errors import ConfigError, user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.job_log import console_to_job_log
@@ -129,15 +129,29 @@ def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserMo
     return raw
 
 
-def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule) -> tuple[dict, dict]:
-    """Validation (and, with cfg.test, test) metrics of `module` by a trainer without callbacks: the
-    averaging callback of the run's trainer would swap its weights in during validation."""
+def build_module(cfg: DictConfig) -> DenoiserModule:
+    """The module of the run, its optimiser and schedule built once to check the config: a bad choice
+    (`select`, `optim.scheduler.name`, `model.act`, ...) ends the command before the fit, in one line."""
+    if cfg.select not in ("last", "best_val"):
+        raise ConfigError(f"select={cfg.select!r}: choose 'last' (final weights) or 'best_val'")
+    try:
+        module = DenoiserModule.from_config(cfg)
+        module.configure_optimizers()
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    return module
+
+
+def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, test: bool = True) -> tuple[dict, dict]:
+    """Validation (and, with cfg.test and `test`, test) metrics of `module` by a trainer without callbacks or
+    loggers. The run's own trainer would let a weight-averaging callback (callbacks=ema) swap its averaged
+    weights in over the module scored, and would log this scoring as one more point of the validation curve."""
     plain: L.Trainer = hydra.utils.instantiate(
         cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
     )
-    val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0]
-    test = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") else {}
-    return val, test
+    val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
+    scores = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") and test else {}
+    return val, scores
 
 
 def train(cfg: DictConfig) -> dict:
@@ -151,7 +165,7 @@ def train(cfg: DictConfig) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.check_sequences(test=bool(cfg.get("test")))
-    module = DenoiserModule.from_config(cfg)
+    module = build_module(cfg)
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     if not loggers:  # Lightning refuses a learning-rate monitor without a logger
@@ -171,23 +185,31 @@ def train(cfg: DictConfig) -> dict:
     # of a cosine cycle) or the best validation checkpoint (`select: best_val`)
     ckpt_cb = trainer.checkpoint_callback
     best_path = ckpt_cb.best_model_path if ckpt_cb is not None and ckpt_cb.monitor else ""
-    if cfg.select not in ("last", "best_val"):
-        raise ValueError(f"select={cfg.select!r}: choose 'last' (final weights) or 'best_val'")
+    selected = f"final weights, epoch {trainer.current_epoch}"
     alternative = None  # the model the other rule would pick, tested too when cfg.test_other_rule
     if cfg.select == "best_val" and best_path:
         alternative, module = module, DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+        selected = portable_path(best_path)
+    elif cfg.select == "best_val":
+        selected += " (select=best_val, but no validation ran during the fit: no best checkpoint)"
+        print(
+            f"warning: select=best_val, but no validation ran during the {trainer.current_epoch} epochs "
+            f"(trainer.check_val_every_n_epoch={trainer.check_val_every_n_epoch}): the final weights are kept"
+        )
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
     steps = ["validation", *(["test"] if cfg.get("test") else [])]
     baseline = wants_calibrated_baseline(cfg)
     print(f"scoring on {' and '.join(steps)}{', then the calibrated baseline' if baseline else ''} (seconds)")
-    val = (trainer.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
-    test, test_other = {}, {}
-    if cfg.get("test"):
-        test = trainer.test(module, datamodule=dm, verbose=False)[0]
-        if alternative is not None and cfg.get("test_other_rule"):
-            test_other = trainer.test(alternative, datamodule=dm, verbose=False)[0]
+    val, test = _score_without_callbacks(cfg, dm, module)
+    test_other = {}
+    if alternative is not None and cfg.get("test_other_rule") and cfg.get("test"):
+        test_other = _score_without_callbacks(cfg, dm, alternative)[1]
     val_raw_final, test_raw_final = _score_without_callbacks(cfg, dm, raw_final) if raw_final is not None else ({}, {})
+    for lg in trainer.loggers:  # the test figures beside the curves (the post-fit validation is not a new point)
+        if test:
+            lg.log_metrics(test, step=trainer.global_step)
+            lg.save()
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if baseline else {}
 
@@ -202,6 +224,7 @@ def train(cfg: DictConfig) -> dict:
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
         "selection": cfg.select,
+        "selected": selected,
         "best_checkpoint": portable_path(best_path) if best_path else "",
         "val": val,
         "test": test,
@@ -227,8 +250,7 @@ def train(cfg: DictConfig) -> dict:
         },
     )
     write_json(out_dir / "summary.json", summary)
-    picked = best_path if cfg.select == "best_val" and best_path else f"final weights, epoch {trainer.current_epoch}"
-    print(f"\nvalidation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({picked})")
+    print(f"\nvalidation AOE {val.get('val/aoe_deg', math.nan):.3f} deg ({selected})")
     if test:
         table = format_test_table(test, safety.get("calibrated_test_aoe_deg_per_sequence"))
         print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{table}", end="")
