@@ -190,3 +190,15 @@ def test_euroc_replay_follows_the_recording(euroc_root):
     tc, d = np.array([replay.t_start + 3.0]), 1e-5
     fd = (replay.rot_spline(tc - d).inv() * replay.rot_spline(tc + d)).as_rotvec() / (2 * d)
     np.testing.assert_allclose(replay.evaluate(tc).omega, fd, atol=1e-4)
+
+
+def test_motion_seed_gives_other_motion_with_the_same_sensor(tmp_path):
+    """'procedural:K': the motion drawn from K, the sensor (hidden effect values) from --seed."""
+    a = make_sequence(tmp_path, "procedural:1", "scale_factor=3000ppm", duration=5.0, seed=3)
+    b = make_sequence(tmp_path, "procedural:2", "scale_factor=3000ppm", duration=5.0, seed=3)
+    assert (a.path.name, b.path.name) == ("procedural1_s3", "procedural2_s3")
+    assert a.truth["effects"] == b.truth["effects"]  # one sensor
+    gyro_a, gyro_b = read_imu(a.imu_file).gyro, read_imu(b.imu_file).gyro
+    assert np.abs(gyro_a - gyro_b).mean() > 0.1  # other motion (rad/s), not only other noise
+    with pytest.raises(ValueError, match="procedural:<motion seed>"):
+        make_sequence(tmp_path, "procedural:x", duration=5.0)

@@ -123,6 +123,9 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
         ", ".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
         for s in settings
     ]
+    rules = sorted({str(r.summary.get("selection", "best_val")) for s in settings for r in s.runs})
+    kept = {"last": "final weights", "best_val": "best validation checkpoint"}
+    kept_by = " / ".join(kept.get(rule, rule) for rule in rules)
     fig, axes = plt.subplots(1, 3, figsize=(max(11.0, 1.2 * len(settings) + 7), 4.2))
     for ax, split in zip(axes[:2], ("val", "test"), strict=True):
         for i, s in enumerate(settings):
@@ -131,7 +134,7 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
             m, sd, _ = s.stats(split)
             err = [0.0 if not math.isfinite(sd) else sd]
             ax.errorbar([i], [m], yerr=err, fmt="s", color="C0", capsize=4, ms=6, zorder=2)
-        ax.set_title(f"{split} AOE (deg), best checkpoint:\nseeds (grey), mean ± std (blue)", fontsize=9)
+        ax.set_title(f"{split} AOE (deg), {kept_by}:\nseeds (grey), mean ± std (blue)", fontsize=9)
         ax.set_xticks(range(len(settings)))
         ax.set_xticklabels(["\n".join(lb.split(", ")) for lb in labels], fontsize=7)
         if max(len(lb) for lb in labels) > 12 * len(keys) or len(settings) > 5:  # long labels: slant them
@@ -149,6 +152,8 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     ax.grid(alpha=0.3, which="both")
     if ax.lines:
         ax.legend(fontsize=7)
+    else:  # e.g. runs shorter than trainer.check_val_every_n_epoch
+        ax.text(0.5, 0.5, "no validation during the fits", ha="center", va="center", transform=ax.transAxes)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     buf = io.BytesIO()

@@ -126,7 +126,15 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
         for m, name in enumerate(methods):
             data = [np.degrees(roe[d][name][a]) for d in dists]
             pos = np.arange(len(dists)) + (m - (len(methods) - 1) / 2) * width
-            bp = ax.boxplot(data, positions=pos, widths=width * 0.9, patch_artist=True, showfliers=False)
+            # black medians: matplotlib's default (orange) vanishes inside an orange box
+            bp = ax.boxplot(
+                data,
+                positions=pos,
+                widths=width * 0.9,
+                patch_artist=True,
+                showfliers=False,
+                medianprops={"color": "black", "lw": 1.5},
+            )
             for box in bp["boxes"]:
                 box.set_facecolor(colors[m % len(colors)])
             ax.plot([], [], color=colors[m % len(colors)], lw=6, label=name)

@@ -266,9 +266,24 @@ def train(cfg: DictConfig) -> dict:
     return summary
 
 
+def single_run_of_a_sweep_note() -> str | None:
+    """A note when the config defines a sweep (an experiment's hydra.sweeper.params) but runs without -m: one
+    run of it is legitimate (the queues of benchmarks/run_queue.py run them so), but easy to do by mistake."""
+    if not HydraConfig.initialized():
+        return None
+    hc = HydraConfig.get()
+    params = dict((hc.sweeper.get("params") or {}) if "sweeper" in hc else {})
+    if str(hc.mode) != "RunMode.RUN" or not params:
+        return None
+    swept = ", ".join(f"{k} over {v}" for k, v in params.items())
+    return f"note: this config defines a sweep ({swept}); this is one run of it. Add -m to run the sweep."
+
+
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
     with console_to_job_log(), user_errors():
+        if note := single_run_of_a_sweep_note():
+            print(note)
         summary = train(cfg)
     # the value an Optuna sweep minimises
     return summary["val"].get("val/aoe_deg")

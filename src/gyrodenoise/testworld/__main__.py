@@ -3,6 +3,8 @@
     python -m gyrodenoise.testworld --out /tmp/world --trajectory euroc:V1_02_medium --seed 0 \\
         --effects scale_factor=2000ppm,time_offset=1.5ms
     python -m gyrodenoise.testworld --out /tmp/world --trajectory procedural --duration 60 --preset null
+    python -m gyrodenoise.testworld --out /tmp/world --trajectory procedural:1 --seed 3 --effects scale_factor=3000ppm
+    python -m gyrodenoise.testworld --out /tmp/world --trajectory procedural:2 --seed 3 --effects scale_factor=3000ppm
 """
 
 from __future__ import annotations
@@ -33,7 +35,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", type=Path, required=True, help="folder that receives <name>/mav0/... and <name>/truth.json")
-    p.add_argument("--trajectory", default="procedural", help="'procedural' or 'euroc:<SEQ>' (default procedural)")
+    p.add_argument(
+        "--trajectory",
+        default="procedural",
+        help="'procedural' (its motion drawn from --seed), 'procedural:<K>' (motion drawn from K: a fit and a "
+        "held-out sequence of one sensor with different motion) or 'euroc:<SEQ>' (default procedural)",
+    )
     p.add_argument(
         "--duration", type=float, default=None, help="seconds of IMU data (default: 60 procedural, all euroc)"
     )

@@ -42,13 +42,17 @@ class WorldSequence:
 def make_motion(
     trajectory: str, duration: float | None, seed: int, euroc_root: str | Path | None = None, smoothing_hz: float = 15.0
 ) -> MotionSource:
-    """'procedural' or 'euroc:<SEQ>' -> a continuous-time motion source."""
+    """'procedural' (motion drawn from `seed`), 'procedural:<K>' (motion drawn from K: other motion, same
+    sensor) or 'euroc:<SEQ>' -> a continuous-time motion source."""
     kind, _, arg = trajectory.partition(":")
-    if kind == "procedural" and not arg:
-        return ProceduralMotion.random((duration or 60.0) + 0.5, seed)
+    if kind == "procedural" and (not arg or arg.isdigit()):
+        return ProceduralMotion.random((duration or 60.0) + 0.5, int(arg) if arg else seed)
     if kind == "euroc" and arg:
         return EurocReplay(arg, euroc_root, cutoff_hz=smoothing_hz, duration=duration)
-    raise ValueError(f"trajectory {trajectory!r}: expected 'procedural' or 'euroc:<SEQ>' (e.g. euroc:V1_02_medium)")
+    raise ValueError(
+        f"trajectory {trajectory!r}: expected 'procedural', 'procedural:<motion seed>' or 'euroc:<SEQ>'"
+        " (e.g. euroc:V1_02_medium)"
+    )
 
 
 def make_sequence(
@@ -84,7 +88,8 @@ def make_sequence(
 
     if isinstance(trajectory, str):
         motion = make_motion(trajectory, duration, seed, euroc_root, smoothing_hz)
-        default_name = trajectory.partition(":")[2] or f"procedural_s{seed}"
+        kind, _, arg = trajectory.partition(":")
+        default_name = (arg if kind == "euroc" else f"procedural{arg}_s{seed}") if arg else f"procedural_s{seed}"
     else:
         motion, default_name = trajectory, f"custom_s{seed}"
     name = name or default_name
