@@ -56,6 +56,8 @@ class Selection:
     # a named time offset against a sensor low-pass of the same delay (`identifiability.delay_or_lowpass`):
     # separable or not, and which one the data preferred when separable
     delay_or_lowpass: dict | None = None
+    # quantization is named from the raw samples, not by regression: the lattice step and the share of samples on it
+    lattice: dict | None = None
 
     @property
     def equivalences(self) -> list[str]:
@@ -156,6 +158,7 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         sel.params["bias_random_walk"], sel.se["bias_random_walk"] = p, s
     if "quantization" in sel.effects and "quantization" not in sel.base:
         q, frac = Quantization.lattice_step(np.concatenate([fc.gyro for fc in fcs]))
+        sel.lattice = {"step": float(q), "fraction": float(frac), "required_fraction": QUANT_LATTICE_FRACTION}
         sigma_min = float(np.min(sel.sigma))
         # a lattice that holds nearly every sample, with a step not far below the noise
         if frac >= QUANT_LATTICE_FRACTION and q > 1e-3 * sigma_min:

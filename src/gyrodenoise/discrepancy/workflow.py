@@ -265,6 +265,10 @@ def run(
             entry["variant"] = cand["variant"]
         if name == "vibration" and sel.band is not None:
             entry["per_sequence_fits"] = sel.band.per_sequence
+        if name == "quantization" and sel.lattice is not None:
+            entry["lattice"] = sel.lattice
+        if name == "saturation" and sel.saturation is not None:
+            entry["saturation_check"] = sel.saturation
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)

@@ -1,0 +1,29 @@
+"""The discrepancy report says what an effect named without regression rests on, and reads the gap table in words."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrodenoise.discrepancy.report import _gap_words, _raw_sample_evidence_md
+
+
+def test_quantization_is_reported_with_its_lattice():
+    report = {
+        "named_effects": [
+            {"name": "time_offset", "delta_bic": 353.0},
+            {"name": "quantization", "lattice": {"step": np.radians(0.04), "fraction": 0.993, "required_fraction": 0.95}},
+        ]
+    }
+    (line,) = [ln for ln in _raw_sample_evidence_md(report) if ln]
+    assert "not fitted (so no delta BIC)" in line and "99.3% of the fit sequences' samples" in line
+    assert "step 0.04 deg/s" in line and ">= 95%" in line
+    assert _raw_sample_evidence_md({"named_effects": [{"name": "time_offset"}]}) == []
+
+
+def test_gap_words_say_when_the_drift_grows():
+    before = {"residual_rms_rad_s": 0.048403, "drift_10s_median_deg": 0.6359, "allan_gap_log10": 0.934}
+    after = {"residual_rms_rad_s": 0.04828, "drift_10s_median_deg": 0.6501, "allan_gap_log10": 0.806}
+    text = _gap_words(before, after)[0]
+    assert "residual RMS -0.3%" in text and "drift +2.2% (it grows" in text and "Allan-deviation gap -13.7%" in text
+    after["drift_10s_median_deg"] = 0.6
+    assert "it grows" not in _gap_words(before, after)[0]
