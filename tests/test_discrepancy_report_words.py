@@ -11,7 +11,10 @@ def test_quantization_is_reported_with_its_lattice():
     report = {
         "named_effects": [
             {"name": "time_offset", "delta_bic": 353.0},
-            {"name": "quantization", "lattice": {"step": np.radians(0.04), "fraction": 0.993, "required_fraction": 0.95}},
+            {
+                "name": "quantization",
+                "lattice": {"step": np.radians(0.04), "fraction": 0.993, "required_fraction": 0.95},
+            },
         ]
     }
     (line,) = [ln for ln in _raw_sample_evidence_md(report) if ln]

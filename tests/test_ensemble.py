@@ -506,3 +506,23 @@ def test_evaluate_with_an_ensemble(euroc_root, tmp_path):
     assert a["proposed"][0] < a["raw IMU"][0]
     for name in ("figures/uncertainty_calibration.png", "figures/correction_V1_03_difficult.png", "results.json"):
         assert (out / name).is_file(), name
+
+
+def test_ensemble_of_members_that_all_failed_warns_and_duplicates_are_refused(tmp_path):
+    """Built from members that all lost to the calibrated baseline, the ensemble warns on loading as they do;
+    the same member twice is refused (it would count double and shrink the spread)."""
+    meta = {"rate_hz": 200.0, "dataset": "own", "beats_calibrated": False}
+    meta |= {"val_aoe_deg": 4.0, "calibrated_val_aoe_deg": 3.3}
+    paths = [
+        save_model(random_model(seed=s, **TINY), {"name": "denoiser", **TINY}, tmp_path / f"m{s}.pt", meta)
+        for s in (1, 2)
+    ]
+    with pytest.warns(UserWarning, match="did not beat"):
+        model, cfg, ens_meta = ensemble_cli.make_ensemble(paths)
+    ens = save_model(model, cfg, tmp_path / "ens.pt", ens_meta)
+    msg = not_better_warning(load_model(ens)[1])
+    assert msg is not None and "none of its 2 members" in msg and "4.00 deg vs 3.30 deg" in msg
+    with pytest.raises(ValueError, match="the same member twice"):
+        ensemble_cli.make_ensemble([paths[0], paths[0]])
+    with pytest.raises(ValueError, match="the same member twice"):  # an ensemble brings its members
+        ensemble_cli.make_ensemble([ens, paths[1]])

@@ -124,6 +124,11 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
             cfgs.append(dict(meta["model"]))
             records.append(member_record(meta["path"], meta))
     check_compatible(records, allow_mixed)
+    seen: dict[str, str] = {}
+    for r in records:  # one network twice would weigh it double and shrink the spread
+        if r.get("sha256") and r["sha256"] in seen:
+            raise ValueError(f"the same member twice: {r['path']} and {seen[r['sha256']]} (identical files)")
+        seen.setdefault(r.get("sha256") or "", r["path"])
     beats = [r.get("beats_calibrated") for r in records]
     if any(b is False for b in beats):
         bad = [r["path"] for r in records if r.get("beats_calibrated") is False]

@@ -97,10 +97,15 @@ class ModelQualityWarning(UserWarning):
 
 def not_better_warning(meta: dict) -> str | None:
     """The warning for a model whose metadata says it did not beat the calibrated baseline, else None."""
-    if meta.get("beats_calibrated") is not False:
+    members = meta.get("members_beat_calibrated") or []
+    # an ensemble is not compared as a whole when it is built; all its members failing is the same warning
+    all_members_failed = meta.get("beats_calibrated") is None and members and all(b is False for b in members)
+    if meta.get("beats_calibrated") is not False and not all_members_failed:
         return None
     name = meta.get("name", meta.get("path", "this model"))
     model_val, cal_val = meta.get("val_aoe_deg"), meta.get("calibrated_val_aoe_deg")
+    if all_members_failed:
+        model_val, name = meta.get("member_val_aoe_deg_mean"), f"{name} (none of its {len(members)} members)"
     numbers = ""
     if model_val is not None and cal_val is not None:
         numbers = f" (validation AOE {float(model_val):.2f} deg vs {float(cal_val):.2f} deg)"
