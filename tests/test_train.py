@@ -211,3 +211,25 @@ def test_recompute_batch_norm_averages_the_batch_statistics():
             expected.append(conv(x).mean(dim=(0, 2)))
     torch.testing.assert_close(bn.running_mean, torch.stack(expected).mean(0))
     assert not model.training or bn.momentum == 0.1  # mode and momentum restored
+
+
+def test_test_data_is_checked_before_the_fit(root, tmp_path, capsys):
+    """An empty test list or a bad test file ends the command before training, not after it; a test sequence
+    that is also a training sequence is pointed out."""
+    import shutil
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.readers import DataFormatError
+
+    with pytest.raises(ConfigError, match="dataset.test_seqs is empty"):
+        train(config(root, tmp_path / "empty", "dataset.test_seqs=[]"))
+    bad = tmp_path / "data"
+    shutil.copytree(root, bad)
+    imu = bad / "c" / "mav0" / "imu0" / "data.csv"
+    lines = imu.read_text().splitlines()
+    imu.write_text("\n".join([*lines[:10], lines[9], *lines[10:]]) + "\n")  # a duplicated line
+    with pytest.raises(DataFormatError, match="duplicate"):
+        train(config(bad, tmp_path / "badtest"))
+    assert not (tmp_path / "badtest" / "checkpoints").exists()
+    train(config(root, tmp_path / "overlap", "dataset.test_seqs=[a]", "calibrated_baseline=false"))
+    assert "test sequence(s) a are also training sequences" in capsys.readouterr().out

@@ -165,6 +165,11 @@ def train(cfg: DictConfig) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.check_sequences(test=bool(cfg.get("test")))
+    if cfg.get("test") and (both := [n for n in dm.test_names if n in dm.train_names]):
+        print(
+            f"warning: test sequence(s) {', '.join(both)} are also training sequences: "
+            "their test figures are not held out"
+        )
     module = build_module(cfg)
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
@@ -186,6 +187,11 @@ class ImuDataModule(L.LightningDataModule):
                 f"<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root to the folder that holds them"
                 f"{'; or ' + test_hint if only_test else ''}."
             )
+        if test and not self.test_names:
+            raise ConfigError(f"dataset.test_seqs is empty: name the test sequences, or {test_hint}")
+        if test and not self.test_part:
+            # read (and check) them now: a bad test file found after the fit would cost the trained model
+            self.test_part = [self.load(n) for n in self.test_names]
 
     def model_meta(self) -> dict:
         """What a model file records of the data it was trained on (read back by evaluate, correct, export)."""
