@@ -197,6 +197,29 @@ def test_gap_warns_with_line(tmp_path, model_file, capsys):
     code, _, err = run([f, "-m", model_file, "-o", tmp_path], capsys)
     assert code == 0
     assert f"{f}:1002" in err and "1 gap(s)" in err and "--resample" in err  # line 1002: after header + 1000
+    # --resample at the model's own rate interpolates over the gap onto a uniform grid (it did nothing before)
+    code, out, err = run([f, "-m", model_file, "-o", tmp_path / "r", "--resample"], capsys)
+    assert code == 0 and "gap" not in err and "resampled to 200 Hz" in out
+    t = np.loadtxt(tmp_path / "r" / "imu_corrected.csv", delimiter=",", dtype=np.int64, usecols=0)
+    assert (np.diff(t) == 5_000_000).all()
+
+
+def test_time_in_seconds_read_as_ns_says_so(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    f = tmp_path / "seconds.csv"
+    rows = [
+        f"{t * 1e-9:.6f},{w[0]},{w[1]},{w[2]},{a[0]},{a[1]},{a[2]}" for t, w, a in zip(t_ns, gyro, acc, strict=True)
+    ]
+    f.write_text("t,wx,wy,wz,ax,ay,az\n" + "\n".join(rows) + "\n")
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:3", "fractional part", "--time-unit s")
+    assert run([f, "-m", model_file, "-o", tmp_path / "s", "--time-unit", "s"], capsys)[0] == 0
+
+
+def test_gyro_only_file_says_the_accelerometer_is_needed(tmp_path, model_file, capsys):
+    t_ns, gyro, _ = synth()
+    f = tmp_path / "gyro_only.csv"
+    f.write_text("\n".join(f"{t},{w[0]},{w[1]},{w[2]}" for t, w in zip(t_ns, gyro, strict=True)) + "\n")
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], f"{f}:1: 4 columns", "accelerometer")
 
 
 def test_duplicated_stamps(tmp_path, model_file, capsys):
@@ -271,3 +294,11 @@ def test_default_output_folder_is_under_outputs(tmp_path, model_file, capsys, mo
     folder = tmp_path / "outputs" / "correct" / "MY_SEQ"
     assert (folder / "imu_corrected.csv").is_file() and (folder / "correct_summary.json").is_file()
     assert str(Path("outputs", "correct", "MY_SEQ", "imu_corrected.csv")) in out
+
+
+def test_output_file_that_is_a_folder_is_refused_before_the_work(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    f = write_asl(tmp_path / "imu.csv", t_ns, gyro, acc)
+    (tmp_path / "tum").mkdir()
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "out", "--out-tum", tmp_path / "tum"], "is a folder")
+    assert not (tmp_path / "out").exists()  # nothing half-written

@@ -199,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        for flag, target in (("--out-csv", args.out_csv), ("--out-tum", args.out_tum)):
+            if target is not None and target.is_dir():  # found after the work, it would leave half the outputs
+                raise ValueError(f"{flag} {target} is a folder: give a file path (or -o DIR for a folder)")
         path = find_imu_file(args.input)
         try:
             model, meta = load_model(args.model)

@@ -96,11 +96,12 @@ def check_time_unit(rec: ImuRecording, report: CheckReport) -> None:
     )
 
 
-def check_gaps(rec: ImuRecording, report: CheckReport, factor: float = GAP_FACTOR) -> None:
+def check_gaps(rec: ImuRecording, report: CheckReport, factor: float = GAP_FACTOR, resample: bool = False) -> None:
+    """Warn about gaps in the timestamps (not when --resample interpolates over them)."""
     d = np.diff(rec.t_ns)
     period = float(np.median(d))
     gaps = np.flatnonzero(d > factor * period)
-    if not gaps.size:
+    if not gaps.size or resample:
         return
     k = int(gaps[np.argmax(d[gaps])])
     missing = float((d[gaps] - period).sum()) * 1e-9
@@ -185,10 +186,10 @@ def check_rate(rec: ImuRecording, model_rate_hz: float | None, report: CheckRepo
     if not model_rate_hz:
         report.warn(f"the model does not record its training rate; cannot compare with {report.rate_hz:.4g} Hz.")
         return False
+    if resample:  # also at the model's rate: a uniform grid over the recording's gaps
+        return True
     if abs(report.rate_hz / model_rate_hz - 1.0) <= RATE_TOL:
         return False
-    if resample:
-        return True
     report.warn(
         f"{rec.path}: sampled at {report.rate_hz:.4g} Hz but the model was trained at {model_rate_hz:.4g} Hz. "
         "Its dilated convolutions span a fixed number of samples, so at another rate it sees another "
@@ -209,7 +210,7 @@ def run_checks(
     report = CheckReport()
     rec = check_time_order(rec, drop_duplicates, report)
     check_time_unit(rec, report)
-    check_gaps(rec, report)
+    check_gaps(rec, report, resample=resample)
     check_gyro_units(rec, report, force)
     check_acc_at_rest(rec, report, force)
     return rec, report, check_rate(rec, model_rate_hz, report, resample)

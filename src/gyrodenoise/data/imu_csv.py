@@ -144,12 +144,24 @@ def read_imu_csv(
                 header = fields
                 continue
             idx = _resolve_columns(columns, header, path)
+        if len(fields) <= max(idx) and not rows:  # the first data line: the file, not one line, is short
+            raise DataFormatError(
+                f"{path}:{lineno}: {len(fields)} columns, but the mapping reads column {max(idx) + 1} (time, gyro "
+                "x/y/z, accelerometer x/y/z). The models read the accelerometer as well as the gyro: a recording "
+                "without it cannot be corrected. If the columns are there, check --columns/--delimiter."
+            )
         if len(fields) <= max(idx):
             raise DataFormatError(
                 f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
                 "remove the truncated line, or check --columns/--delimiter."
             )
         t_field = fields[idx[0]]
+        if time_unit == "ns" and "." in t_field and _is_number(t_field) and float(t_field) % 1:
+            raise DataFormatError(
+                f"{path}:{lineno}: the time column is {t_field!r}, with a fractional part, in nanoseconds "
+                "(--time-unit ns, the default): the stamps are likely seconds (or ms/us); pass --time-unit s "
+                "(ms, us) as they are."
+            )
         try:
             try:
                 stamps.append(int(t_field) * ns_per)  # integers stay exact
