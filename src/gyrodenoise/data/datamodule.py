@@ -24,6 +24,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from gyrodenoise.cli_errors import ConfigError
+from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
@@ -209,7 +210,10 @@ class ImuDataModule(L.LightningDataModule):
         return self.part_origin.get(seq.name, (seq.name, 0.0))
 
     def load(self, name: str) -> Sequence:
-        return load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
+        """A sequence through the cache, checked against its ground truth (`consistency`: deg/s, gaps, clock)."""
+        seq = load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
+        consistency.check(seq)
+        return seq
 
     def setup(self, stage: str | None = None) -> None:
         if stage in (None, "fit", "validate") and not self.train_part:

@@ -1,0 +1,61 @@
+"""Training and evaluation data: the IMU is checked against its ground truth (deg/s, gaps, another clock)."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+from _asl import write_asl_sequence
+
+from gyrodenoise.data import consistency
+from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.readers import DataFormatError
+
+
+@pytest.fixture(scope="module")
+def seq(tmp_path_factory):
+    root = tmp_path_factory.mktemp("consistency")
+    write_asl_sequence(root / "s", seconds=40.0, seed=3)
+    return load_sequence(root, "s", cache_dir="")
+
+
+def test_a_consistent_sequence_passes_silently(seq):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = consistency.check(seq)
+    assert m.gaps == 0 and 0.9 < m.rate_ratio < 1.1 and abs(m.best_lag_s) <= 0.005
+
+
+def test_gyro_in_deg_s_is_an_error(seq):
+    with pytest.raises(DataFormatError, match="looks like deg/s"):
+        consistency.check(dataclasses.replace(seq, gyro=np.degrees(seq.gyro)))
+
+
+def test_gaps_and_a_shifted_truth_warn(seq):
+    keep = np.ones(len(seq.t), bool)
+    keep[2000:2400] = False  # 2 s of IMU missing
+    gap = dataclasses.replace(
+        seq,
+        t=seq.t[keep],
+        gyro=seq.gyro[keep],
+        acc=seq.acc[keep],
+        rot=seq.rot[keep],
+        pos=seq.pos[keep],
+        gt_mask=seq.gt_mask[keep],
+    )
+    with pytest.warns(consistency.DataConsistencyWarning, match="1 gap"):
+        consistency.check(gap)
+    shift = 600  # the IMU 3 s ahead of its truth
+    late = dataclasses.replace(
+        seq,
+        t=seq.t[shift:],
+        gyro=seq.gyro[shift:],
+        acc=seq.acc[shift:],
+        rot=seq.rot[:-shift],
+        pos=seq.pos[:-shift],
+        gt_mask=seq.gt_mask[shift:],
+    )
+    with pytest.warns(consistency.DataConsistencyWarning, match=r"best -[23]\.\d+ s away .* not on the IMU"):
+        consistency.check(late)
