@@ -157,3 +157,15 @@ def test_orientation_figure_keeps_estimates_on_the_ground_truths_branch():
         gt, est = (line.get_ydata() for line in ax.get_lines()[:2])
         assert np.max(np.abs(est - gt)) <= 180 + 1e-9
     plt.close(fig)
+
+
+def test_unknown_model_names_the_weights_options(euroc_root, tmp_path):
+    """dataset=asl_folder (or any dataset without shipped models): the error says how to name the models."""
+    with pytest.raises(FileNotFoundError, match=r"weights\.proposed=PATH .* weights\.calibrated=PATH"):
+        run_evaluate(
+            "dataset=euroc",
+            f"dataset.root={euroc_root}",
+            "dataset.test_seqs=[MH_04_difficult]",
+            "weights.proposed=myimu",
+            f"out_dir={tmp_path}",
+        )

@@ -72,11 +72,16 @@ def test_export_leaves_model_untouched(tiny, tmp_path):
 def test_cli(tiny, tmp_path, capsys):
     pytest.importorskip("onnxscript")
     pytest.importorskip("onnxruntime")
-    model_file = save_model(tiny, {"name": "denoiser", **TINY}, tmp_path / "tiny.pt")
+    model_file = save_model(tiny, {"name": "denoiser", **TINY}, tmp_path / "tiny.pt", {"rate_hz": 200.0})
     assert main([str(model_file), "--onnx", str(tmp_path / "out.onnx"), "--pt2", str(tmp_path / "out.pt2")]) == 0
     out = capsys.readouterr().out
     assert (tmp_path / "out.onnx").is_file() and (tmp_path / "out.pt2").is_file()
     assert "onnxruntime vs PyTorch" in out
+    import onnx  # the file says what its input is: units, channel order, rate
+
+    props = {p.key: p.value for p in onnx.load(str(tmp_path / "out.onnx")).metadata_props}
+    assert props["gyrodenoise.rate_hz"] == "200" and "gyro x, y, z [rad/s]" in props["gyrodenoise.input"]
+    assert props["gyrodenoise.outputs"] == "gyro_corrected (batch, samples, 3) [rad/s]"
 
 
 def test_cli_error_is_one_line(tmp_path, capsys):

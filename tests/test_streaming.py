@@ -63,6 +63,22 @@ def test_calibrated_model():
     assert np.abs(np.stack([sc.push(s) for s in imu]) - predict_gyro(model, imu).numpy()).max() < 1e-6
 
 
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_non_finite_sample_is_refused_and_leaves_the_state(backend):
+    model, imu = random_model(), random_imu(300)
+    ref = StreamingCorrector(model, backend=backend).push_chunk(imu)
+    sc = StreamingCorrector(model, backend=backend)
+    first = sc.push_chunk(imu[:100])
+    bad = imu[100].copy()
+    bad[4] = np.nan
+    with pytest.raises(ValueError, match="NaN/inf"):
+        sc.push(bad)
+    with pytest.raises(ValueError, match="NaN/inf"):
+        sc.push_chunk(np.stack([imu[100], bad]))
+    rest = np.stack([sc.push(s) for s in imu[100:]])  # as if the bad sample had never come
+    assert np.abs(np.concatenate([first, rest]) - ref).max() < ATOL
+
+
 def test_bad_sample_shape():
     sc = StreamingCorrector(random_model())
     with pytest.raises(ValueError, match=r"\(6,\)"):

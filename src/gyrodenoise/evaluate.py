@@ -131,8 +131,14 @@ def evaluate(cfg: DictConfig) -> dict:
         train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
     )
     dm.setup("test" if split == "test" else "fit")
-    proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
-    calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)
+    try:
+        proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
+        calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)
+    except FileNotFoundError as e:  # e.g. dataset=asl_folder: no shipped model of that name
+        raise FileNotFoundError(
+            f"{e} Name the models to score with weights.proposed=PATH (e.g. a training run's model.pt) and "
+            "weights.calibrated=PATH (its calibrated.pt)."
+        ) from None
     methods = {  # "proposed" is run in the loop below, with its spread when it is an ensemble
         "raw IMU": gyro_method(None),
         "zero motion": lambda seq: None,
@@ -234,7 +240,8 @@ def evaluate(cfg: DictConfig) -> dict:
         print(
             f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
             f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows; above 1 the spread "
-            "underestimates the error: `python -m gyrodenoise.ensemble scale` fits a factor on data with ground truth)"
+            "underestimates the error). To correct it, measure this ratio on validation data (split=val), not on "
+            "the test, then `python -m gyrodenoise.ensemble scale ENS.pt --by RATIO --fitted-by TEXT --out ENS2.pt`"
         )
     for w in warned:
         print(f"WARNING: {w}")

@@ -76,8 +76,25 @@ def export_pt2(model: CorrectionModel, path: str | Path) -> Path:
     return path
 
 
-def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET) -> Path:
-    """Write a self-contained ONNX file (weights inside) with dynamic batch and length."""
+def onnx_metadata(model: CorrectionModel, meta: dict | None = None) -> dict[str, str]:
+    """What a user of the .onnx file needs and the graph does not say: units, channel order, rate, origin."""
+    meta = meta or {}
+    out = {
+        "gyrodenoise.input": f"{INPUT_NAME} (batch, samples, 6): gyro x, y, z [rad/s], accelerometer x, y, z [m/s^2], "
+        "IMU body frame, consecutive samples at the training rate, oldest first",
+        "gyrodenoise.outputs": ", ".join(output_names(model)) + " (batch, samples, 3) [rad/s]",
+    }
+    if meta.get("rate_hz"):
+        out["gyrodenoise.rate_hz"] = f"{float(meta['rate_hz']):g}"
+    for key in ("name", "dataset", "beats_calibrated"):
+        if meta.get(key) is not None:
+            out[f"gyrodenoise.{key}"] = str(meta[key])
+    return out
+
+
+def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET, meta: dict | None = None) -> Path:
+    """Write a self-contained ONNX file (weights inside) with dynamic batch and length; `meta` (the model file's
+    metadata) adds the training rate and origin to the file's metadata_props (`onnx_metadata`)."""
     for mod in ("onnx", "onnxscript"):
         try:
             __import__(mod)
@@ -97,6 +114,7 @@ def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET) ->
             external_data=False,
             verbose=False,
         )
+    program.model.metadata_props.update(onnx_metadata(model, meta))
     with atomic_path(path, ".onnx") as tmp:
         program.save(str(tmp), external_data=False)
     return path
@@ -106,7 +124,10 @@ def main(argv: list[str] | None = None) -> int:
     quiet_library_notices()
     ap = argparse.ArgumentParser(
         prog="python -m gyrodenoise.export",
-        description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export.",
+        description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export. "
+        "Input 'imu' (batch, samples, 6): gyro x, y, z [rad/s] and accelerometer x, y, z [m/s^2] at the model's "
+        "training rate; output 'gyro_corrected' (and an ensemble's 'gyro_std') (batch, samples, 3) [rad/s]. "
+        "The .onnx file's metadata_props record these and the training rate.",
     )
     ap.add_argument("model", help="shipped model name (e.g. euroc) or path of a .pt model / .ckpt checkpoint")
     ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length)")
@@ -117,11 +138,11 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.onnx or args.pt2):
         ap.error("give at least one of --onnx PATH, --pt2 PATH")
     try:
-        model, _ = load_model(args.model)
+        model, meta = load_model(args.model)
         if args.pt2:
             print(f"wrote {export_pt2(model, args.pt2)}")
         if args.onnx:
-            export_onnx(model, args.onnx, args.opset)
+            export_onnx(model, args.onnx, args.opset, meta)
             msg = f"wrote {args.onnx}"
             if not args.no_check:
                 err = onnx_parity(model, args.onnx)

@@ -52,6 +52,16 @@ NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
+def _finite(x, what: str) -> None:
+    """A NaN or inf enters every layer's buffer and spoils the outputs of a whole receptive field (~2.5 s)
+    after it, without an error: refused before the state changes."""
+    if not np.isfinite(np.asarray(x)).all():
+        raise ValueError(
+            f"{what}: a NaN/inf IMU value would corrupt the outputs of the next receptive field (~2.5 s at 200 Hz) "
+            "without an error; repair or drop the sample first (the state is unchanged)"
+        )
+
+
 @dataclass
 class _Layer:
     """One dilated conv (batch norm folded in) followed by an activation."""
@@ -198,6 +208,7 @@ class StreamingCorrector:
         """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
         if self.members is None:
             return self.push(sample), None
+        _finite(sample, "push")
         self.n_pushed += 1
         return self._mean_std([m.push(sample) for m in self.members])
 
@@ -205,6 +216,7 @@ class StreamingCorrector:
         """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
         if self.members is None:
             return self.push_chunk(chunk), None
+        _finite(chunk, "push_chunk")
         outs = [m.push_chunk(chunk) for m in self.members]
         self.n_pushed += len(outs[0])
         return self._mean_std(outs)
@@ -214,6 +226,7 @@ class StreamingCorrector:
         """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean)."""
         if self.members is not None:
             return self.push_with_spread(sample)[0]
+        _finite(sample, "push")
         if self.backend == "torch":
             return self._push_torch(sample)
         x = np.asarray(sample, dtype=self.np_dtype)
@@ -266,6 +279,7 @@ class StreamingCorrector:
         if self.members is not None:
             return self.push_chunk_with_spread(chunk)[0]
         x = np.asarray(chunk, dtype=self.np_dtype)
+        _finite(x, "push_chunk")
         if x.ndim != 2 or x.shape[1] != 6:
             raise ValueError(f"push_chunk expects (N, 6) samples, got shape {x.shape}")
         if len(x) == 0:

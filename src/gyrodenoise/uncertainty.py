@@ -168,3 +168,12 @@ def pooled(results: list[CalibrationResult], n_bins: int = 10) -> CalibrationRes
     return CalibrationResult(
         pred, act, *idx, rho, p, reliability_table(pred, act, n_bins), results[0].window_s, results[0].mode
     )
+
+
+if __name__ == "__main__":  # a library module: say where its command-line use is
+    print(
+        "gyrodenoise.uncertainty is a library (calibration, pooled, plots.calibration_figure). To check an "
+        "ensemble's spread against the actual 1-s increment error, run `python -m gyrodenoise.evaluate "
+        "dataset=... weights.proposed=ENS.pt split=val`; to rescale the spread, `python -m gyrodenoise.ensemble "
+        "scale --help`."
+    )
