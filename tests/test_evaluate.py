@@ -167,5 +167,6 @@ def test_unknown_model_names_the_weights_options(euroc_root, tmp_path):
             f"dataset.root={euroc_root}",
             "dataset.test_seqs=[MH_04_difficult]",
             "weights.proposed=myimu",
+            "threads=1",
             f"out_dir={tmp_path}",
         )

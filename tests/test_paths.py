@@ -15,3 +15,12 @@ def test_console_script_keeps_its_name_and_paths_become_portable():
     cmd = invoked_command("train", ["/usr/bin/gyrodenoise-train", f"dataset.root={home_file}"])
     assert cmd == f"gyrodenoise-train dataset.root={portable_path(home_file)}" and str(home_file) not in cmd
     assert invoked_command("train", ["/x/train.py"]) == "python -m gyrodenoise.train"
+
+
+def test_recorded_command_is_quoted_where_a_shell_needs_it():
+    import shlex
+
+    argv = ["/x/train.py", "dataset.train_seqs=[a,b]", "dataset.root=my data", "seed=1", "-o", "out/dir"]
+    cmd = invoked_command("train", argv)
+    assert cmd == "python -m gyrodenoise.train 'dataset.train_seqs=[a,b]' 'dataset.root=my data' seed=1 -o out/dir"
+    assert shlex.split(cmd)[3:] == argv[1:]  # a shell gives the program the same arguments back

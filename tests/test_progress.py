@@ -51,7 +51,8 @@ def test_plain_lines_every_n_epochs(capsys):
     fit(EpochProgressBar(print_every_n_epochs=2, plain=True), epochs=5)
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("epoch ")]
     assert [ln.split(" | ")[0] for ln in lines] == ["epoch 2/5", "epoch 4/5", "epoch 5/5"]  # and the last one
-    assert "val/aoe_deg" not in lines[0] and lines[1].endswith("| val/aoe_deg 3.5")  # latest validation (epoch 3)
+    # the latest validation, with its epoch when it is older than the line
+    assert "val/aoe_deg" not in lines[0] and lines[1].endswith("| val/aoe_deg 3.5 (epoch 3)")
     assert " elapsed, " in lines[0] and " left | train/loss " in lines[0]
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
+import torch
 from omegaconf import DictConfig
 from scipy.spatial.transform import Rotation
 
@@ -122,6 +123,8 @@ def csv_text(header: list[str], rows: list[list[str]]) -> str:
 
 
 def evaluate(cfg: DictConfig) -> dict:
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
     out = Path(cfg.out_dir)
     dm = hydra.utils.instantiate(cfg.dataset)
     split = cfg.get("split", "test")

@@ -10,6 +10,8 @@ folder, else as given.
 from __future__ import annotations
 
 import os
+import re
+import shlex
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -30,6 +32,9 @@ def portable_path(path: str | Path) -> str:
     return str(path)
 
 
+_SHELL_SAFE = re.compile(r"[\w./:=,+@%~-]*")
+
+
 def portable_command(args: Iterable[str]) -> str:
     """A command line with each absolute path argument (also `key=/abs/path` overrides) made portable."""
     out = []
@@ -39,6 +44,11 @@ def portable_command(args: Iterable[str]) -> str:
     return " ".join(out)
 
 
+def _shell_word(a: str) -> str:
+    """`a` quoted where a shell would split or expand it (spaces, Hydra lists [a,b], $, quotes)."""
+    return a if _SHELL_SAFE.fullmatch(a) else shlex.quote(a)
+
+
 def invoked_command(module: str, argv: Sequence[str] | None = None) -> str:
     """The command line as the user typed it: `python -m gyrodenoise.<module> ...` when run as a module
     (sys.argv[0] is then the module's file), the console script's name otherwise; paths made portable."""
@@ -46,7 +56,8 @@ def invoked_command(module: str, argv: Sequence[str] | None = None) -> str:
     prog = Path(argv[0]).name if argv else module
     if prog.endswith(".py"):
         prog = f"python -m gyrodenoise.{module}"
-    return f"{prog} {portable_command(argv[1:])}".rstrip()
+    words = [_shell_word(portable_command([a])) for a in argv[1:]]  # the record re-runs as it is
+    return " ".join([prog, *words])
 
 
 def portable_tree(obj):

@@ -66,12 +66,18 @@ class EpochProgressBar(TQDMProgressBar):
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._start_epoch = trainer.current_epoch  # > 0 when resumed from a checkpoint
+        self._val_epoch: int | None = None
         self._start_time = time.monotonic()
         self.train_progress_bar = self.init_train_tqdm()
         total = trainer.max_epochs if trainer.max_epochs is not None and trainer.max_epochs > 0 else None
         self.train_progress_bar.reset(total=total)
         self.train_progress_bar.initial = self._start_epoch  # the rate and time left count this run's epochs only
         self.train_progress_bar.n = self._start_epoch
+
+    def on_validation_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        super().on_validation_end(trainer, pl_module)
+        if not trainer.sanity_checking:
+            self._val_epoch = trainer.current_epoch + 1  # the plain line says how old its val figure is
 
     def on_train_epoch_start(self, trainer: L.Trainer, *_: Any) -> None:
         pass  # one bar for the whole run: no per-epoch reset
@@ -99,5 +105,9 @@ class EpochProgressBar(TQDMProgressBar):
             parts.append(f"{tqdm.format_interval(elapsed)} elapsed, {tqdm.format_interval(left)} left")
         else:
             parts.append(f"{tqdm.format_interval(elapsed)} elapsed")
-        parts += [f"{k} {v}" for k, v in self.get_metrics(trainer).items()]
+        val_epoch = self._val_epoch
+        parts += [
+            f"{k} {v}" + (f" (epoch {val_epoch})" if k.startswith("val/") and val_epoch not in (None, done) else "")
+            for k, v in self.get_metrics(trainer).items()
+        ]
         print(" | ".join(parts), flush=True)
