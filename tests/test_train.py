@@ -76,6 +76,13 @@ def test_ckpt_path_resumes(root, tmp_path):
     last = tmp_path / "first" / "checkpoints" / "last.ckpt"
     assert torch.load(last, weights_only=False)["epoch"] == 2
     assert [p.name for p in (tmp_path / "first" / "checkpoints").glob("best-*")] == ["best-epoch0001.ckpt"]
+    # a checkpoint of a run takes the run's data facts and safety verdict from its model.pt
+    from gyrodenoise.pretrained import load_model
+
+    run_meta = torch.load(tmp_path / "first" / "model.pt", weights_only=True)["meta"]
+    ckpt_meta = load_model(last)[1]
+    assert ckpt_meta["rate_hz"] == run_meta["rate_hz"] and ckpt_meta["beats_calibrated"] == run_meta["beats_calibrated"]
+    assert ckpt_meta["calibrated_model"] == str(tmp_path / "first" / "calibrated.pt")
     resumed = train(config(root, tmp_path / "second", "trainer.max_epochs=4", f"ckpt_path={last}"))
     assert resumed["epochs"] == 4
 

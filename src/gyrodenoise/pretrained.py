@@ -71,6 +71,24 @@ def is_shipped(path: str | Path) -> bool:
     return p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve()
 
 
+RUN_FACTS = ("dataset", "sensor", "rate_hz", "train_seqs", "train_duration_s", "beats_calibrated")
+
+
+def _run_meta(ckpt: Path) -> dict:
+    """A Lightning checkpoint carries no metadata; in a training run's checkpoints/ folder it takes the run's
+    data facts and safety verdict from the run's model.pt (the verdict is that of the model the run kept)."""
+    model_pt = ckpt.parent.parent / "model.pt"
+    if ckpt.parent.name != "checkpoints" or not model_pt.is_file():
+        return {}
+    meta = torch.load(model_pt, map_location="cpu", weights_only=True).get("meta", {})
+    out = {k: meta[k] for k in RUN_FACTS if k in meta}
+    if meta.get("calibrated_model") and (ckpt.parent.parent / meta["calibrated_model"]).is_file():
+        out["calibrated_model"] = str(ckpt.parent.parent / meta["calibrated_model"])
+    if out:
+        out["metadata_from"] = portable_path(model_pt)
+    return out
+
+
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
     """Returns (model in eval mode, metadata); metadata 'path' is the file, 'name' how reports name it."""
     path = resolve(name_or_path)
@@ -80,7 +98,7 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
         cfg = blob["hyper_parameters"]["model"]
         state = {k[len("model.") :]: v for k, v in blob["state_dict"].items() if k.startswith("model.")}
-        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch")}
+        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **_run_meta(path)}
     else:
         raise ValueError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     model = build_model(**cfg)
