@@ -170,3 +170,24 @@ def test_unknown_model_names_the_weights_options(euroc_root, tmp_path):
             "threads=1",
             f"out_dir={tmp_path}",
         )
+
+
+def test_figures_shade_where_the_ground_truth_is_missing():
+    """TUM-VI's mocap occlusions: the truth there is interpolated, so the figures mark those spans."""
+    import matplotlib.pyplot as plt
+
+    from gyrodenoise.plots import error_figure, orientation_figure
+
+    t = np.arange(1000) * 0.01
+    R = Rotation.from_rotvec(np.c_[np.sin(t), 0 * t, t] * 0.3).as_matrix()
+    mask = np.ones(1000, bool)
+    mask[200:300] = mask[990:] = False
+    for fig in (
+        orientation_figure(t, R, {"x": R}, "t", mask),
+        error_figure(t, {"x": (np.full(1000, 0.1), np.full(1000, 0.1))}, "e", mask),
+    ):
+        spans = [p.get_x() for p in fig.axes[0].patches]
+        assert len(spans) == 2 and spans[0] == pytest.approx(2.0)
+        assert "no ground truth" in [h.get_label() for h in fig.axes[0].patches]
+        plt.close(fig)
+    assert len(orientation_figure(t, R, {"x": R}).axes[0].patches) == 0  # no mask: nothing shaded

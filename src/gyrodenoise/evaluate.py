@@ -181,9 +181,10 @@ def evaluate(cfg: DictConfig) -> dict:
             figs = out / "figures"
             figs.mkdir(parents=True, exist_ok=True)
             shown = {m: r["estimates"][m] for m in ("raw IMU", "calibrated IMU", "proposed")}
-            plots.save(plots.orientation_figure(seq.t, seq.rot, shown, label), figs / f"orientation_{slug(label)}.png")
+            fig = plots.orientation_figure(seq.t, seq.rot, shown, label, seq.gt_mask)
+            plots.save(fig, figs / f"orientation_{slug(label)}.png")
             errs = {m: orientation_errors(seq.rot, R) for m, R in shown.items()}
-            plots.save(plots.error_figure(seq.t, errs, label), figs / f"error_{slug(label)}.png")
+            plots.save(plots.error_figure(seq.t, errs, label, seq.gt_mask), figs / f"error_{slug(label)}.png")
             w_tilde = gyros["proposed"] - seq.gyro @ proposed.C_hat.detach().double().numpy().T
             plots.save(plots.correction_figure(seq.t, w_tilde, label, spread), figs / f"correction_{slug(label)}.png")
 

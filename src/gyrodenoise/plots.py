@@ -18,9 +18,27 @@ from gyrodenoise.uncertainty import CalibrationResult  # noqa: E402
 AXES = ("roll", "pitch", "yaw")
 
 
-def orientation_figure(t: np.ndarray, R_gt: np.ndarray, estimates: dict[str, np.ndarray], title: str = ""):
-    """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6)."""
+def _shade_gaps(axs, t: np.ndarray, gt_mask: np.ndarray | None) -> None:
+    """Grey spans where the ground truth is missing (mocap occlusions): its curve there is interpolated."""
+    if gt_mask is None or gt_mask.all():
+        return
+    edges = np.flatnonzero(np.diff(np.r_[0, (~gt_mask).astype(int), 0]))
+    for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
+        for ax in axs:
+            ax.axvspan(t[a], t[min(b, len(t) - 1)], color="0.85", zorder=0, label="no ground truth" if k == 0 else None)
+
+
+def orientation_figure(
+    t: np.ndarray,
+    R_gt: np.ndarray,
+    estimates: dict[str, np.ndarray],
+    title: str = "",
+    gt_mask: np.ndarray | None = None,
+):
+    """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6); `gt_mask` False: no ground
+    truth there (shaded)."""
     fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    _shade_gaps(axs, t, gt_mask)
     rpy_gt = rpy_of(R_gt)
     gt = np.unwrap(rpy_gt, axis=0)
     # each estimate on the ground truth's 360-degree branch, sample by sample: unwrapped on their own, the
@@ -44,9 +62,12 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-def error_figure(t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):
-    """3D and yaw orientation error (deg) over time for each method (Fig. 7)."""
+def error_figure(
+    t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = "", gt_mask: np.ndarray | None = None
+):
+    """3D and yaw orientation error (deg) over time for each method (Fig. 7); `gt_mask` as orientation_figure."""
     fig, axs = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    _shade_gaps(axs, t, gt_mask)
     for name, (e3d, eyaw) in errors.items():
         axs[0].plot(t, np.degrees(e3d), lw=1, label=name)
         axs[1].plot(t, np.degrees(np.abs(eyaw)), lw=1, label=name)
