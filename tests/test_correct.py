@@ -302,3 +302,20 @@ def test_output_file_that_is_a_folder_is_refused_before_the_work(tmp_path, model
     (tmp_path / "tum").mkdir()
     expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "out", "--out-tum", tmp_path / "tum"], "is a folder")
     assert not (tmp_path / "out").exists()  # nothing half-written
+
+
+def test_every_bad_line_is_reported_in_one_run(tmp_path, model_file, capsys):
+    """A damaged file: its truncated line, non-number and NaN come in one error, in line order."""
+    t_ns, gyro, acc = synth()
+    f = write_asl(tmp_path / "imu.csv", t_ns, gyro, acc)
+    lines = f.read_text().splitlines()
+    lines[300] = lines[300][:20]  # truncated
+    fields = lines[100].split(",")
+    fields[2] = "x"
+    lines[100] = ",".join(fields)
+    fields = lines[500].split(",")
+    fields[5] = "nan"
+    lines[500] = ",".join(fields)
+    f.write_text("\n".join(lines) + "\n")
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], "3 lines to fix in all")
+    assert err.index(f"{f}:101: column 3 is 'x'") < err.index(f"{f}:301: ") < err.index(f"{f}:501: column 6 (a_y) is nan")

@@ -127,6 +127,7 @@ def read_imu_csv(
     stamps: list[int] = []
     rows: list[list[float]] = []
     line_numbers: list[int] = []
+    problems: list[str] = []  # every bad line, reported together (one run finds them all)
     ns_per = TIME_UNITS[time_unit]
     for lineno, raw in text_lines(path, CSV_LAYOUT):
         s = raw.strip()
@@ -151,10 +152,11 @@ def read_imu_csv(
                 "without it cannot be corrected. If the columns are there, check --columns/--delimiter."
             )
         if len(fields) <= max(idx):
-            raise DataFormatError(
+            problems.append(
                 f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
                 "remove the truncated line, or check --columns/--delimiter."
             )
+            continue
         t_field = fields[idx[0]]
         if time_unit == "ns" and "." in t_field and _is_number(t_field) and float(t_field) % 1:
             raise DataFormatError(
@@ -169,24 +171,36 @@ def read_imu_csv(
                 stamps.append(round(float(t_field) * ns_per))
             rows.append([float(fields[i]) for i in idx[1:]])
         except ValueError:
+            del stamps[len(rows) :]  # the stamp of this line was appended, its values were not
             bad = next(i for i in idx if not _is_number(fields[i]))
-            raise DataFormatError(
+            problems.append(
                 f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number; fix or remove that line, "
                 "or check --columns/--delimiter."
-            ) from None
+            )
+            continue
         line_numbers.append(lineno)
+    names = header or []
+    if rows:
+        values = np.array(rows, dtype=np.float64)
+        lines = np.array(line_numbers)
+        bad = ~np.isfinite(values)
+        for r in np.flatnonzero(bad.any(1)):  # NaN/inf, after the lines that do not parse: all in one report
+            c = int(np.flatnonzero(bad[r])[0])
+            name = f" ({names[idx[c + 1]]})" if idx[c + 1] < len(names) else ""
+            problems.append(
+                f"{path}:{lines[r]}: column {idx[c + 1] + 1}{name} is {values[r, c]}. Remove or repair NaN/inf "
+                "samples; gyrodenoise does not fill them in silently."
+            )
+    if problems:
+        problems.sort(key=lambda m: int(m[len(str(path)) + 1 :].split(":", 1)[0]))
+        more = (
+            ""
+            if len(problems) == 1
+            else f"\n({len(problems)} lines to fix in all; the first ones:)\n" + "\n".join(problems[1:6])
+        )
+        raise DataFormatError(problems[0] + more)
     if not rows:
         raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")
-    values = np.array(rows, dtype=np.float64)
-    lines = np.array(line_numbers)
-    bad = ~np.isfinite(values)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise DataFormatError(
-            f"{path}:{lines[r]}: column {idx[c + 1] + 1} is {values[r, c]} ({int(bad.any(1).sum())} lines "
-            "with NaN/inf). Remove or repair these samples; gyrodenoise does not fill them in silently."
-        )
-    names = header or []
     desc = {
         f: f"column {i + 1}" + (f" ({names[i]})" if i < len(names) else "") for f, i in zip(FIELDS, idx, strict=True)
     }
