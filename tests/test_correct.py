@@ -318,4 +318,5 @@ def test_every_bad_line_is_reported_in_one_run(tmp_path, model_file, capsys):
     lines[500] = ",".join(fields)
     f.write_text("\n".join(lines) + "\n")
     err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], "3 lines to fix in all")
-    assert err.index(f"{f}:101: column 3 is 'x'") < err.index(f"{f}:301: ") < err.index(f"{f}:501: column 6 (a_y) is nan")
+    first, second = err.index(f"{f}:101: column 3 is 'x'"), err.index(f"{f}:301: ")
+    assert first < second < err.index(f"{f}:501: column 6 (a_y) is nan")
