@@ -190,11 +190,13 @@ def check_rate(rec: ImuRecording, model_rate_hz: float | None, report: CheckRepo
         return True
     if abs(report.rate_hz / model_rate_hz - 1.0) <= RATE_TOL:
         return False
+    up = " (upsampling interpolates: it cannot restore the bandwidth the recording lacks, and may not help)"
     report.warn(
         f"{rec.path}: sampled at {report.rate_hz:.4g} Hz but the model was trained at {model_rate_hz:.4g} Hz. "
         "Its dilated convolutions span a fixed number of samples, so at another rate it sees another "
-        f"time window and noise level: pass --resample to resample to {model_rate_hz:.4g} Hz, or train a "
-        "model on data at this rate."
+        f"time window and noise level: pass --resample to resample to {model_rate_hz:.4g} Hz"
+        + (up if report.rate_hz < model_rate_hz else "")
+        + ", or train a model on data at this rate."
     )
     return False
 
