@@ -98,3 +98,17 @@ def test_real_euroc_slice(euroc_root):
     sc = StreamingCorrector(model)
     out = np.concatenate([np.stack([sc.push(s) for s in imu[:700]]), sc.push_chunk(imu[700:])])
     assert np.abs(out - ref).max() < ATOL
+
+
+def test_ensemble_refuses_a_non_finite_sample_without_changing_its_state():
+    from gyrodenoise.models.ensemble import EnsembleCorrection
+
+    ens, imu = EnsembleCorrection([random_model(seed=1), random_model(seed=2)]).eval(), random_imu(200)
+    ref = StreamingCorrector(ens).push_chunk(imu)
+    sc = StreamingCorrector(ens)
+    first = sc.push_chunk(imu[:50])
+    with pytest.raises(ValueError, match="NaN/inf"):
+        sc.push(np.full(6, np.nan))
+    assert sc.n_pushed == 50
+    rest = np.stack([sc.push(s) for s in imu[50:]])
+    assert np.abs(np.concatenate([first, rest]) - ref).max() < ATOL

@@ -208,15 +208,14 @@ class StreamingCorrector:
         """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
         if self.members is None:
             return self.push(sample), None
-        _finite(sample, "push")
+        outs = [m.push(sample) for m in self.members]  # a NaN/inf sample: the first member refuses it, no state changed
         self.n_pushed += 1
-        return self._mean_std([m.push(sample) for m in self.members])
+        return self._mean_std(outs)
 
     def push_chunk_with_spread(self, chunk) -> tuple[np.ndarray, np.ndarray | None]:
         """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
         if self.members is None:
             return self.push_chunk(chunk), None
-        _finite(chunk, "push_chunk")
         outs = [m.push_chunk(chunk) for m in self.members]
         self.n_pushed += len(outs[0])
         return self._mean_std(outs)
