@@ -19,6 +19,7 @@ import hydra
 import lightning.pytorch as L
 import torch
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from lightning.pytorch.callbacks import LearningRateMonitor, WeightAveraging
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
@@ -142,16 +143,16 @@ def build_module(cfg: DictConfig) -> DenoiserModule:
     return module
 
 
-def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, test: bool = True) -> tuple[dict, dict]:
-    """Validation (and, with cfg.test and `test`, test) metrics of `module` by a trainer without callbacks or
+def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, validate: bool = True) -> tuple[dict, dict]:
+    """Validation (with `validate`) and, with cfg.test, test metrics of `module` by a trainer without callbacks or
     loggers. The run's own trainer would let a weight-averaging callback (callbacks=ema) swap its averaged
     weights in over the module scored, and would log this scoring as one more point of the validation curve."""
     plain: L.Trainer = hydra.utils.instantiate(
         cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
     )
-    val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0]  # {}: nothing to validate on
-    scores = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") and test else {}
-    return val, scores
+    val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0] if validate else {}  # {}: no val data
+    test = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") else {}
+    return val, test
 
 
 def train(cfg: DictConfig) -> dict:
@@ -209,12 +210,11 @@ def train(cfg: DictConfig) -> dict:
     val, test = _score_without_callbacks(cfg, dm, module)
     test_other = {}
     if alternative is not None and cfg.get("test_other_rule") and cfg.get("test"):
-        test_other = _score_without_callbacks(cfg, dm, alternative)[1]
+        test_other = _score_without_callbacks(cfg, dm, alternative, validate=False)[1]
     val_raw_final, test_raw_final = _score_without_callbacks(cfg, dm, raw_final) if raw_final is not None else ({}, {})
-    for lg in trainer.loggers:  # the test figures beside the curves (the post-fit validation is not a new point)
-        if test:
-            lg.log_metrics(test, step=trainer.global_step)
-            lg.save()
+    for lg in trainer.loggers if test else []:  # the test figures beside the curves (not the post-fit validation)
+        lg.log_metrics(test, step=trainer.global_step)
+        lg.save()
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if baseline else {}
 
@@ -278,7 +278,7 @@ def single_run_of_a_sweep_note() -> str | None:
         return None
     hc = HydraConfig.get()
     params = dict((hc.sweeper.get("params") or {}) if "sweeper" in hc else {})
-    if str(hc.mode) != "RunMode.RUN" or not params:
+    if hc.mode != RunMode.RUN or not params:
         return None
     swept = ", ".join(f"{k} over {v}" for k, v in params.items())
     return f"note: this config defines a sweep ({swept}); this is one run of it. Add -m to run the sweep."
