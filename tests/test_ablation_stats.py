@@ -338,3 +338,14 @@ def test_whole_report(activation_runs, tmp_path):
     assert "![paired differences](ablation_euroc/paired/activation.png)" in md
     for ext in ("md", "csv", "png"):
         assert (tables / f"activation.{ext}").is_file()
+
+
+def test_report_out_is_a_prefix_and_an_empty_folder_says_where_runs_go(activation_runs, tmp_path, capsys):
+    """--report --out PREFIX writes PREFIX.md (as --out does elsewhere); without an appendix file the report does
+    not mention one; a folder without the queue's layout says what it expects."""
+    assert ablation.main([str(activation_runs), "--report", "--out", str(tmp_path / "rep")]) == 0
+    md = (tmp_path / "rep.md").read_text()
+    assert "appendix" not in md.split("\n\n")[1]
+    (tmp_path / "sweep").mkdir()
+    assert ablation.main([str(tmp_path / "sweep"), "--report", "--out", str(tmp_path / "none")]) == 0
+    assert "--claim NAME --out PREFIX" in capsys.readouterr().err
