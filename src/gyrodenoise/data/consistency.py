@@ -16,11 +16,11 @@ import numpy as np
 from scipy.signal import correlate
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise.data.checks import GAP_FACTOR  # the corrector's gap: a step > 3 x the median period
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import Sequence
 
 DEG_PER_RAD = 180.0 / np.pi
-GAP_FACTOR = 3.0  # an IMU step longer than this x the median period is a gap
 RATIO_RANGE = (0.5, 2.0)  # gyro / truth rate magnitude outside it: a scale or unit problem
 MAX_LAG_S = 0.05  # a best lag beyond it: the truth is not on the IMU's clock
 SEARCH_S = 60.0  # lags searched either way

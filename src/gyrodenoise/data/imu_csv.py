@@ -127,7 +127,8 @@ def read_imu_csv(
     stamps: list[int] = []
     rows: list[list[float]] = []
     line_numbers: list[int] = []
-    problems: list[str] = []  # every bad line, reported together (one run finds them all)
+    problems: list[tuple[int, str]] = []  # (line, message) of every bad line, reported together
+    short_lines, short_fields = 0, 0  # lines with too few columns, and the first one's count
     ns_per = TIME_UNITS[time_unit]
     for lineno, raw in text_lines(path, CSV_LAYOUT):
         s = raw.strip()
@@ -145,16 +146,15 @@ def read_imu_csv(
                 header = fields
                 continue
             idx = _resolve_columns(columns, header, path)
-        if len(fields) <= max(idx) and not rows:  # the first data line: the file, not one line, is short
-            raise DataFormatError(
-                f"{path}:{lineno}: {len(fields)} columns, but the mapping reads column {max(idx) + 1} (time, gyro "
-                "x/y/z, accelerometer x/y/z). The models read the accelerometer as well as the gyro: a recording "
-                "without it cannot be corrected. If the columns are there, check --columns/--delimiter."
-            )
         if len(fields) <= max(idx):
+            short_lines += 1
+            short_fields = short_fields or len(fields)
             problems.append(
-                f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
-                "remove the truncated line, or check --columns/--delimiter."
+                (
+                    lineno,
+                    f"{path}:{lineno}: {len(fields)} columns, but column {max(idx) + 1} is mapped. Fix or "
+                    "remove the truncated line, or check --columns/--delimiter.",
+                )
             )
             continue
         t_field = fields[idx[0]]
@@ -174,11 +174,21 @@ def read_imu_csv(
             del stamps[len(rows) :]  # the stamp of this line was appended, its values were not
             bad = next(i for i in idx if not _is_number(fields[i]))
             problems.append(
-                f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number; fix or remove that line, "
-                "or check --columns/--delimiter."
+                (
+                    lineno,
+                    f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number; fix or remove that line, "
+                    "or check --columns/--delimiter.",
+                )
             )
             continue
         line_numbers.append(lineno)
+    if short_lines and short_lines == len(problems) and not rows:  # every line short: the file lacks the columns
+        first = problems[0][0]
+        raise DataFormatError(
+            f"{path}:{first}: {short_fields} columns, but the mapping reads column {max(idx) + 1} (time, gyro "
+            "x/y/z, accelerometer x/y/z). The models read the accelerometer as well as the gyro: a recording "
+            "without it cannot be corrected. If the columns are there, check --columns/--delimiter."
+        )
     names = header or []
     if rows:
         values = np.array(rows, dtype=np.float64)
@@ -188,17 +198,16 @@ def read_imu_csv(
             c = int(np.flatnonzero(bad[r])[0])
             name = f" ({names[idx[c + 1]]})" if idx[c + 1] < len(names) else ""
             problems.append(
-                f"{path}:{lines[r]}: column {idx[c + 1] + 1}{name} is {values[r, c]}. Remove or repair NaN/inf "
-                "samples; gyrodenoise does not fill them in silently."
+                (
+                    int(lines[r]),
+                    f"{path}:{lines[r]}: column {idx[c + 1] + 1}{name} is {values[r, c]}. Remove or repair NaN/inf "
+                    "samples; gyrodenoise does not fill them in silently.",
+                )
             )
     if problems:
-        problems.sort(key=lambda m: int(m[len(str(path)) + 1 :].split(":", 1)[0]))
-        more = (
-            ""
-            if len(problems) == 1
-            else f"\n({len(problems)} lines to fix in all; the first ones:)\n" + "\n".join(problems[1:6])
-        )
-        raise DataFormatError(problems[0] + more)
+        messages = [m for _, m in sorted(problems)]
+        more = "" if len(messages) == 1 else f"\n({len(messages)} lines to fix in all; the first ones:)\n"
+        raise DataFormatError(messages[0] + more + "\n".join(messages[1:6]))
     if not rows:
         raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")
     desc = {
