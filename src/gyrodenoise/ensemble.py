@@ -126,9 +126,11 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     check_compatible(records, allow_mixed)
     seen: dict[str, str] = {}
     for r in records:  # one network twice would weigh it double and shrink the spread
-        if r.get("sha256") and r["sha256"] in seen:
-            raise ValueError(f"the same member twice: {r['path']} and {seen[r['sha256']]} (identical files)")
-        seen.setdefault(r.get("sha256") or "", r["path"])
+        sha = r.get("sha256")
+        if sha in seen:
+            raise ValueError(f"the same member twice: {r['path']} and {seen[sha]} (identical files)")
+        if sha:  # older records may lack it: not comparable
+            seen[sha] = r["path"]
     beats = [r.get("beats_calibrated") for r in records]
     if any(b is False for b in beats):
         bad = [r["path"] for r in records if r.get("beats_calibrated") is False]
