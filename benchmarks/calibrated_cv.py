@@ -29,15 +29,17 @@ OUT = Path("benchmarks/results/calibrated_cv")
 DURATIONS = {"first 50 s": "50", "whole": "null"}
 
 
-def fit_fold(dataset: str, fold: int, duration: str) -> tuple[CalibratedImu, list[Sequence]]:
-    """The calibrated model fitted on the training sequences of `fold` (their first `duration` s, or "null": whole)
-    and the held-out sequence's parts (whole; split only at ground-truth gaps)."""
+def fit_fold(
+    dataset: str, fold: int, duration: str, g_sensitivity: bool = False
+) -> tuple[CalibratedImu, list[Sequence]]:
+    """The calibrated model (with its g-sensitivity term if asked) fitted on the training sequences of `fold` (their
+    first `duration` s, or "null": whole) and the held-out sequence's parts (whole; split only at ground-truth gaps)."""
     overrides = [f"dataset={dataset}", f"dataset.cv_fold={fold}", f"dataset.train_duration_s={duration}"]
     cfg = compose_config("train", overrides)
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.setup("fit")
     held_out = [s for s, g in zip(dm.val_part, dm.val_groups, strict=True) if g == "val"]
-    return fit_calibrated(dm.train_part, loss=dict(cfg.loss)), held_out
+    return fit_calibrated(dm.train_part, loss=dict(cfg.loss), g_sensitivity=g_sensitivity), held_out
 
 
 def fold_scores(dataset: str, fold: int) -> dict[str, float | str]:

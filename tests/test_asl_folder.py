@@ -145,13 +145,12 @@ def test_fit_calibrated_alone(asl_root, tmp_path):
     from gyrodenoise.baseline import evaluate_on
     from gyrodenoise.fit_calibrated import fit
 
-    cfg = compose_config(
-        "fit_calibrated",
-        ["dataset=asl_folder", f"dataset.root={asl_root}", "dataset.name=my_imu", "dataset.train_seqs=[walk_1,walk_2]",
-         "dataset.val_seqs=[walk_3]", "dataset.test_seqs=[walk_3]", "dataset.train_duration_s=null",
-         f"paths.output_dir={tmp_path}"],
-    )  # fmt: skip
-    summary = fit(cfg)
+    overrides = [
+        "dataset=asl_folder", f"dataset.root={asl_root}", "dataset.name=my_imu", "dataset.train_seqs=[walk_1,walk_2]",
+        "dataset.val_seqs=[walk_3]", "dataset.test_seqs=[walk_3]", "dataset.train_duration_s=null",
+        f"paths.output_dir={tmp_path}",
+    ]  # fmt: skip
+    summary = fit(compose_config("fit_calibrated", overrides))
     model, meta = load_model(tmp_path / "model.pt")
     assert meta["train_seqs"] == ["walk_1", "walk_2"] and meta["train_duration_s"] is None
     assert meta["val_aoe_deg"] == pytest.approx(summary["aoe_deg"]["val"])
@@ -162,3 +161,8 @@ def test_fit_calibrated_alone(asl_root, tmp_path):
     assert evaluate_on(model, [seq])["walk_3"] == pytest.approx(summary["aoe_deg"]["val"], rel=1e-5)
     raw = evaluate_on(None, [seq])["walk_3"]
     assert summary["aoe_deg"]["val"] < 0.2 * raw
+
+    # model.g_sensitivity=true: the 21-parameter form is fitted and saved as such
+    fit(compose_config("fit_calibrated", [*overrides, "model.g_sensitivity=true"]))
+    model_g, _ = load_model(tmp_path / "model.pt")
+    assert model_g.G is not None and model.G is None

@@ -430,8 +430,10 @@ def test_calibration_skips_windows_without_ground_truth():
 # ------------------------------------------------------------------ calibrated baseline fit
 
 
-def synthetic_sequence(name: str, seconds: float, C: np.ndarray, bias: np.ndarray, seed: int) -> Sequence:
-    """Ground truth from a smooth rate; the raw gyro is what C_hat w + bias maps back to it."""
+def synthetic_sequence(
+    name: str, seconds: float, C: np.ndarray, bias: np.ndarray, seed: int, G: np.ndarray | None = None
+) -> Sequence:
+    """Ground truth from a smooth rate; the raw gyro is what C_hat w + bias (+ G acc) maps back to it."""
     rng = np.random.default_rng(seed)
     rate = 200.0
     n = int(seconds * rate) + 1
@@ -439,8 +441,9 @@ def synthetic_sequence(name: str, seconds: float, C: np.ndarray, bias: np.ndarra
     f = rng.uniform(0.1, 0.6, 3)
     w_true = 0.8 * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 6, 3))
     R = integrate_gyro(np.eye(3), w_true, np.full(n, 1 / rate))
-    raw = (w_true - bias) @ np.linalg.inv(C).T + 1e-3 * rng.standard_normal((n, 3))
     acc = Rotation.from_matrix(R).inv().apply([0, 0, 9.81])
+    g_term = 0.0 if G is None else acc @ G.T
+    raw = (w_true - bias - g_term) @ np.linalg.inv(C).T + 1e-3 * rng.standard_normal((n, 3))
     return Sequence(name, 0, t, raw, acc, R, np.zeros((n, 3)), np.ones(n, dtype=bool))
 
 
@@ -463,6 +466,27 @@ def test_fit_calibrated_recovers_c_and_bias_and_flags():
     assert flags["calibrated_val_aoe_deg"] == pytest.approx(scores["v"])
     assert safety_meta(cal, raw, val)["beats_calibrated"] is True
     assert safety_meta(cal, raw, [])["beats_calibrated"] is None
+
+
+def test_fit_calibrated_recovers_g_sensitivity():
+    """model.g_sensitivity: w_hat = C_hat w + b + G a; the same L-BFGS fit recovers a G of ~0.5 deg/s/g from motion
+    that tilts the body, and the 12-parameter fit cannot take its place."""
+    rng = np.random.default_rng(1)
+    C = np.eye(3) + 0.01 * rng.standard_normal((3, 3))
+    bias = np.array([0.02, -0.03, 0.07])
+    G = np.radians(0.5) / 9.81 * rng.standard_normal((3, 3))  # rad/s per m/s^2
+    train = [synthetic_sequence(f"s{i}", 30.0, C, bias, i, G) for i in range(3)]
+    val = [synthetic_sequence("v", 20.0, C, bias, 9, G)]
+    cal_g = fit_calibrated(train, g_sensitivity=True)
+    np.testing.assert_allclose(cal_g.G.detach().numpy(), G, atol=0.05 * np.abs(G).max())
+    np.testing.assert_allclose(cal_g.bias.detach().numpy(), bias, atol=5e-4)
+    assert evaluate_on(cal_g, val)["v"] < 0.5 * evaluate_on(fit_calibrated(train), val)["v"]
+    rebuilt = build_model("calibrated", g_sensitivity=True)
+    rebuilt.load_state_dict(cal_g.state_dict())
+    imu = val[0].imu
+    np.testing.assert_allclose(predict_gyro(rebuilt, imu).numpy(), predict_gyro(cal_g, imu).numpy())
+    with pytest.raises(ValueError, match="g_sensitivity"):
+        build_model("calibrated", scale=1)
 
 
 def test_real_euroc_slice_ensemble(euroc_root):

@@ -54,10 +54,14 @@ def test_reset_starts_a_new_sequence():
     assert np.abs(sc.push_chunk(imu) - predict_gyro(model, imu).numpy()).max() < ATOL
 
 
-def test_calibrated_model():
-    model = build_model("calibrated")
+@pytest.mark.parametrize("g_sensitivity", [False, True])
+def test_calibrated_model(g_sensitivity):
+    model = build_model("calibrated", g_sensitivity=g_sensitivity)
     model.bias.data[:] = torch.tensor([0.01, -0.02, 0.03])
     model.C_delta.data.normal_(std=0.01)
+    if g_sensitivity:
+        model.G.data.normal_(std=1e-3)
+        model.set_normalization(np.r_[0.0, 0.1, 0.0, 0.2, -0.3, 9.8], np.r_[0.5, 0.5, 0.5, 2.0, 1.5, 3.0])
     imu = random_imu(50)
     sc = StreamingCorrector(model)
     assert np.abs(np.stack([sc.push(s) for s in imu]) - predict_gyro(model, imu).numpy()).max() < 1e-6

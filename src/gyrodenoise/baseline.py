@@ -59,8 +59,9 @@ def fit_calibrated(
     loss: Mapping | None = None,
     weight_decay: float = 0.0,
     max_iter: int = 100,
+    g_sensitivity: bool = False,
 ) -> CalibratedImu:
-    """Fit C_hat and the gyro bias to the training sequences with the increment loss.
+    """Fit C_hat and the gyro bias (and G, with g_sensitivity) to the training sequences with the increment loss.
 
     sequences: the training parts (e.g. `ImuDataModule.train_part`); loss: IncrementLoss options (the
     `loss` config of training); weight_decay: an L2 penalty 0.5 * wd * ||theta||^2, what Adam's coupled
@@ -74,7 +75,7 @@ def fit_calibrated(
         raise ValueError("fit_calibrated: no training sequence has a ground-truth increment to fit")
     weights = torch.tensor([float(t[3].sum()) for t in terms], dtype=torch.float64)
     weights = weights / weights.sum()
-    model = CalibratedImu().double()
+    model = CalibratedImu(g_sensitivity).double()
     opt = torch.optim.LBFGS(
         model.parameters(), lr=1.0, max_iter=max_iter, history_size=20, line_search_fn="strong_wolfe"
     )

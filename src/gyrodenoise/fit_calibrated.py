@@ -8,7 +8,7 @@ L-BFGS, float64, whole training parts), written as a model file that loads like 
 summary.json: the AOE on each validation group ("val": the held-out sequence under cross-validation or the
 end of the training sequences; "val_tail": the end of the other training sequences under cross-validation)
 and on the test sequences when `test=true` and they exist. Config `fit_calibrated`: the training config with
-`model=calibrated`; only its `dataset` and `loss` groups are used (no trainer, no optimiser).
+`model=calibrated`; only its `dataset` and `loss` groups and `model.g_sensitivity` are used (no trainer, no optimiser).
 """
 
 from __future__ import annotations
@@ -37,7 +37,10 @@ def fit(cfg: DictConfig) -> dict:
     dm.check_sequences(test=bool(cfg.get("test")))
     dm.setup("fit")
     start = time.time()
-    model = fit_calibrated(dm.train_part, loss=OmegaConf.to_container(cfg.loss, resolve=True))
+    g_sensitivity = bool(cfg.model.get("g_sensitivity", False))
+    model = fit_calibrated(
+        dm.train_part, loss=OmegaConf.to_container(cfg.loss, resolve=True), g_sensitivity=g_sensitivity
+    )
     fit_s = time.time() - start
     scores: dict[str, dict[str, float]] = {}
     for group in dict.fromkeys(dm.val_groups):
@@ -59,7 +62,7 @@ def fit(cfg: DictConfig) -> dict:
     }
     save_model(
         model,
-        {"name": "calibrated"},
+        {"name": "calibrated", "g_sensitivity": g_sensitivity},
         out_dir / "model.pt",
         meta={
             **dm.model_meta(),

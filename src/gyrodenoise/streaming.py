@@ -151,6 +151,10 @@ class StreamingCorrector:
         elif isinstance(model, CalibratedImu):
             self.layers, self.head_w, self.head_b = [], np.zeros((3, 6)), np.zeros(3)
             self.constant = model.bias.detach().double().numpy()
+            if model.G is not None:  # G a = (G diag(std_a)) h_a + G mean_a on the normalised input h
+                G = model.G.detach().double().numpy()
+                self.head_w[:, 3:] = G * self.std[3:]
+                self.constant = self.constant + G @ self.mean[3:]
         else:
             raise TypeError(f"no streaming implementation for {type(model).__name__}")
         self.receptive_field = 1 + sum(ly.span - 1 for ly in self.layers)

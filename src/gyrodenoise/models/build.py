@@ -26,7 +26,7 @@ def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
     if name == "denoiser":
         return DilatedCNNDenoiser(**kwargs)
     if name == "calibrated":
-        if kwargs:
-            raise ValueError(f"the calibrated model takes no options, got {sorted(kwargs)}")
-        return CalibratedImu()
+        if set(kwargs) - {"g_sensitivity"}:
+            raise ValueError(f"the calibrated model takes only `g_sensitivity`, got {sorted(kwargs)}")
+        return CalibratedImu(**kwargs)
     raise ValueError(f"model.name={name!r}; choose 'denoiser', 'calibrated' or 'ensemble'")

@@ -103,15 +103,22 @@ class DilatedCNNDenoiser(GyroCorrection):
 
 
 class CalibratedImu(GyroCorrection):
-    """The 'calibrated IMU' baseline: C_hat and a constant bias, 12 parameters."""
+    """The 'calibrated IMU' baseline: C_hat and a constant bias, 12 parameters.
 
-    def __init__(self) -> None:
+    g_sensitivity=True adds G (3x3, rad/s per m/s^2): a gyro bias linear in the raw specific force,
+    w_hat = C_hat w_imu + b + G a_imu (21 parameters; a MEMS gyro's acceleration sensitivity).
+    """
+
+    def __init__(self, g_sensitivity: bool = False) -> None:
         super().__init__()
         self.bias = nn.Parameter(torch.zeros(3))
+        self.G = nn.Parameter(torch.zeros(3, 3)) if g_sensitivity else None
         self.receptive_field = 1
 
     def correction(self, imu: torch.Tensor) -> torch.Tensor:
-        return self.bias.expand(*imu.shape[:-1], 3)
+        if self.G is None:
+            return self.bias.expand(*imu.shape[:-1], 3)
+        return self.bias + imu[..., 3:] @ self.G.T
 
 
 @torch.no_grad()
