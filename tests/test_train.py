@@ -87,6 +87,23 @@ def test_ckpt_path_resumes(root, tmp_path):
     assert resumed["epochs"] == 4
 
 
+def test_resumed_run_ends_on_the_uninterrupted_runs_weights(root, tmp_path):
+    """A run stopped after epoch 2 and resumed from its last.ckpt ends with exactly the weights of the same run
+    done in one go: the checkpoint carries the random stream (crops, dropout) with the optimiser state."""
+
+    def run(out: str, epochs: int, *extra: str) -> dict:
+        cfg = config(root, tmp_path / out, "seed=5", f"trainer.max_epochs={epochs}", "optim.scheduler.T_0=4", *extra)
+        cfg.callbacks.last_checkpoint.every_n_epochs = 1
+        train(cfg)
+        return torch.load(tmp_path / out / "model.pt", weights_only=True)["state_dict"]
+
+    whole = run("whole", 4)
+    run("part", 2)
+    resumed = run("resumed", 4, f"ckpt_path={tmp_path / 'part' / 'checkpoints' / 'last.ckpt'}")
+    for k in whole:
+        torch.testing.assert_close(resumed[k], whole[k], rtol=0, atol=0, msg=k)
+
+
 def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     """experiment=sim_quick (the README's main job) on tiny settings: TensorBoard gets the scalars, the
     figures and the hparams; without a terminal the progress is one plain line every N epochs."""

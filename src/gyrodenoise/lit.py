@@ -138,6 +138,21 @@ class DenoiserModule(L.LightningModule):
                 )
                 tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(t, w_tilde, title), step)
 
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        # the random stream (crops, augmentation, dropout: all torch's generators) travels with the weights, so a
+        # run resumed from last.ckpt continues on the uninterrupted run's path instead of a fresh draw
+        checkpoint["rng_states"] = {"torch": torch.get_rng_state()}
+        if torch.cuda.is_available() and torch.cuda.is_initialized():
+            checkpoint["rng_states"]["cuda"] = torch.cuda.get_rng_state_all()
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        states = checkpoint.get("rng_states")  # absent in checkpoints written before it was saved: resume as before
+        if states is None:
+            return
+        torch.set_rng_state(states["torch"])
+        if "cuda" in states and torch.cuda.is_available() and len(states["cuda"]) == torch.cuda.device_count():
+            torch.cuda.set_rng_state_all(states["cuda"])
+
     def configure_optimizers(self):
         o = self.hparams.optim
         opt = torch.optim.Adam(self.parameters(), lr=o["lr"], weight_decay=o.get("weight_decay", 0.0))
