@@ -104,6 +104,17 @@ def test_resumed_run_ends_on_the_uninterrupted_runs_weights(root, tmp_path):
         torch.testing.assert_close(resumed[k], whole[k], rtol=0, atol=0, msg=k)
 
 
+def test_csv_logger_alone_writes_the_curves_and_the_test(root, tmp_path):
+    """logger=csv: the validation curve and the test figures in csv/metrics.csv, no TensorBoard files."""
+    import csv
+
+    train(config(root, tmp_path / "run", "logger=csv"))
+    rows = list(csv.DictReader((tmp_path / "run" / "csv" / "metrics.csv").open()))
+    assert [r["epoch"] for r in rows if r.get("val/aoe_deg")] == ["0", "1", "2"]
+    assert any(r.get("test/aoe_deg") for r in rows)
+    assert not (tmp_path / "run" / "tensorboard").exists()
+
+
 def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     """experiment=sim_quick (the README's main job) on tiny settings: TensorBoard gets the scalars, the
     figures and the hparams; without a terminal the progress is one plain line every N epochs."""
