@@ -83,6 +83,13 @@ def test_ckpt_path_resumes(root, tmp_path):
     ckpt_meta = load_model(last)[1]
     assert ckpt_meta["rate_hz"] == run_meta["rate_hz"] and ckpt_meta["beats_calibrated"] == run_meta["beats_calibrated"]
     assert ckpt_meta["calibrated_model"] == str(tmp_path / "first" / "calibrated.pt")
+    # copied out of its run, a checkpoint still knows its data (rate, training sequences), not the verdict
+    import shutil
+
+    alone = shutil.copy(last, tmp_path / "copied.ckpt")
+    alone_meta = load_model(alone)[1]
+    assert alone_meta["rate_hz"] == run_meta["rate_hz"] and alone_meta["train_seqs"] == ["a", "b"]
+    assert "beats_calibrated" not in alone_meta
     resumed = train(config(root, tmp_path / "second", "trainer.max_epochs=4", f"ckpt_path={last}"))
     assert resumed["epochs"] == 4
 

@@ -144,6 +144,9 @@ class DenoiserModule(L.LightningModule):
         checkpoint["rng_states"] = {"torch": torch.get_rng_state()}
         if torch.cuda.is_available() and torch.cuda.is_initialized():
             checkpoint["rng_states"]["cuda"] = torch.cuda.get_rng_state_all()
+        dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        if dm is not None and hasattr(dm, "model_meta"):  # the data facts travel with a checkpoint copied elsewhere
+            checkpoint["data_facts"] = dm.model_meta()
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
         states = checkpoint.get("rng_states")  # absent in checkpoints written before it was saved: resume as before

@@ -75,8 +75,9 @@ RUN_FACTS = ("dataset", "sensor", "rate_hz", "train_seqs", "train_duration_s", "
 
 
 def _run_meta(ckpt: Path) -> dict:
-    """A Lightning checkpoint carries no metadata; in a training run's checkpoints/ folder it takes the run's
-    data facts and safety verdict from the run's model.pt (the verdict is that of the model the run kept)."""
+    """A Lightning checkpoint carries the data facts of its run but no safety verdict (known only after the fit); in
+    a training run's checkpoints/ folder it takes both from the run's model.pt (the verdict is that of the model the
+    run kept)."""
     model_pt = ckpt.parent.parent / "model.pt"
     if ckpt.parent.name != "checkpoints" or not model_pt.is_file():
         return {}
@@ -98,7 +99,10 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
         cfg = blob["hyper_parameters"]["model"]
         state = {k[len("model.") :]: v for k, v in blob["state_dict"].items() if k.startswith("model.")}
-        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **_run_meta(path)}
+        facts = blob.get(
+            "data_facts", {}
+        )  # written since the checkpoints carry them; the run's model.pt has the last word
+        meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **facts, **_run_meta(path)}
     else:
         raise ValueError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     model = build_model(**cfg)
