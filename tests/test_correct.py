@@ -164,6 +164,12 @@ def test_acc_m_s2_read_as_g(tmp_path, model_file, capsys):
     expect_error(capsys, [f, "-m", model_file, "-o", tmp_path, "--acc-unit", "g"], "--acc-unit m/s^2")
 
 
+def test_gyro_and_acc_units_wrong_together_are_told_together(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path, gyro=np.degrees(synth()[1]), acc=synth()[2] / G0)
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], "2 problems", "--gyro-unit deg/s", "--acc-unit g")
+    assert run([f, "-m", model_file, "-o", tmp_path, "--gyro-unit", "deg/s", "--acc-unit", "g"], capsys)[0] == 0, err
+
+
 def test_force_turns_unit_errors_into_warnings(tmp_path, model_file, capsys):
     f = bad_file(tmp_path, acc=synth()[2] / G0)
     code, _, err = run([f, "-m", model_file, "-o", tmp_path, "--force"], capsys)

@@ -213,8 +213,17 @@ def run_checks(
     rec = check_time_order(rec, drop_duplicates, report)
     check_time_unit(rec, report)
     check_gaps(rec, report, resample=resample)
-    check_gyro_units(rec, report, force)
-    check_acc_at_rest(rec, report, force)
+    # the two unit checks are independent: a file in deg/s and in g is told both at once, not one run per problem
+    problems = []
+    for check in (check_gyro_units, check_acc_at_rest):
+        try:
+            check(rec, report, force)
+        except SanityCheckError as e:
+            problems.append(str(e))
+    if len(problems) == 1:
+        raise SanityCheckError(problems[0])
+    if problems:
+        raise SanityCheckError(f"{len(problems)} problems:\n" + "\n".join(f"- {p}" for p in problems))
     return rec, report, check_rate(rec, model_rate_hz, report, resample)
 
 
