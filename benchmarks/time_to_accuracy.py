@@ -33,6 +33,13 @@ RUNS = Path("benchmarks/results/time_to_accuracy_runs")
 OUT = Path("benchmarks/results/time_to_accuracy")
 
 
+def ran_alone(run: dict) -> bool:
+    """Whether a run had the machine to itself: its queue note names it ("... e1800_s0 alone"); the other runs of
+    that call share the note but ran many at once."""
+    q = run.get("queue", {})
+    return f"{Path(q.get('id', '')).name} alone" in q.get("note", "")
+
+
 def schedule_overrides(epochs: int) -> str:
     if epochs == 1800:
         return "experiment=paper_schedule"
@@ -220,7 +227,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             f"`python benchmarks/time_to_accuracy.py run --schedules {epochs} --seeds "
             f"{' '.join(map(str, seeds))}{'' if kind.startswith('GPU') else ' --prefix cpu_'}` |"
         )
-    alone = [r for r in runs if "alone" in r.get("queue", {}).get("note", "")]
+    alone = [r for r in runs if ran_alone(r)]
     alone_rows = [
         f"| {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | "
         f"{r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
