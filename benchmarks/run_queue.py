@@ -47,7 +47,9 @@ def read_queue(path: Path) -> list[tuple[str, list[str]]]:
     return runs
 
 
-def run_one(run_id: str, overrides: list[str], out: Path, collect: Path, threads: int) -> tuple[str, bool, float]:
+def run_one(
+    run_id: str, overrides: list[str], out: Path, collect: Path, threads: int, note: str = "", jobs: int | None = None
+) -> tuple[str, bool, float]:
     run_dir = out / run_id
     log = out / f"{run_id}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -64,6 +66,10 @@ def run_one(run_id: str, overrides: list[str], out: Path, collect: Path, threads
         return run_id, False, wall
     summary = json.loads(summary_file.read_text())
     summary["queue"] = {"id": run_id, "overrides": overrides, "process_wall_time_s": wall, "threads": threads}
+    if jobs is not None:  # trainings this runner ran at once (other runners on the machine are not counted)
+        summary["queue"]["jobs"] = jobs
+    if note:
+        summary["queue"]["note"] = note
     write_json(collect / f"{run_id}.json", summary)
     print(
         f"done {run_id} in {wall:.0f} s: test AOE {summary.get('test', {}).get('test/aoe_deg', float('nan')):.2f}",
@@ -81,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--collect", type=Path, required=True, help="folder for the collected ID.json summaries")
     ap.add_argument("--done", type=Path, action="append", default=[], help="skip runs whose ID.json is here too")
     ap.add_argument("--deadline", type=float, default=None, help="start no run after this many seconds")
+    ap.add_argument("--note", default="", help="recorded in each collected summary (e.g. how the machine was shared)")
     ap.add_argument(
         "--shard", default=None, help="I/N: only the runs at positions I, I+N, I+2N, ... of the queue (0-based)"
     )
@@ -168,7 +175,7 @@ def _guarded(
         print(f"skip {run_id}: another runner is on it ({args.out / run_id}.claim)", flush=True)
         return run_id, None, 0.0
     try:
-        return run_one(run_id, overrides, args.out, args.collect, args.threads)
+        return run_one(run_id, overrides, args.out, args.collect, args.threads, args.note, args.jobs)
     finally:
         shutil.rmtree(claim, ignore_errors=True)
 

@@ -34,10 +34,11 @@ OUT = Path("benchmarks/results/time_to_accuracy")
 
 
 def ran_alone(run: dict) -> bool:
-    """Whether a run had the machine to itself: its queue note names it ("... e1800_s0 alone"); the other runs of
-    that call share the note but ran many at once."""
+    """Whether a run had the machine to itself: its queue note names it ("... e1800_s0 alone"; the other runs of
+    that call share the note but ran many at once), or a one-job runner's note says the machine was alone."""
     q = run.get("queue", {})
-    return f"{Path(q.get('id', '')).name} alone" in q.get("note", "")
+    note = q.get("note", "")
+    return f"{Path(q.get('id', '')).name} alone" in note or (q.get("jobs") == 1 and note.endswith("alone"))
 
 
 def schedule_overrides(epochs: int) -> str:
@@ -198,7 +199,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     runs = load_runs()
     groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
     for r in runs:
-        if r["_file"].startswith("cpu_default"):
+        if r["_file"].startswith(("cpu_default", "gpu_alone_")):  # tables of their own (end to end; alone)
             continue
         groups[(kind_of(r), epochs_of(r))].append(r)
     rows, table = [], []

@@ -32,7 +32,7 @@ def test_queue_runs_two_at_once_and_resumes(tmp_path):
         f"runs/bad {common} model.act=nope\n"
     )
     cmd = [sys.executable, str(REPO / "benchmarks" / "run_queue.py"), str(queue), "--jobs", "2", "--threads", "1"]
-    cmd += ["--out", str(tmp_path / "out"), "--collect", str(tmp_path / "collect")]
+    cmd += ["--out", str(tmp_path / "out"), "--collect", str(tmp_path / "collect"), "--note", "two at once"]
     env = {**os.environ, "PYTHONWARNINGS": "ignore"}
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
     assert proc.returncode == 1, proc.stdout + proc.stderr  # the bad run fails the queue...
@@ -40,6 +40,7 @@ def test_queue_runs_two_at_once_and_resumes(tmp_path):
     for seed in (0, 1):  # ...but not the good ones
         s = json.loads((tmp_path / "collect" / "runs" / f"s{seed}.json").read_text())
         assert s["seed"] == seed and s["queue"]["threads"] == 1 and s["queue"]["process_wall_time_s"] > 0
+        assert s["queue"]["note"] == "two at once"
         assert f"seed={seed}" in s["overrides"] and s["test"]["test/aoe_deg"] > 0
     assert "2 runs finished" in proc.stdout
     again = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
