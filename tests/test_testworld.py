@@ -202,3 +202,13 @@ def test_motion_seed_gives_other_motion_with_the_same_sensor(tmp_path):
     assert np.abs(gyro_a - gyro_b).mean() > 0.1  # other motion (rad/s), not only other noise
     with pytest.raises(ValueError, match="procedural:<motion seed>"):
         make_sequence(tmp_path, "procedural:x", duration=5.0)
+
+
+@pytest.mark.parametrize("bandwidth", ["butter2:50Hz", "bessel4:40Hz"])
+def test_filter_bandwidth_on_a_procedural_trajectory(tmp_path, bandwidth):
+    """A filtering sensor needs motion before its first sample (its start-up): the IMU starts after it, so a
+    procedural trajectory (which starts at 0) works, and the samples still span the duration asked for."""
+    seq = make_sequence(tmp_path, "procedural", duration=5.0, seed=2, bandwidth=bandwidth)
+    imu = read_imu(seq.imu_file)
+    assert len(imu.t_ns) == 1000 and np.all(np.isfinite(imu.gyro))
+    assert read_groundtruth(seq.groundtruth_file).t_ns[0] > imu.t_ns[0]  # the truth inside the IMU span

@@ -58,6 +58,12 @@ class Bandwidth:
         # norm="mag": -3 dB at the corner, as a datasheet states it
         return signal.bessel(self.order, self.corner_hz, fs=fs, output="sos", norm="mag")
 
+    def start_up_s(self, rate_hz: float) -> float:
+        """Motion a filter needs before the first sample (its start-up, run on the internal grid); 0 for the
+        integrating sensor, whose window fits in the period before the first sample."""
+        period = 1.0 / rate_hz
+        return 0.0 if self.kind == "integrate" else np.ceil(0.5 / period) * period
+
     def check(self, rate_hz: float, internal_hz: float) -> None:
         if self.kind != "integrate" and not self.corner_hz < internal_hz / 4:
             raise ValueError(f"bandwidth corner {self.corner_hz} Hz too high for the internal rate {internal_hz} Hz")
@@ -143,7 +149,7 @@ def simulate_imu(
         start = t[0] - (T / 2 if bandwidth.window == "centred" else T) + 0.5 / fs
         warm = 0
     else:
-        warm = int(np.ceil(0.5 / T)) * oversample  # 0.5 s of filter start-up before the first sample
+        warm = int(round(bandwidth.start_up_s(rate_hz) / T)) * oversample  # filter start-up before the first sample
         start = t[0] - warm / fs
     grid = start + np.arange(warm + n * oversample) / fs
     kin = motion.evaluate(grid)

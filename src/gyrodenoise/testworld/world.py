@@ -40,13 +40,19 @@ class WorldSequence:
 
 
 def make_motion(
-    trajectory: str, duration: float | None, seed: int, euroc_root: str | Path | None = None, smoothing_hz: float = 15.0
+    trajectory: str,
+    duration: float | None,
+    seed: int,
+    euroc_root: str | Path | None = None,
+    smoothing_hz: float = 15.0,
+    lead_s: float = 0.0,
 ) -> MotionSource:
     """'procedural' (motion drawn from `seed`), 'procedural:<K>' (motion drawn from K: other motion, same
-    sensor) or 'euroc:<SEQ>' -> a continuous-time motion source."""
+    sensor) or 'euroc:<SEQ>' -> a continuous-time motion source. lead_s: motion needed before the first IMU sample
+    (a filtering sensor's start-up), added to a procedural motion's length."""
     kind, _, arg = trajectory.partition(":")
     if kind == "procedural" and (not arg or arg.isdigit()):
-        return ProceduralMotion.random((duration or 60.0) + 0.5, int(arg) if arg else seed)
+        return ProceduralMotion.random((duration or 60.0) + 0.5 + lead_s, int(arg) if arg else seed)
     if kind == "euroc" and arg:
         return EurocReplay(arg, euroc_root, cutoff_hz=smoothing_hz, duration=duration)
     raise ValueError(
@@ -83,11 +89,12 @@ def make_sequence(
     spec = merge(parse_effects(PRESETS[preset]), parse_effects(effects))
     eff = realise(spec, np.random.default_rng([seed, 1]))
     bw = Bandwidth.parse(bandwidth)
+    lead = bw.start_up_s(imu_rate_hz)
     jitter_s = float(to_si(imu_jitter, "time", "imu_jitter")[0])
     mocap = mocap or MocapConfig()
 
     if isinstance(trajectory, str):
-        motion = make_motion(trajectory, duration, seed, euroc_root, smoothing_hz)
+        motion = make_motion(trajectory, duration, seed, euroc_root, smoothing_hz, lead)
         kind, _, arg = trajectory.partition(":")
         default_name = (arg if kind == "euroc" else f"procedural{arg}_s{seed}") if arg else f"procedural_s{seed}"
     else:
@@ -99,19 +106,19 @@ def make_sequence(
     rng = {s: np.random.default_rng([seed, 2 + i, tag]) for i, s in enumerate(_STREAMS)}
     t0_ns = getattr(motion, "t0_ns", PROCEDURAL_T0_NS)
 
-    # the IMU runs over the whole span; the mocap starts and ends a little inside it, at its own phase
+    # the IMU runs over the whole span (after a filter's start-up); the mocap starts and ends a little inside it, at
+    # its own phase
     period = 1.0 / imu_rate_hz
-    span = motion.t_end - motion.t_start
+    span = motion.t_end - motion.t_start - lead
     if duration is not None:
         span = min(span, duration + 2 * period)
     n = int((span - 2 * period) / period)
     if n < 100:
         raise ValueError(f"only {n} IMU samples fit in the trajectory span of {span:.2f} s")
-    imu = simulate_imu(
-        motion, eff, motion.t_start + period, n, t0_ns, rng, imu_rate_hz, bw, oversample, jitter_s, AccelModel()
-    )
+    t_first = motion.t_start + lead + period
+    imu = simulate_imu(motion, eff, t_first, n, t0_ns, rng, imu_rate_hz, bw, oversample, jitter_s, AccelModel())
     t_imu_end = imu.t[-1]
-    first = motion.t_start + 0.2 + rng["phase"].uniform(0, 1.0 / mocap.rate_hz)
+    first = motion.t_start + lead + 0.2 + rng["phase"].uniform(0, 1.0 / mocap.rate_hz)
     poses = measure_poses(motion, mocap, first, min(t_imu_end, motion.t_end) - 0.2, t0_ns, rng["mocap"])
     if mocap.fuse_tau_s > 0:
         poses = fuse_with_gyro(poses, imu.t, imu.gyro, mocap.fuse_tau_s, (poses.stamp_ns - t0_ns) * 1e-9)
