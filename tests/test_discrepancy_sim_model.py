@@ -51,3 +51,37 @@ def test_a_bad_error_model_file_is_refused_with_its_path(tmp_path):
     bad.write_text("just text\n")
     with pytest.raises(ValueError, match="'error_model' list"):
         load_error_model(bad)
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        (
+            "{name: time_offset, units: Datasheet, params: {delta: 3}}",
+            "'units' is 'Datasheet'; use 'si' or 'datasheet'",
+        ),
+        ("{name: time_offset, units: si, params: {}}", r"needs exactly \['delta'\]; missing \['delta'\]"),
+        ("{name: g_sensitivity, units: datasheet}", r"missing \['matrix'\]"),
+        ("{name: white_noise, units: si, params: {density: [1.0e-4, 1.0e-4]}}", "has 2 values; give one number or 3"),
+        ("{name: white_noise, units: si, params: {density: -1.2e-4}}", "density = -0.00012 .SI. must not be negative"),
+        (
+            "{name: quantization, units: datasheet, params: {step: -0.04}}",
+            r"step = -0.04 \(deg/s\) must not be negative",
+        ),
+        ("{name: bias, units: si, params: {bias: [a, b, c]}}", "not a number"),
+        ("{name: tiem_offset, units: si, params: {delta: 0.003}}", "'name' 'tiem_offset' must be one of"),
+    ],
+)
+def test_error_model_entries_are_checked_field_by_field(tmp_path, entry, message):
+    """An error model written by hand: a wrong unit system, a missing, misshapen, negative or non-numeric parameter
+    or a misspelt effect is refused with the file, the entry's index and the field, in a few words."""
+    f = tmp_path / "model.yaml"
+    f.write_text(f"error_model:\n  - {{name: bias, units: si, params: {{bias: [0, 0, 0]}}}}\n  - {entry}\n")
+    with pytest.raises(ValueError, match=message) as info:
+        load_error_model(f)
+    assert str(info.value).startswith(f"{f}: error_model[1]") and len(str(info.value)) < 400
+    # a 3x3 matrix may be given as 9 numbers, one number stands for every value
+    nine = "[0, 0, 0, 0, 0.1, 0, 0, 0, 0]"
+    f.write_text(f"error_model:\n  - {{name: g_sensitivity, units: datasheet, params: {{matrix: {nine}}}}}\n"
+                 "  - {name: white_noise, units: si, params: {density: 1.0e-4}}\n")  # fmt: skip
+    assert len(load_error_model(f)[0]) == 2

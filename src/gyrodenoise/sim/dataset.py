@@ -44,7 +44,12 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     rng = np.random.default_rng(seed)
     duration = float(generation.get("duration_s", 120.0))
     traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
-    effects: list[Effect] = [effect_from_config(dict(c)) for c in generation.get("error_model", [])]
+    effects: list[Effect] = []
+    for i, c in enumerate(generation.get("error_model", [])):
+        try:
+            effects.append(effect_from_config(dict(c)))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"dataset.generation.error_model[{i}]: {err}") from None
     jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
     if jitter > 0:
         effects.append(Bias(bias=rng.normal(0.0, jitter, 3)))

@@ -636,15 +636,53 @@ def build_effect(name: str, **params: Any) -> Effect:
     return EFFECTS[name](**params)
 
 
+NON_NEGATIVE = frozenset({"density", "step", "limit", "corner_hz", "frequency_hz", "bandwidth_hz", "tau"})
+
+
 def effect_from_config(cfg: dict) -> Effect:
-    """{'name': ..., 'units': 'si'|'datasheet', 'params': {...}} -> Effect."""
+    """{'name': ..., 'units': 'si'|'datasheet', 'params': {...}} -> Effect.
+
+    Every parameter must be given (a file that omits one has most likely misspelt it), as one number or as many as
+    the parameter has (a 3x3 matrix also as 9 numbers), finite, and not negative where a negative value means
+    nothing (densities, steps, limits, frequencies, time constants)."""
     name = cfg.get("name")
     if name not in EFFECTS:
-        raise ValueError(f"error model entry {cfg!r}: 'name' must be one of {', '.join(sorted(EFFECTS))}")
-    params = dict(cfg.get("params", {}))
-    if cfg.get("units", "si") == "datasheet":
-        return EFFECTS[name].from_datasheet(**params)
-    return EFFECTS[name](**params)
+        raise ValueError(f"'name' {name!r} must be one of {', '.join(sorted(EFFECTS))}")
+    units = cfg.get("units", "si")
+    if units not in ("si", "datasheet"):
+        raise ValueError(f"effect {name!r}: 'units' is {units!r}; use 'si' or 'datasheet' (the datasheet units)")
+    cls = EFFECTS[name]
+    params = cfg.get("params") or {}
+    if not isinstance(params, dict):
+        raise ValueError(f"effect {name!r}: 'params' must be a mapping of {sorted(cls.DEFAULTS)}")
+    missing, unknown = set(cls.DEFAULTS) - set(params), set(params) - set(cls.DEFAULTS)
+    if missing or unknown:
+        raise ValueError(
+            f"effect {name!r}: 'params' needs exactly {sorted(cls.DEFAULTS)}"
+            + (f"; missing {sorted(missing)}" if missing else "")
+            + (f"; unknown {sorted(unknown)}" if unknown else "")
+        )
+    checked = {k: _param_value(name, k, v, np.shape(cls.DEFAULTS[k]), units, cls) for k, v in params.items()}
+    return cls.from_datasheet(**checked) if units == "datasheet" else cls(**checked)
+
+
+def _param_value(effect: str, key: str, value: Any, shape: tuple, units: str, cls: type[Effect]) -> np.ndarray:
+    where = f"effect {effect!r}: params.{key} = {value!r}"
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where} is not a number or a list of numbers") from None
+    size = int(np.prod(shape))
+    if a.size == size and a.shape != shape:
+        a = a.reshape(shape)
+    if a.shape not in ((), shape):
+        raise ValueError(f"{where} has {a.size} values; give one number or {size}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{where} is not finite")
+    if key in NON_NEGATIVE and (a < 0).any():
+        unit = cls.DATASHEET.get(key, ("SI", 1.0))[0] if units == "datasheet" else "SI"
+        raise ValueError(f"{where} ({unit}) must not be negative")
+    return a
 
 
 # ===================================================================== sensor presets
