@@ -127,6 +127,19 @@ def test_identifiability_is_a_number_that_predicts_detection(tmp_path):
         assert ("g_sensitivity" in sel.named) is named, (factor, sel.steps[0]["candidates"])
 
 
+def test_a_named_effect_is_reported_identifiable_beside_a_large_one(tmp_path):
+    """The identifiability table is stated against the final model: a large hidden g-sensitivity swells the base
+    model's residual, against which a time offset the selection names looked 'not identifiable' at 1 ms."""
+    from gyrodenoise.sim.effects import TimeOffset
+
+    g = GSensitivity(matrix=np.radians(10.0) / 9.80665 * np.random.default_rng(2).choice([-1.0, 1.0], (3, 3)))
+    fcs = _contexts(tmp_path, [g, TimeOffset(delta=0.003)], 2, seed=8)
+    sel = select_effects(fcs, candidates=["g_sensitivity", "time_offset"], min_gain=0.0)
+    assert set(sel.named) == {"g_sensitivity", "time_offset"}, sel.steps[0]["candidates"]
+    idf = sel.identifiability["time_offset"]
+    assert idf["identifiable"] and idf["min_magnitude_datasheet"] < 1.0  # ms: the old table said 1.5, not identifiable
+
+
 def test_g_sensitivity_on_a_turntable_is_not_identifiable_with_the_numbers(tmp_path):
     fcs = _contexts(tmp_path, [], 2, seed=9, trajectory="yaw_only")
     sel = select_effects(fcs, candidates=["g_sensitivity"])

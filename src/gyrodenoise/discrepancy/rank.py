@@ -357,13 +357,11 @@ def select_effects(
                 if kappa is not None:
                     set_row_weights([h], fcs[0].extra["sensor_floor"], kappa)
     steps: list[dict] = []
-    first: StepScores | None = None
     while True:
         corner = _named_corner(effects, selected)
         view = [sensor_view(fc, corner) for fc in fcs]
         remaining = [c for c in scorable if c not in selected]
         st = score_step(view, effects, selected, remaining, sigma, band_vibration, thresholds, bic_threshold, fcs)
-        first = first or st
         design, cur = st.design, st.current
         step = {"model": list(selected), "rss_weighted": cur.rss, "n": cur.n, "candidates": st.scores}
         steps.append(step)
@@ -451,7 +449,7 @@ def select_effects(
         sigma=sigma,
         design=design,
         result=final,
-        identifiability=first.identifiability,
+        identifiability=_final_identifiability(view, effects, selected, sigma, scorable, thresholds, bic_threshold),
         thresholds={c: thresholds.get(c, bic_threshold) for c in scorable},
         delay_or_lowpass=delay_lp,
     )
@@ -461,6 +459,31 @@ def select_effects(
         # the band's power into it (re-simulations draw the error at this level)
         set_row_weights(fcs + list(holdout or []), fcs[0].extra["sensor_floor"], sel.band.kappa)
     return sel
+
+
+def _final_identifiability(
+    view: list[FitContext],
+    effects: dict[str, Effect],
+    selected: list[str],
+    sigma: np.ndarray,
+    scorable: list[str],
+    thresholds: dict[str, float],
+    bic_threshold: float,
+) -> dict[str, dict]:
+    """The reported identifiability: each regression effect's expected delta BIC given the other effects of the
+    FINAL model, at the final residual's variance. (Against the base model, a large missing effect swells the
+    residual and makes the others look unidentifiable, even ones the selection then names.)"""
+    regress = [c for c in scorable if not effects[c].stochastic]
+    design = Design(view, {n: effects[n] for n in dict.fromkeys(selected + regress)}, sigma)
+    cur = design.fit(selected)
+    s2 = cur.rss / max(cur.n - cur.k, 1)
+    out = {}
+    for c in regress:
+        given = [n for n in selected if n != c]
+        idf = identifiability(design, given, c, s2, thresholds.get(c, bic_threshold), NONLINEAR_PARAMS.get(c, 0))
+        if idf is not None:
+            out[c] = idf.as_dict()
+    return out
 
 
 def _delay_or_lowpass(

@@ -436,8 +436,8 @@ def _identifiability_md(report: dict) -> list[str]:
         "",
         "Expected delta BIC of each effect at a stated magnitude (every coefficient at +-that value, random signs; "
         "and the least identifiable coefficient alone), from the Fisher information of its regressors on these fit "
-        "sequences given the base model, in the compared band; and the smallest magnitude expected to clear the "
-        "threshold.",
+        "sequences given the other effects of the final model (base and named) at its residual's variance, in the "
+        "compared band; and the smallest magnitude expected to clear the threshold.",
         "",
         "| effect | stated magnitude | expected delta BIC | least identifiable coefficient alone | threshold | "
         "smallest detectable | verdict |",
