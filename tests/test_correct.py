@@ -134,6 +134,26 @@ def expect_error(capsys, args, *needles):
     return err
 
 
+def test_a_ground_truth_file_is_refused_by_its_header(tmp_path, model_file, capsys):
+    """An ASL ground-truth file has 7+ numeric columns and |q| = 1 passes for an accelerometer in g: following that
+    advice gave a 'corrected' output of poses. Its header names it."""
+    f = tmp_path / "data.csv"
+    rows = "\n".join(f"{i * 5_000_000},{i},0,0,1,0,0,0" for i in range(400))
+    header = "#timestamp [ns], p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []"
+    f.write_text(header + "\n" + rows + "\n")
+    for extra in ([], ["--acc-unit", "g"]):
+        expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "o", *extra], "pose (ground-truth) file", "imu0")
+
+
+def test_a_file_that_is_not_a_model_is_refused_in_one_line(tmp_path, capsys):
+    f = bad_file(tmp_path)
+    summary = tmp_path / "summary.json"
+    summary.write_text('{"a": 1}')
+    for not_a_model in (f, summary):  # an IMU CSV, a run's summary
+        err = expect_error(capsys, [f, "-m", not_a_model, "-o", tmp_path / "o"], "not a model file", "shipped model")
+        assert "weights_only" not in err and "Traceback" not in err
+
+
 def test_gyro_in_deg_s(tmp_path, model_file, capsys):
     f = bad_file(tmp_path, gyro=np.degrees(synth()[1]))
     expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], str(f), "column 2", "--gyro-unit deg/s")

@@ -14,13 +14,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.pretrained import ModelFileError
 
 
 class ConfigError(ValueError):
     """A config value the command cannot run with (e.g. `select=best`), found before any work is done."""
 
 
-USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError)
+USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError, ModelFileError)
 
 
 @contextmanager

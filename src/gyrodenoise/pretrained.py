@@ -90,10 +90,25 @@ def _run_meta(ckpt: Path) -> dict:
     return out
 
 
+class ModelFileError(ValueError):
+    """A file given as a model that is not one (the CLIs print it as one line)."""
+
+
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
     """Returns (model in eval mode, metadata); metadata 'path' is the file, 'name' how reports name it."""
     path = resolve(name_or_path)
-    blob = torch.load(path, map_location=map_location, weights_only=True)
+    try:
+        blob = torch.load(path, map_location=map_location, weights_only=True)
+    except OSError:
+        raise
+    except Exception:  # a CSV, a JSON, a truncated file: torch's unpickler fails in many ways (its message
+        # advises weights_only=False, i.e. running code from the file: not advice to pass on)
+        raise ModelFileError(
+            f"{path}: not a model file (torch cannot read it as one). Give a shipped model name "
+            f"({', '.join(available_models())}), a training run's folder, its model.pt or calibrated.pt, or a .ckpt."
+        ) from None
+    if not isinstance(blob, dict):
+        raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     if blob.get("format") == FORMAT:
         cfg, state, meta = blob["model"], blob["state_dict"], blob.get("meta", {})
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
@@ -104,7 +119,7 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
         )  # written since the checkpoints carry them; the run's model.pt has the last word
         meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **facts, **_run_meta(path)}
     else:
-        raise ValueError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
+        raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
     model = build_model(**cfg)
     model.load_state_dict(state)
     model.eval()

@@ -10,6 +10,7 @@ module only refuses what it cannot parse, naming the file, the line and the colu
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,6 +103,23 @@ def _resolve_columns(spec: str, header: list[str] | None, path: Path) -> list[in
     return out
 
 
+POSE_NAME = re.compile(r"^[pqv]_rs_|\[m\]")  # ASL ground truth / mocap (lowercased): p_rs_r_x [m], q_rs_w [], v_rs_r_x
+
+
+def _refuse_pose_columns(header: list[str] | None, idx: list[int], path: Path) -> None:
+    """A ground-truth (pose) file read as IMU samples passes the unit checks' advice into garbage: refuse it by its
+    header when the gyro or accelerometer columns carry pose names."""
+    if not header:
+        return
+    named = [header[i].lstrip("#").strip() for i in idx[1:] if i < len(header)]
+    pose = [n for n in named if POSE_NAME.search(n.lower())]
+    if pose:
+        raise DataFormatError(
+            f"{path}: the gyro/accelerometer columns are named {', '.join(pose[:4])}: a pose (ground-truth) file, "
+            "not IMU samples. Give the IMU's file (ASL: mav0/imu0/data.csv), or map its columns with --columns."
+        )
+
+
 def read_imu_csv(
     path: str | Path,
     columns: str = "1,2,3,4,5,6,7",
@@ -146,6 +164,7 @@ def read_imu_csv(
                 header = fields
                 continue
             idx = _resolve_columns(columns, header, path)
+            _refuse_pose_columns(header, idx, path)
         if len(fields) <= max(idx):
             short_lines += 1
             short_fields = short_fields or len(fields)
