@@ -39,3 +39,29 @@ def test_full_error_switch_and_other_errors_keep_the_trace(monkeypatch):
     monkeypatch.delenv("HYDRA_FULL_ERROR")
     with pytest.raises(RuntimeError), user_errors():  # a bug is not a user error: its trace stays
         raise RuntimeError("bug")
+
+
+def test_missing_value_gpu_on_a_cpu_machine_and_a_misspelt_sequence_say_what_to_do(tmp_path, monkeypatch, capsys):
+    from hydra.errors import InstantiationException
+    from omegaconf import OmegaConf
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    with pytest.raises(SystemExit), user_errors():
+        OmegaConf.create({"dataset": {"root": "???"}}).dataset.root  # noqa: B018
+    assert "dataset.root has no value" in capsys.readouterr().err
+    with pytest.raises(SystemExit), user_errors():
+        raise InstantiationException(
+            "Error in call to target Trainer: MisconfigurationException('No supported gpu backend found!')"
+        )
+    assert "leave out trainer=gpu" in capsys.readouterr().err
+    with pytest.raises(InstantiationException), user_errors():  # another instantiation error is not ours to word
+        raise InstantiationException("Error in call to target X: TypeError('bad')")
+
+    import hydra
+
+    from gyrodenoise.config import compose_config
+
+    (tmp_path / "MH_01_easy" / "mav0").mkdir(parents=True)
+    cfg = compose_config("train", ["dataset=euroc", f"dataset.root={tmp_path}", "dataset.train_seqs=[MH_01_easyy]"])
+    with pytest.raises(FileNotFoundError, match="MH_01_easyy: did you mean MH_01_easy\\? The folder holds MH_01_easy"):
+        hydra.utils.instantiate(cfg.dataset).check_sequences()

@@ -13,6 +13,10 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from hydra.errors import InstantiationException
+from lightning.fabric.utilities.exceptions import MisconfigurationException
+from omegaconf.errors import MissingMandatoryValue
+
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.pretrained import ModelFileError
 
@@ -29,7 +33,18 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except USER_ERRORS as e:
-        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+        _one_line(str(e))
+    except MissingMandatoryValue as e:  # e.g. dataset=asl_folder without dataset.root
+        _one_line(f"{e.full_key} has no value (it is '???' in the config): give it, e.g. {e.full_key}=...")
+    except (MisconfigurationException, InstantiationException) as e:  # Hydra wraps the Trainer's own error
+        if "gpu backend" not in str(e).lower() and "cuda" not in str(e).lower():
             raise
-        print(f"error: {e}\n(HYDRA_FULL_ERROR=1 shows the stack trace)", file=sys.stderr)
-        raise SystemExit(2) from None
+        _one_line("no supported GPU backend on this machine: leave out trainer=gpu, or set trainer.accelerator=cpu.")
+
+
+def _one_line(message: str) -> None:
+    """Called inside an `except` block: a bare raise re-raises the error being handled."""
+    if os.environ.get("HYDRA_FULL_ERROR") == "1":
+        raise  # noqa: PLE0704
+    print(f"error: {message}\n(HYDRA_FULL_ERROR=1 shows the stack trace)", file=sys.stderr)
+    raise SystemExit(2) from None

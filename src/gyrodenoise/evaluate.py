@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.cli_errors import user_errors
+from gyrodenoise.cli_errors import ConfigError, user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
@@ -129,7 +129,7 @@ def evaluate(cfg: DictConfig) -> dict:
     dm = hydra.utils.instantiate(cfg.dataset)
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
-        raise ValueError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
+        raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
     dm.check_sequences(
         train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
     )

@@ -14,7 +14,9 @@ so that both protocols are measured on the same run.
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -96,6 +98,13 @@ class RandomCrops(Dataset):
             "dR": torch.from_numpy(dR[a:b]),
             "dR_mask": torch.from_numpy(ok[a:b]),
         }
+
+
+def _misspelt(name: str, names: list[str]) -> str | None:
+    """The folder name `name` is probably a typo of: close, with the same digits (MH_02 is not a typo of MH_01)."""
+    digits = re.findall(r"\d", name)
+    close = [c for c in difflib.get_close_matches(name, names, n=3, cutoff=0.8) if re.findall(r"\d", c) == digits]
+    return close[0] if close else None
 
 
 class ImuDataModule(L.LightningDataModule):
@@ -183,9 +192,14 @@ class ImuDataModule(L.LightningDataModule):
             )
         if missing:
             only_test = set(missing) <= set(self.test_names)
+            here = sorted(p.parent.name for p in Path(self.root).glob("*/mav0") if p.is_dir())
+            typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := _misspelt(n, here)))
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "
-                f"<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root to the folder that holds them"
+                f"<root>/<sequence>/mav0/imu0/data.csv). "
+                + (f"{typo} " if typo else "")
+                + (f"The folder holds {', '.join(here)}. " if here else "")
+                + "Check the names, or set dataset.root to the folder that holds them"
                 f"{'; or ' + test_hint if only_test else ''}."
             )
         if test and not self.test_names:
