@@ -450,6 +450,13 @@ def _identifiability_md(report: dict) -> list[str]:
             f"{v['expected_delta_bic_weakest']:.1f} | {v['threshold']:.1f} | {v['min_magnitude_datasheet']:.3g} "
             f"{v['unit']} | {verdict} |"
         )
+    no_row = [e["name"] for e in report.get("named_effects", []) if e["name"] not in idf]
+    if no_row:
+        lines += [
+            "",
+            f"Named without a row here: {', '.join(no_row)} (no regression coefficients to state it for: a "
+            "band-limited vibration is fitted to the spectrum, quantization read from the raw samples).",
+        ]
     return lines + [""]
 
 
