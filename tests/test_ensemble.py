@@ -352,6 +352,8 @@ def test_model_not_beating_calibrated_warns(tmp_path, capsys):
         {**meta, "calibrated_model": "calibrated.pt"},
     )
     assert f"{tmp_path / 'run' / 'calibrated.pt'}' instead" in not_better_warning(load_model(beside)[1])
+    if {"tumvi", "tumvi-denoiser"} <= set(available_models()):  # TUM-VI's default IS the calibrated model: name it
+        assert "the calibrated model 'tumvi' instead" in not_better_warning(load_model("tumvi-denoiser")[1])
 
     with pytest.warns(ModelQualityWarning, match="did not beat"):  # what evaluate does on loading
         load_checked(str(bad))

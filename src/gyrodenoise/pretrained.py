@@ -151,8 +151,16 @@ def not_better_warning(meta: dict) -> str | None:
         # recorded as a file name beside the model file: say where it is
         beside = Path(meta["path"]).parent / instead
         instead = str(beside) if beside.is_file() else instead
-    if not instead and meta.get("dataset") and f"{meta['dataset']}-calibrated" in available_models():
-        instead = f"{meta['dataset']}-calibrated"
+    shipped, dataset = available_models(), meta.get("dataset")
+    if (
+        not instead
+        and dataset in shipped
+        and dataset != name
+        and load_model(dataset)[1]["model"]["name"] == "calibrated"
+    ):
+        instead = dataset  # the dataset's default is the calibrated model (TUM-VI): name the default, not a variant
+    if not instead and dataset and f"{dataset}-calibrated" in shipped:
+        instead = f"{dataset}-calibrated"
     advice = (
         f"use the calibrated model {instead!r} instead"
         if instead
