@@ -181,6 +181,14 @@ def train(cfg: DictConfig) -> dict:
 
     # one optimiser step per epoch: log_every_n_steps counts steps across epochs, as intended here
     warnings.filterwarnings("ignore", message=r"The number of training batches \(\d+\) is smaller than the logging")
+    if cfg.get("ckpt_path"):
+        # Lightning warns that a checkpoint from another folder does not bring its best-score bookkeeping: true and
+        # expected when resuming into a new run folder; said once, plainly
+        warnings.filterwarnings("ignore", message=r"The dirpath has changed from")
+        print(
+            f"resuming from {cfg.ckpt_path}: weights, optimiser, schedule and random state restored; the "
+            "best-validation checkpoint is tracked afresh in this run's folder (the earlier run's stays in its own)"
+        )
     start = time.time()
     trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
     wall_s = time.time() - start
