@@ -346,3 +346,11 @@ def test_every_bad_line_is_reported_in_one_run(tmp_path, model_file, capsys):
     err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], "3 lines to fix in all")
     first, second = err.index(f"{f}:101: column 3 is 'x'"), err.index(f"{f}:301: ")
     assert first < second < err.index(f"{f}:501: column 6 (a_y) is nan")
+
+
+def test_the_sensor_a_model_learned_is_said():
+    from gyrodenoise.correct import trained_on
+
+    meta = {"dataset": "euroc", "sensor": {"model": "ADIS16448", "rate_hz": 200.0}}
+    assert trained_on(meta) == "the euroc dataset's ADIS16448"
+    assert trained_on({"sensor": {"model": "BMI160"}}) == "a BMI160" and trained_on({"dataset": "mine"}) is None

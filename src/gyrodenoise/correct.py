@@ -161,7 +161,7 @@ def correct_recording(
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="gyrodenoise-correct",
-        description="Correct the gyro of an IMU recording with a trained model (no ground truth needed).",
+        description="Correct the gyro of an IMU recording with a model trained on that IMU (no ground truth needed)."
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=__doc__.split("\n\n", 1)[1],
     )
@@ -248,6 +248,7 @@ def main(argv: list[str] | None = None) -> int:
         "ensemble_members": len(model.members) if res.std is not None else None,
         "mean_std_deg_s": None if res.std is None else float(np.degrees(np.linalg.norm(res.std, axis=1).mean())),
         "beats_calibrated": meta.get("beats_calibrated"),
+        "model_trained_on": trained_on(meta),
         "warnings": ([model_warning] if model_warning else []) + res.report.warnings,
         "outputs": {"imu_csv": portable_path(out_csv), "orientation_tum": portable_path(out_tum)},
     }
@@ -264,7 +265,21 @@ def main(argv: list[str] | None = None) -> int:
         )
         + f"\n  {out_csv}\n  {out_tum}"
     )
+    if summary["model_trained_on"]:
+        print(
+            f"note: {meta['name']} learned the errors of {summary['model_trained_on']}; on a recording of another IMU "
+            "it is not expected to help: train a model on that IMU's own data (README: train on your own ASL folders)",
+            file=sys.stderr,
+        )
     return 0
+
+
+def trained_on(meta: dict) -> str | None:
+    """'the euroc dataset's ADIS16448' from a model's metadata, or None when it does not say."""
+    sensor = (meta.get("sensor") or {}).get("model")
+    if not sensor:
+        return None
+    return f"the {meta['dataset']} dataset's {sensor}" if meta.get("dataset") else f"a {sensor}"
 
 
 if __name__ == "__main__":
