@@ -161,7 +161,7 @@ def correct_recording(
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="gyrodenoise-correct",
-        description="Correct the gyro of an IMU recording with a model trained on that IMU (no ground truth needed)."
+        description="Correct the gyro of an IMU recording with a model trained on that IMU (no ground truth needed).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=__doc__.split("\n\n", 1)[1],
     )
