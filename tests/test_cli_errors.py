@@ -65,3 +65,15 @@ def test_missing_value_gpu_on_a_cpu_machine_and_a_misspelt_sequence_say_what_to_
     cfg = compose_config("train", ["dataset=euroc", f"dataset.root={tmp_path}", "dataset.train_seqs=[MH_01_easyy]"])
     with pytest.raises(FileNotFoundError, match="MH_01_easyy: did you mean MH_01_easy\\? The folder holds MH_01_easy"):
         hydra.utils.instantiate(cfg.dataset).check_sequences()
+
+
+def test_discrepancy_cli_names_a_wrong_sequence_in_one_line(tmp_path, capsys):
+    from gyrodenoise.discrepancy.__main__ import main
+
+    (tmp_path / "V1_02_medium" / "mav0").mkdir(parents=True)
+    code = main(["--root", str(tmp_path), "--fit", "V1_02_mediun", "--holdout", "x", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "Did you mean V1_02_medium?" in err and "Traceback" not in err
+    with pytest.raises(SystemExit):
+        main(["--root", str(tmp_path), "--fit", "a", "--holdout", "b", "--knot-spacing", "0"])
+    assert "--knot-spacing 0.0: must be positive" in capsys.readouterr().err

@@ -14,9 +14,7 @@ so that both protocols are measured on the same run.
 
 from __future__ import annotations
 
-import difflib
 import math
-import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -29,7 +27,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.data.sequence import Sequence, misspelt
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -98,13 +96,6 @@ class RandomCrops(Dataset):
             "dR": torch.from_numpy(dR[a:b]),
             "dR_mask": torch.from_numpy(ok[a:b]),
         }
-
-
-def _misspelt(name: str, names: list[str]) -> str | None:
-    """The folder name `name` is probably a typo of: close, with the same digits (MH_02 is not a typo of MH_01)."""
-    digits = re.findall(r"\d", name)
-    close = [c for c in difflib.get_close_matches(name, names, n=3, cutoff=0.8) if re.findall(r"\d", c) == digits]
-    return close[0] if close else None
 
 
 class ImuDataModule(L.LightningDataModule):
@@ -193,7 +184,7 @@ class ImuDataModule(L.LightningDataModule):
         if missing:
             only_test = set(missing) <= set(self.test_names)
             here = sorted(p.parent.name for p in Path(self.root).glob("*/mav0") if p.is_dir())
-            typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := _misspelt(n, here)))
+            typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := misspelt(n, here)))
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "
                 f"<root>/<sequence>/mav0/imu0/data.csv). "

@@ -7,6 +7,8 @@ fall in a ground-truth gap (TUM-VI mocap occlusions) as unavailable.
 
 from __future__ import annotations
 
+import difflib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -114,12 +116,23 @@ def build_sequence(name: str, imu: ImuData, gt: GroundTruthData, max_gap_factor:
     )
 
 
+def misspelt(name: str, names: list[str]) -> str | None:
+    """The folder name `name` is probably a typo of: close, with the same digits (MH_02 is not a typo of MH_01)."""
+    digits = re.findall(r"\d", name)
+    close = [c for c in difflib.get_close_matches(name, names, n=3, cutoff=0.8) if re.findall(r"\d", c) == digits]
+    return close[0] if close else None
+
+
 def sequence_folder(root: str | Path, name: str) -> Path:
-    """<root>/<name>/mav0, with an error that says what was looked for."""
+    """<root>/<name>/mav0, with an error that says what was looked for and what the root holds."""
     mav0 = Path(root) / name / "mav0"
     if not mav0.is_dir():
+        here = sorted(p.parent.name for p in Path(root).glob("*/mav0") if p.is_dir())
+        typo = misspelt(name, here)
         raise FileNotFoundError(
-            f"{mav0}: sequence folder not found. Set dataset.root to the folder that holds "
-            f"'{name}/mav0/imu0/data.csv' (ASL layout)."
+            f"{mav0}: sequence folder not found. "
+            + (f"Did you mean {typo}? " if typo else "")
+            + (f"{root} holds {', '.join(here)}. " if here else f"{root} holds no sequence folder. ")
+            + f"The data root must be the folder that holds '{name}/mav0/imu0/data.csv' (ASL layout)."
         )
     return mav0

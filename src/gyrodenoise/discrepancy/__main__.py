@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
 from gyrodenoise.discrepancy.null import DRAWS
@@ -160,6 +161,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args.gt_files = gt
     if args.gyro_noise_density is not None and not args.gyro_noise_density > 0:
         p.error(f"--gyro-noise-density {args.gyro_noise_density}: must be positive (rad/s/sqrt(Hz))")
+    if not args.knot_spacing > 0:
+        p.error(f"--knot-spacing {args.knot_spacing}: must be positive (seconds between the truth spline's knots)")
     return args
 
 
@@ -186,7 +189,11 @@ def main(argv: list[str] | None = None) -> int:
             left_out.extend(left)
         return out
 
-    fit, holdout = load(args.fit), load(args.holdout)
+    try:
+        fit, holdout = load(args.fit), load(args.holdout)
+    except (FileNotFoundError, DataFormatError) as e:  # a wrong --root, sequence name or file: one line, not a trace
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
     null_cache: dict = {}  # a second selection on other held-out sequences reuses the null distribution
 
