@@ -75,5 +75,5 @@ def test_discrepancy_cli_names_a_wrong_sequence_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "Did you mean V1_02_medium?" in err and "Traceback" not in err
     with pytest.raises(SystemExit):
-        main(["--root", str(tmp_path), "--fit", "a", "--holdout", "b", "--knot-spacing", "0"])
+        main(["--root", str(tmp_path), "--fit", "a", "--holdout", "b", "--knot-spacing", "0", "--out", "o"])
     assert "--knot-spacing 0.0: must be positive" in capsys.readouterr().err
