@@ -212,3 +212,9 @@ def test_filter_bandwidth_on_a_procedural_trajectory(tmp_path, bandwidth):
     imu = read_imu(seq.imu_file)
     assert len(imu.t_ns) == 1000 and np.all(np.isfinite(imu.gyro))
     assert read_groundtruth(seq.groundtruth_file).t_ns[0] > imu.t_ns[0]  # the truth inside the IMU span
+
+
+def test_time_offset_may_be_negative():
+    """A stamp error has either sign: -3 ms (early stamps) is taken as given, no random sign."""
+    assert float(_effects("time_offset=-3ms").get("time_offset")) == pytest.approx(-0.003)
+    assert float(_effects("time_offset=3ms").get("time_offset")) == pytest.approx(0.003)

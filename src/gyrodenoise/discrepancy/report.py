@@ -499,6 +499,16 @@ def markdown(report: dict) -> str:
                     f"| {_label(e) if first else ''} | {k} | {val} | {d['unit']} | " + " | ".join(cells) + " |"
                 )
                 first = False
+        lines += [
+            "",
+            "explained (fit): the share of the fit residual left at the step the effect was added that it removes "
+            "(weighted residual sum of squares), so the shares of successive effects need not add up to 100%.",
+        ]
+        if any(e["name"] == "time_offset" for e in report["named_effects"]):
+            lines.append(
+                "time_offset delta > 0: the IMU stamps are late (the sample stamped t holds the motion of t - delta); "
+                "< 0: early."
+            )
         lines.append("")
         lines += _raw_sample_evidence_md(report)
     else:

@@ -42,7 +42,7 @@ VOCABULARY: dict[str, tuple[str, dict[str, Param]]] = {
     # 3x3 matrix row-major (9 numbers), its diagonal (3 numbers), or a magnitude
     "g_sensitivity": ("value", {"value": Param("g_sens", "deg/s/g", 9, signed=True)}),
     # the IMU sample stamped t holds the motion of t - value (value > 0: IMU stamps late)
-    "time_offset": ("value", {"value": Param("time", "ms", 1)}),
+    "time_offset": ("value", {"value": Param("time", "ms", 1, signed=True)}),  # either sign: early or late stamps
     "nonlinearity": (
         "value",
         {
