@@ -39,7 +39,13 @@ from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, not_better_warning, training_overlap_warning
+from gyrodenoise.pretrained import (
+    ModelQualityWarning,
+    is_shipped,
+    load_model,
+    not_better_warning,
+    training_overlap_warning,
+)
 from gyrodenoise.so3 import integrate_gyro
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
@@ -244,8 +250,14 @@ def evaluate(cfg: DictConfig) -> dict:
         print(
             f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
             f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows; above 1 the spread "
-            "underestimates the error). To correct it, measure this ratio on validation data (split=val), not on "
-            "the test, then `python -m gyrodenoise.ensemble scale ENS.pt --by RATIO --fitted-by TEXT --out ENS2.pt`"
+            "underestimates the error). "
+            + (
+                "The shipped ensembles keep a factor of 1 on purpose: a factor fitted on the cross-validation folds "
+                "was not resolved (reports/accuracy.md)."
+                if is_shipped(proposed_meta["path"])
+                else "To correct it, measure this ratio on validation data (split=val), not on the test, then "
+                "`python -m gyrodenoise.ensemble scale ENS.pt --by RATIO --fitted-by TEXT --out ENS2.pt`"
+            )
         )
     for w in warned:
         print(f"WARNING: {w}")
