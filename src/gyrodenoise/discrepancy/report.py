@@ -330,17 +330,19 @@ def _truth_check_md(report: dict) -> list[str]:
     for name, c in checks.items():
         cells = {b["band_hz"][0]: b for b in c["bands"]}
         row = []
-        for lo, _ in BANDS_HZ:
+        for lo, _ in BANDS_HZ:  # _: the band's nominal upper edge
             b = cells.get(lo)
             if b is None:
                 row.append("-")
                 continue
             coh = "/".join(f"{x:.2f}" for x in b["coherence"])
+            upto = f" (to {b['band_hz'][1]:g} Hz)" if b["band_hz"][1] < _ - 1e-9 else ""  # cut by the truth's rate
             if b.get("residual_over_noise") is not None:
                 ratio = "/".join(f"{x:.2g}" for x in b["residual_over_noise"])
-                row.append(f"{coh}; {ratio}{' *' if b['follows_gyro'] else ''}")
+                row.append(f"{coh}; {ratio}{' *' if b['follows_gyro'] else ''}{upto}")
             else:
-                row.append(f"{coh}; {np.mean(b['reproduced_share']):+.2f}")
+                share = float(np.mean(b["reproduced_share"]))  # below -1: the residual outweighs the gyro's power
+                row.append(f"{coh}; {f'{share:+.2f}' if share >= -1 else '< -1'}{upto}")
         lines.append(f"| {name} | {c['truth_rate_hz']:.0f} Hz | " + " | ".join(row) + " |")
     return lines + [""]
 
