@@ -471,6 +471,10 @@ def markdown(report: dict) -> str:
         "",
         f"**Verdict: {report['verdict']}.**",
         "",
+        "This is one split of the sequences into fitted and held out. Whether a named effect holds on other splits "
+        "is what `python -m gyrodenoise.discrepancy.splits` measures (each sequence held out in turn); an effect "
+        "named on one split only is a property of that split's data, not of the sensor.",
+        "",
     ]
     lines += _truth_caution(report)
     if report["named_effects"]:
