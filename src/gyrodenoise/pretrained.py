@@ -114,9 +114,8 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
         cfg = blob["hyper_parameters"]["model"]
         state = {k[len("model.") :]: v for k, v in blob["state_dict"].items() if k.startswith("model.")}
-        facts = blob.get(
-            "data_facts", {}
-        )  # written since the checkpoints carry them; the run's model.pt has the last word
+        # the data facts the checkpoint carries (older ones have none); the run's model.pt has the last word
+        facts = blob.get("data_facts", {})
         meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **facts, **_run_meta(path)}
     else:
         raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
