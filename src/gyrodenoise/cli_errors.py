@@ -37,7 +37,7 @@ def user_errors() -> Iterator[None]:
     except MissingMandatoryValue as e:  # e.g. dataset=asl_folder without dataset.root
         _one_line(f"{e.full_key} has no value (it is '???' in the config): give it, e.g. {e.full_key}=...")
     except (MisconfigurationException, InstantiationException) as e:  # Hydra wraps the Trainer's own error
-        if "gpu backend" not in str(e).lower() and "cuda" not in str(e).lower():
+        if "no supported gpu backend" not in str(e).lower():
             raise
         _one_line("no supported GPU backend on this machine: leave out trainer=gpu, or set trainer.accelerator=cpu.")
 

@@ -27,7 +27,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.sequence import Sequence, misspelt
+from gyrodenoise.data.sequence import Sequence, misspelt, sequences_in
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -183,7 +183,7 @@ class ImuDataModule(L.LightningDataModule):
             )
         if missing:
             only_test = set(missing) <= set(self.test_names)
-            here = sorted(p.parent.name for p in Path(self.root).glob("*/mav0") if p.is_dir())
+            here = sequences_in(self.root)
             typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := misspelt(n, here)))
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "

@@ -123,11 +123,16 @@ def misspelt(name: str, names: list[str]) -> str | None:
     return close[0] if close else None
 
 
+def sequences_in(root: str | Path) -> list[str]:
+    """The sequence folders (<name>/mav0) a data root holds, sorted."""
+    return sorted(p.parent.name for p in Path(root).glob("*/mav0") if p.is_dir())
+
+
 def sequence_folder(root: str | Path, name: str) -> Path:
     """<root>/<name>/mav0, with an error that says what was looked for and what the root holds."""
     mav0 = Path(root) / name / "mav0"
     if not mav0.is_dir():
-        here = sorted(p.parent.name for p in Path(root).glob("*/mav0") if p.is_dir())
+        here = sequences_in(root)
         typo = misspelt(name, here)
         raise FileNotFoundError(
             f"{mav0}: sequence folder not found. "
