@@ -77,6 +77,11 @@ def fit(cfg: DictConfig) -> dict:
     for group, per_seq in scores.items():
         cells = ", ".join(f"{k} {v:.2f}" for k, v in per_seq.items())
         print(f"{group} AOE {means[group]:.3f} deg ({cells})")
+    if not scores:
+        print(
+            "no validation or test data to score on (whole training sequences and test=false): score the fit on a "
+            "held-out sequence with dataset.cv_fold=K, or on the test sequences with test=true"
+        )
     print(f"fitted in {fit_s:.1f} s; outputs in {out_dir}")
     return summary
 
