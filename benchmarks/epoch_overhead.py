@@ -53,7 +53,9 @@ def loop_wall(epochs: int, device: str, overrides: list[str]) -> float:
             f"hydra.run.dir={tmp}",
             *overrides,
         ]
-        subprocess.run(cmd, check=True, capture_output=True)
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:  # the training's own error, not a CalledProcessError that hides it
+            raise SystemExit(f"epoch_overhead: the timed training failed:\n{proc.stderr[-2000:]}")
         return json.loads((Path(tmp) / "summary.json").read_text())["train_wall_time_s"]
 
 
@@ -122,6 +124,10 @@ def main() -> None:
     ap.add_argument("--label", default="", help="what the code measured is (e.g. a commit and what it changes)")
     ap.add_argument("overrides", nargs="*", help="extra train overrides of the loop (e.g. logger=none)")
     args = ap.parse_args()
+    import torch
+
+    if args.device == "cuda" and not torch.cuda.is_available():
+        ap.error("--device cuda: torch sees no CUDA device on this machine")
     loop, bare, syncs = [], [], []
     for r in range(args.rounds):
         walls = {e: loop_wall(e, args.device, args.overrides) for e in EPOCHS}
