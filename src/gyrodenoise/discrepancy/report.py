@@ -478,7 +478,14 @@ def markdown(report: dict) -> str:
     ]
     lines += _truth_caution(report)
     if report["named_effects"]:
-        lines += ["## Named effects (datasheet units, +- one standard error)", ""]
+        lines += [
+            "## Named effects (datasheet units, +- one standard error)",
+            "",
+            "The standard errors assume the residual's fitted noise model; on independent test data they were right "
+            "for smooth replayed flights and up to ~2 times too small for fast motion with a noisy sensor "
+            "(benchmarks/results/discrepancy_se_calibration.md): read them as lower bounds.",
+            "",
+        ]
         lines += [
             "| effect | parameter | value | unit | delta BIC | threshold | null rank p | explained (fit) | "
             "closed (held-out) |",
