@@ -354,3 +354,10 @@ def test_the_sensor_a_model_learned_is_said():
     meta = {"dataset": "euroc", "sensor": {"model": "ADIS16448", "rate_hz": 200.0}}
     assert trained_on(meta) == "the euroc dataset's ADIS16448"
     assert trained_on({"sensor": {"model": "BMI160"}}) == "a BMI160" and trained_on({"dataset": "mine"}) is None
+
+
+def test_a_second_run_into_the_same_folder_says_it_replaces_the_first(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path)
+    assert run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)[0] == 0
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)
+    assert code == 0 and "replacing the outputs of an earlier run" in err

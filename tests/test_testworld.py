@@ -137,6 +137,8 @@ def test_spec_errors_are_clear(tmp_path):
         _effects("misalignment=1:2:3mrad")
     with pytest.raises(EffectSpecError, match="no '='"):
         parse_effects("scale_factor")
+    with pytest.raises(EffectSpecError, match=r"time_offset.value is given twice \('3ms' and '4ms'\)"):
+        parse_effects("time_offset=3ms,time_offset=4ms")
     with pytest.raises(ValueError, match="bandwidth 'butter:50'"):
         Bandwidth.parse("butter:50")
     assert cli(["--out", str(tmp_path), "--effects", "foo=1ppm"]) == 2

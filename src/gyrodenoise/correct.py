@@ -20,6 +20,7 @@ at identity unless --initial-orientation says otherwise; `correct_summary.json` 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import warnings
 from dataclasses import dataclass
@@ -229,6 +230,13 @@ def main(argv: list[str] | None = None) -> int:
     out_dir = args.out_dir or default_out_dir(path)
     out_csv = args.out_csv or out_dir / "imu_corrected.csv"
     out_tum = args.out_tum or out_dir / "orientation.txt"
+    summary_file = out_csv.parent / "correct_summary.json"
+    if summary_file.is_file():  # say so: the earlier outputs (maybe of another model) are about to be replaced
+        try:
+            earlier = json.loads(summary_file.read_text()).get("model", "?")
+        except (ValueError, AttributeError):  # not our summary: it is replaced all the same
+            earlier = "?"
+        print(f"note: replacing the outputs of an earlier run in {out_csv.parent} (model {earlier})", file=sys.stderr)
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
     write_text(out_tum, tum_text(res.rec.t_ns, res.R))
     delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)
@@ -252,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         "warnings": ([model_warning] if model_warning else []) + res.report.warnings,
         "outputs": {"imu_csv": portable_path(out_csv), "orientation_tum": portable_path(out_tum)},
     }
-    write_json(out_csv.parent / "correct_summary.json", summary)
+    write_json(summary_file, summary)
     print(
         f"corrected {len(res.rec)} samples ({summary['duration_s']:.1f} s at {res.report.rate_hz:.4g} Hz"
         f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta['name']}; "

@@ -662,6 +662,8 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
             )
             ax.set_title(f"attitude drift vs truth over {w} s")
             ax.set_ylabel("deg")
+        fig.suptitle(f"held out: {', '.join(report.get('holdout_sequences', []))}", fontsize=9)
+        fig.tight_layout()
         save_figure(fig, out / "drift.png", dpi=90)
         files.append("drift.png")
 

@@ -101,6 +101,8 @@ def parse_effects(spec: str | Mapping[str, str] | None) -> dict[str, dict[str, s
         param = param or main
         if param not in params:
             raise EffectSpecError(f"effect {name!r} has no parameter {param!r}; it has: {', '.join(params)}")
+        if param in out.get(name, {}):  # one spec, one value: a second would silently win
+            raise EffectSpecError(f"{name}.{param} is given twice ({out[name][param]!r} and {value!r}); give it once")
         out.setdefault(name, {})[param] = value
     return out
 
