@@ -18,7 +18,7 @@ import numpy as np
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
-from gyrodenoise.sim.effects import Bias, Effect, effect_from_config
+from gyrodenoise.sim.effects import Bias, Effect, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
@@ -44,12 +44,8 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     rng = np.random.default_rng(seed)
     duration = float(generation.get("duration_s", 120.0))
     traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
-    effects: list[Effect] = []
-    for i, c in enumerate(generation.get("error_model", [])):
-        try:
-            effects.append(effect_from_config(dict(c)))
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"dataset.generation.error_model[{i}]: {err}") from None
+    entries = [dict(c) if hasattr(c, "keys") else c for c in generation.get("error_model", [])]  # DictConfig -> dict
+    effects: list[Effect] = effects_from_config(entries, "dataset.generation.error_model")
     jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
     if jitter > 0:
         effects.append(Bias(bias=rng.normal(0.0, jitter, 3)))

@@ -666,6 +666,20 @@ def effect_from_config(cfg: dict) -> Effect:
     return cls.from_datasheet(**checked) if units == "datasheet" else cls(**checked)
 
 
+def effects_from_config(entries: list, where: str) -> list[Effect]:
+    """Every entry of an error-model list through `effect_from_config`; an error names `where[i]` (the file or the
+    config key) and the field."""
+    out = []
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}[{i}] is {entry!r}; expected a mapping {{name, units, params}}")
+        try:
+            out.append(effect_from_config(entry))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{where}[{i}]: {err}") from None
+    return out
+
+
 def _param_value(effect: str, key: str, value: Any, shape: tuple, units: str, cls: type[Effect]) -> np.ndarray:
     where = f"effect {effect!r}: params.{key} = {value!r}"
     try:
