@@ -330,13 +330,13 @@ def _truth_check_md(report: dict) -> list[str]:
     for name, c in checks.items():
         cells = {b["band_hz"][0]: b for b in c["bands"]}
         row = []
-        for lo, _ in BANDS_HZ:  # _: the band's nominal upper edge
+        for lo, nominal_hi in BANDS_HZ:
             b = cells.get(lo)
             if b is None:
                 row.append("-")
                 continue
             coh = "/".join(f"{x:.2f}" for x in b["coherence"])
-            upto = f" (to {b['band_hz'][1]:g} Hz)" if b["band_hz"][1] < _ - 1e-9 else ""  # cut by the truth's rate
+            upto = f" (to {b['band_hz'][1]:g} Hz)" if b["band_hz"][1] < nominal_hi - 1e-9 else ""  # cut by its rate
             if b.get("residual_over_noise") is not None:
                 ratio = "/".join(f"{x:.2g}" for x in b["residual_over_noise"])
                 row.append(f"{coh}; {ratio}{' *' if b['follows_gyro'] else ''}{upto}")
@@ -662,7 +662,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
             )
             ax.set_title(f"attitude drift vs truth over {w} s")
             ax.set_ylabel("deg")
-        fig.suptitle(f"held out: {', '.join(report.get('holdout_sequences', []))}", fontsize=9)
+        fig.suptitle(f"held out: {held_out}", fontsize=9)
         fig.tight_layout()
         save_figure(fig, out / "drift.png", dpi=90)
         files.append("drift.png")
