@@ -77,3 +77,31 @@ def test_discrepancy_cli_names_a_wrong_sequence_in_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--root", str(tmp_path), "--fit", "a", "--holdout", "b", "--knot-spacing", "0", "--out", "o"])
     assert "--knot-spacing 0.0: must be positive" in capsys.readouterr().err
+
+
+def test_a_misspelt_config_key_is_named_with_the_key_it_was_meant_to_be(tmp_path):
+    from gyrodenoise.cli_errors import misspelt_key_message
+
+    def said(*overrides: str, config: str = "train") -> str | None:
+        return misspelt_key_message(config, list(overrides))
+
+    assert said("dataset=euroc", "trainer.max_epoch=3").endswith("did you mean trainer.max_epochs?")
+    assert said("max_epochs=3").endswith("did you mean trainer.max_epochs?")  # the group left out
+    assert said("sed=3").endswith("did you mean seed?")
+    assert said("dataset=tumvi", "dataset.train_seq=[a]").endswith("did you mean dataset.train_seqs?")
+    far = said("dataset.sequnces=[a]")
+    assert "dataset has name, root, train_seqs" in far and "+key=value" in far
+    # right keys, '+' additions, sweeps and Hydra's own options are not ours to judge
+    for fine in [("trainer.max_epochs=3",), ("+trainer.foo=1",), ("-m", "sed=1,2"), ("hydra.run.dir=x",)]:
+        assert said(*fine) is None, fine
+    assert said("weights=x", config="evaluate") is None
+    # end to end: one line and status 2, before Hydra's advice to add the key with '+'
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", "trainer.max_epoch=3", f"hydra.run.dir={tmp_path / 'run'}"],
+        capture_output=True, text=True, cwd=tmp_path, env={**os.environ, "HYDRA_FULL_ERROR": "0"}, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert (
+        proc.stderr.strip()
+        == "error: trainer.max_epoch is not a key of the 'train' config: did you mean trainer.max_epochs?"
+    )

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.cli_errors import ConfigError, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
@@ -265,6 +265,7 @@ def evaluate(cfg: DictConfig) -> dict:
     return summary
 
 
+@hydra_key_hints("evaluate")
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
 def main(cfg: DictConfig) -> None:
     with console_to_job_log(), user_errors(), warnings.catch_warnings():

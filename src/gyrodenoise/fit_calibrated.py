@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated
-from gyrodenoise.cli_errors import user_errors
+from gyrodenoise.cli_errors import hydra_key_hints, user_errors
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.paths import invoked_command
 from gyrodenoise.pretrained import save_model
@@ -86,6 +86,7 @@ def fit(cfg: DictConfig) -> dict:
     return summary
 
 
+@hydra_key_hints("fit_calibrated")
 @hydra.main(version_base="1.3", config_path="conf", config_name="fit_calibrated")
 def main(cfg: DictConfig) -> float:
     with console_to_job_log(), user_errors():

@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
-from gyrodenoise.cli_errors import ConfigError, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.job_log import console_to_job_log
@@ -292,6 +292,7 @@ def single_run_of_a_sweep_note() -> str | None:
     return f"note: this config defines a sweep ({swept}); this is one run of it. Add -m to run the sweep."
 
 
+@hydra_key_hints("train")
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
     with console_to_job_log(), user_errors():
