@@ -18,8 +18,9 @@ from gyrodenoise.so3 import integrate_gyro
 RATE = 200.0
 
 
-def make_sequence(mav0: Path, seconds: float, seed: int) -> None:
-    """Smooth rotation; IMU = truth + bias + noise; ground truth in mocap0 at 100 Hz (another rate)."""
+def make_sequence(mav0: Path, seconds: float, seed: int, occlusions: tuple[tuple[float, float], ...] = ()) -> None:
+    """Smooth rotation; IMU = truth + bias + noise; ground truth in mocap0 at 100 Hz (another rate), none inside
+    the `occlusions` (start, end) in seconds."""
     rng = np.random.default_rng(seed)
     n = int(seconds * RATE) + 1
     t = np.arange(n) / RATE
@@ -38,7 +39,10 @@ def make_sequence(mav0: Path, seconds: float, seed: int) -> None:
     gt = np.column_stack([np.zeros((len(q), 3)), q])
     with open(mav0 / "mocap0" / "data.csv", "w") as fh:
         fh.write("#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z\n")
-        fh.writelines(f"{s}," + ",".join(f"{v:.9f}" for v in row) + "\n" for s, row in zip(t_ns[::2], gt, strict=True))
+        seen = ~np.any([(t[::2] > a) & (t[::2] < b) for a, b in occlusions], axis=0) if occlusions else t[::2] >= 0
+        fh.writelines(
+            f"{s}," + ",".join(f"{v:.9f}" for v in row) + "\n" for s, row in zip(t_ns[::2][seen], gt[seen], strict=True)
+        )
 
 
 @pytest.fixture(scope="module")
@@ -115,6 +119,23 @@ def test_validation_split(asl_root):
     # whole training sequences and no validation sequence named: nothing to validate on (select=last needs none)
     train, val = parts(train_seqs=["walk_1"], val_seqs=None, train_duration_s=None)
     assert train == [n] and val == []
+
+
+def test_scored_parts_start_on_measured_ground_truth(tmp_path):
+    """A sequence or validation part that would start inside an occlusion starts at the first sample with ground
+    truth: estimates are aligned on their first orientation, and inside a gap that one is SLERP across it."""
+    from gyrodenoise.data.datamodule import ImuDataModule
+    from gyrodenoise.evaluate import estimate
+
+    make_sequence(tmp_path / "occluded" / "mav0", seconds=7.0, seed=5, occlusions=((0.005, 0.4), (4.9, 5.5)))
+    dm = ImuDataModule(name="my_imu", root=str(tmp_path), test_seqs=["occluded"], window=256, cache_dir="",
+                       train_seqs=["occluded"], val_seqs=["occluded"], train_duration_s=5.0)  # fmt: skip
+    dm.setup()
+    (whole,), (train,), (val,) = dm.test_part, dm.train_part, dm.val_part
+    for part, gap_end in ((whole, 0.4), (train, 0.4), (val, 5.5)):
+        assert part.gt_mask[0] and part.t[0] >= gap_end - 0.01 and part.t[0] < gap_end + 0.02, part.name
+        assert np.allclose(estimate(part, part.gyro)[0], part.rot[0])
+    assert val.name == "occluded[5s:]" and dm.origin(val) == ("occluded", 5.0)
 
 
 def test_missing_sequences_fail_before_training(asl_root):

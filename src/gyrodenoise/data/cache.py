@@ -74,7 +74,8 @@ def load_sequence(
         if cache_path.is_file():
             with np.load(cache_path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
-                return Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
+                seq = Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
+                return seq.from_first_ground_truth()
     seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
     if cache_path is not None:
         atomic_save_npz(
@@ -83,4 +84,4 @@ def load_sequence(
             meta=np.array(json.dumps(seq.meta)),
             **{k: getattr(seq, k) for k in _ARRAYS},
         )
-    return seq
+    return seq.from_first_ground_truth()

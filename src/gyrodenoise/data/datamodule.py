@@ -239,7 +239,8 @@ class ImuDataModule(L.LightningDataModule):
                             f"left after train_duration_s={self.train_duration_s}: lower "
                             "dataset.train_duration_s or name other sequences in dataset.val_seqs"
                         )
-                    self.val_part.append(seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]"))
+                    tail = seq.slice(cut, len(seq), f"{name}[{self.train_duration_s:g}s:]")
+                    self.val_part.append(tail.from_first_ground_truth())  # a cut inside an occlusion
                     self.part_origin[self.val_part[-1].name] = (name, float(self.train_duration_s))
                     self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
         if stage in (None, "test", "predict") and not self.test_part:

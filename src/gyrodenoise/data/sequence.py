@@ -21,7 +21,7 @@ from gyrodenoise.data.readers import DataFormatError, GroundTruthData, ImuData
 @dataclass
 class Sequence:
     name: str
-    t0_ns: int  # absolute time of the first sample
+    t0_ns: int  # absolute time of t = 0 (the first sample's, before any slice)
     t: np.ndarray  # (N,) float64 s since t0_ns
     gyro: np.ndarray  # (N, 3) rad/s
     acc: np.ndarray  # (N, 3) m/s^2
@@ -61,6 +61,13 @@ class Sequence:
             gt_mask=self.gt_mask[start:stop],
             meta=dict(self.meta),
         )
+
+    def from_first_ground_truth(self) -> Sequence:
+        """The samples from the first one with ground truth on. Estimates are aligned on ground truth at their first
+        instant: inside an occlusion that orientation is SLERP bridged across the gap, not measured."""
+        if not self.gt_mask.any() or self.gt_mask[0]:
+            return self
+        return self.slice(int(np.argmax(self.gt_mask)), len(self))
 
     def index_at(self, seconds: float) -> int:
         """First sample index at or after `seconds` from the sequence start."""
