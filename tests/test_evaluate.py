@@ -60,6 +60,16 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     tum = np.loadtxt(tmp_path / "trajectories" / slug("V1_01_easy (data_recomputed_openvins)") / "proposed.txt")
     assert tum.shape[1] == 8 and np.allclose(np.linalg.norm(tum[:, 4:], axis=1), 1.0)
     assert tum[0, 0] > 1.4e9  # absolute seconds, as the ground truth
+    # stamps printed exactly from the IMU's ns (float64 absolute seconds were ~100 ns off)
+    folder = tmp_path / "trajectories" / slug("V1_01_easy (data_recomputed_openvins)")
+    first_stamp = (folder / "proposed.txt").read_text().splitlines()[1].split()[0]
+    imu_stamps = {
+        line.split(",")[0] for line in (euroc_root / "V1_01_easy/mav0/imu0/data.csv").open() if line[0] != "#"
+    }
+    assert first_stamp.replace(".", "") in imu_stamps
+    # provenance and what the AOE is
+    assert summary["machine"] and summary["command"].startswith("python -m gyrodenoise.evaluate")
+    assert "RMS" in summary["aoe_definition"] and "RMS" in (tmp_path / "table.md").read_text()
 
 
 def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):
@@ -84,6 +94,16 @@ def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):
         assert abs(meta["rate_hz"] - 199.4) < 0.2
         assert summary["average_aoe_deg"][method][0] == pytest.approx(meta["val_aoe_deg"], abs=0.01)
     assert load_model("tumvi-denoiser")[1]["beats_calibrated"] is False
+    # ground truth exported only where measured (with its positions), and the samples left out are counted
+    for name, left_out in summary["samples_without_ground_truth"].items():
+        gt = np.loadtxt(tmp_path / "trajectories" / slug(name) / "groundtruth.txt")
+        est = np.loadtxt(tmp_path / "trajectories" / slug(name) / "proposed.txt")
+        assert left_out > 0 and len(gt) == summary["samples"][name] - left_out == len(est) - left_out
+        assert np.abs(gt[:, 1:4]).max() > 0.1 and not est[:, 1:4].any()
+        assert (
+            f"{name}: {left_out} of {len(est)} samples inside ground-truth gaps left out"
+            in (tmp_path / "table.md").read_text()
+        )
 
 
 def test_shipped_tumvi_is_the_calibrated_fit_on_whole_rooms(tumvi_root, tmp_path):
@@ -132,6 +152,16 @@ def test_training_overlap_warning():
     assert training_overlap_warning(first50, [("room1", 50.0), ("room3", 50.0)]) is None
     assert "first 50 s of room1" in training_overlap_warning(first50, [("room1", 0.0)])
     assert training_overlap_warning({"name": "user"}, [("room1", 0.0)]) is None
+
+
+def test_a_model_of_another_imu_is_named():
+    from gyrodenoise.pretrained import other_imu_warning
+
+    tumvi = {"name": "tumvi", "dataset": "tumvi", "sensor": {"model": "BMI160"}}
+    assert "tumvi was trained on tumvi (BMI160), not on euroc" in other_imu_warning(tumvi, "euroc", {"model": "x"})
+    assert other_imu_warning(tumvi, "tumvi") is None
+    assert other_imu_warning(tumvi, "my_imu", {"model": "BMI160"}) is None  # own recordings of the same sensor
+    assert other_imu_warning({"name": "old"}, "euroc") is None
 
 
 def test_orientation_figure_keeps_estimates_on_the_ground_truths_branch():

@@ -38,6 +38,7 @@ from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import load_model, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.streaming import StreamingCorrector
+from gyrodenoise.trajectory_files import tum_text
 
 ENGINES = ("batch", "streaming")
 STREAM_CHUNK = 4096  # samples per push_chunk: bounded memory on long recordings
@@ -127,15 +128,6 @@ def initial_rotation(spec: str, rec: ImuRecording) -> np.ndarray:
             f"--initial-orientation {spec!r}: give identity, gravity, or a unit quaternion qx,qy,qz,qw (scalar last)"
         )
     return Rotation.from_quat(q).as_matrix()
-
-
-def tum_text(t_ns: np.ndarray, R: np.ndarray) -> str:
-    """TUM lines `t tx ty tz qx qy qz qw`, t in seconds printed exactly from the int ns stamps."""
-    q = Rotation.from_matrix(R).as_quat()
-    lines = ["# t[s] tx ty tz qx qy qz qw (open-loop orientation from the corrected gyro; translation zero)"]
-    for t, (x, y, z, w) in zip(t_ns.tolist(), q.tolist(), strict=True):
-        lines.append(f"{t // 1_000_000_000}.{t % 1_000_000_000:09d} 0 0 0 {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
-    return "\n".join(lines) + "\n"
 
 
 def correct_recording(
@@ -238,7 +230,9 @@ def main(argv: list[str] | None = None) -> int:
             earlier = "?"
         print(f"note: replacing the outputs of an earlier run in {out_csv.parent} (model {earlier})", file=sys.stderr)
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
-    write_text(out_tum, tum_text(res.rec.t_ns, res.R))
+    write_text(
+        out_tum, tum_text(res.rec.t_ns, res.R, "open-loop orientation from the corrected gyro; translation zero")
+    )
     delta = np.linalg.norm(res.gyro - res.rec.gyro, axis=1)
     summary = {
         "command": "gyrodenoise-correct " + portable_command(argv if argv is not None else sys.argv[1:]),

@@ -8,7 +8,9 @@ Methods: raw IMU (integrated gyro), zero motion (initial orientation held), cali
 12-parameter baseline), proposed (the denoiser, or an ensemble of them). Every estimate is aligned
 on ground truth at the first instant. Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
 roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
-trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation).
+trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation; stamps exact to the ns;
+groundtruth.txt holds positions and only the samples with ground truth, the estimates orientation only, translation
+zero: score them on orientation, e.g. `evo_ape tum groundtruth.txt proposed.txt --pose_relation angle_deg`).
 An ensemble as the proposed model adds its uncertainty: a +-2 sigma band in the correction figures,
 and in results.json / figures/uncertainty_calibration.png the calibration of its spread against the
 actual 1-s increment errors (gyrodenoise.uncertainty). A model whose metadata says it did not beat
@@ -29,7 +31,6 @@ import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig
-from scipy.spatial.transform import Rotation
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
@@ -37,18 +38,31 @@ from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
-from gyrodenoise.metrics import aoe, orientation_errors, roe, summarize
+from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
+from gyrodenoise.paths import invoked_command, portable_path
 from gyrodenoise.pretrained import (
     ModelQualityWarning,
     is_shipped,
     load_model,
     not_better_warning,
+    other_imu_warning,
     training_overlap_warning,
 )
+from gyrodenoise.provenance import machine_description
 from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.trajectory_files import tum_text
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
+AOE_DEFINITION = (
+    "AOE 3D/yaw in degrees: the RMS, over the samples with ground truth, of the angle of R_gt^T R_est (yaw: of the "
+    "world-frame error R_est R_gt^T); every estimate is aligned on ground truth at its first sample."
+)
+ROE_DEFINITION = (
+    "ROE in degrees: the angle of dR_gt^T dR_est between a start sample (every {stride}th) and the first sample "
+    "{d} m of ground-truth path later (positions interpolated linearly across gaps), pooled over the averaged "
+    "sequences; pairs with an end inside a ground-truth gap are left out."
+)
 
 
 def gyro_method(model: CorrectionModel | None) -> Callable[[Sequence], np.ndarray | None]:
@@ -76,14 +90,18 @@ def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
     return integrate_gyro(seq.rot[0], gyro, seq.dt)
 
 
-def tum_text(seq: Sequence, R: np.ndarray) -> str:
-    """TUM trajectory lines `t tx ty tz qx qy qz qw` (absolute seconds; translation zeros)."""
-    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-    t = seq.t0_ns * 1e-9 + seq.t
-    buf = io.StringIO()
-    buf.write("# t[s] tx ty tz qx qy qz qw (orientation only; translation set to zero)\n")
-    np.savetxt(buf, np.column_stack([t, np.zeros((len(t), 3)), q]), fmt=["%.9f"] + ["%.1f"] * 3 + ["%.9f"] * 4)
-    return buf.getvalue()
+def write_trajectories(folder: Path, seq: Sequence, estimates: dict[str, np.ndarray]) -> None:
+    """groundtruth.txt (positions too, only the samples with ground truth: an occlusion's SLERP is not a measurement)
+    and one orientation-only file per method, all on the IMU's stamps."""
+    t_ns = seq.t0_ns + np.round(seq.t * 1e9).astype(np.int64)
+    m = seq.gt_mask
+    n_out = int((~m).sum())
+    gaps = f"; {n_out} samples inside ground-truth gaps left out" if n_out else ""
+    write_text(folder / "groundtruth.txt", tum_text(t_ns[m], seq.rot[m], f"ground truth{gaps}", seq.pos[m]))
+    for method, R in estimates.items():
+        write_text(
+            folder / f"{slug(method)}.txt", tum_text(t_ns, R, f"{method}: open-loop orientation; translation zero")
+        )
 
 
 def slug(name: str) -> str:
@@ -166,8 +184,12 @@ def evaluate(cfg: DictConfig) -> dict:
             )
 
     parts = [dm.origin(seq) for seq in sequences.values()]
-    overlap = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
-    for w in overlap:
+    data_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
+    data_warnings += [
+        w for w in (other_imu_warning(m, dm.name, dm.sensor) for m in (proposed_meta, calibrated_meta)) if w
+    ]
+    warned = [w for w in (proposed_warning, calibrated_warning, *data_warnings) if w]
+    for w in data_warnings:
         warnings.warn(w, ModelQualityWarning, stacklevel=2)
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
@@ -179,10 +201,7 @@ def evaluate(cfg: DictConfig) -> dict:
             calib[label] = uncertainty.calibration(gyros["proposed"], spread, seq.dt, seq.rot, seq.gt_mask)
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
-        folder = out / "trajectories" / slug(label)
-        write_text(folder / "groundtruth.txt", tum_text(seq, seq.rot))
-        for m, R in r["estimates"].items():
-            write_text(folder / f"{slug(m)}.txt", tum_text(seq, R))
+        write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
         if cfg.figures:
             figs = out / "figures"
             figs.mkdir(parents=True, exist_ok=True)
@@ -194,10 +213,19 @@ def evaluate(cfg: DictConfig) -> dict:
             w_tilde = gyros["proposed"] - seq.gyro @ proposed.C_hat.detach().double().numpy().T
             plots.save(plots.correction_figure(seq.t, w_tilde, label, spread), figs / f"correction_{slug(label)}.png")
 
-    header = ["sequence", *[f"{m} (3D/yaw deg)" for m in METHODS]]
+    names = {"proposed": proposed_meta["name"], "calibrated IMU": calibrated_meta["name"]}
+    header = ["sequence", *[f"{m}: {names[m]}" if m in names else m for m in METHODS]]
     rows = table_rows(results, averaged)
-    write_text(out / "table.md", markdown_table(header, rows))
-    write_text(out / "table.csv", csv_text(header, rows))
+    left_out = {n: int((~seq.gt_mask).sum()) for n, seq in sequences.items()}
+    notes = [AOE_DEFINITION]
+    notes += [
+        f"{n}: {k} of {len(sequences[n])} samples inside ground-truth gaps left out" for n, k in left_out.items() if k
+    ]
+    write_text(
+        out / "table.md",
+        markdown_table(header, rows) + "".join(f"\n- {x}" for x in notes + [f"WARNING: {w}" for w in warned]) + "\n",
+    )
+    write_text(out / "table.csv", csv_text([h if h == "sequence" else f"{h} (AOE 3D/yaw deg)" for h in header], rows))
 
     # ROE pooled over the averaged test sequences
     roe_pooled = {
@@ -212,22 +240,32 @@ def evaluate(cfg: DictConfig) -> dict:
                 [f"{d:g}", m, *[f"{s[k]:.2f}" for s in (s3, sy) for k in ("q1", "median", "q3")], str(s3["n"])]
             )
     roe_header = ["distance (m)", "method", "3D q1", "3D median", "3D q3", "yaw q1", "yaw median", "yaw q3", "pairs"]
-    write_text(out / "roe.md", markdown_table(roe_header, roe_rows))
+    roe_note = ROE_DEFINITION.format(stride=ROE_STRIDE, d="/".join(f"{d:g}" for d in distances))
+    write_text(out / "roe.md", markdown_table(roe_header, roe_rows) + f"\n- {roe_note}\n")
     write_text(out / "roe.csv", csv_text(roe_header, roe_rows))
     if cfg.figures:
         plots.save(plots.roe_boxplot(roe_pooled, f"ROE on {dm.name} {split} sequences"), out / "figures" / "roe.png")
 
     summary = {
+        "command": invoked_command("evaluate"),
+        "machine": machine_description(),
         "dataset": dm.name,
+        "data_root": portable_path(dm.root),
         "split": split,
-        "models": {"proposed": proposed_meta["name"], "calibrated IMU": calibrated_meta["name"]},  # no machine paths
+        "models": names,  # no machine paths
         "averaged_sequences": averaged,
+        "aoe_definition": AOE_DEFINITION,
+        "samples": {n: len(seq) for n, seq in sequences.items()},
+        "samples_without_ground_truth": left_out,
+        "ground_truth_files": {
+            n: portable_path(seq.meta["gt_file"]) for n, seq in sequences.items() if "gt_file" in seq.meta
+        },
+        "roe_definition": roe_note,
         "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in METHODS} for n, r in results.items()},
         "average_aoe_deg": {
             m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in METHODS
         },
     }
-    warned = [w for w in (proposed_warning, calibrated_warning, *overlap) if w]
     if warned:
         summary["warnings"] = warned
     if calib:

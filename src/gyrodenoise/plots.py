@@ -137,7 +137,8 @@ def calibration_figure(result: CalibrationResult, title: str = ""):
 
 
 def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], title: str = ""):
-    """Box plots of ROE (3D and yaw) per travelled distance and method (Fig. 5)."""
+    """Box plots of ROE (3D and yaw) per travelled distance and method (Fig. 5); boxes: quartiles, whiskers:
+    1.5 x the interquartile range, outliers not drawn (the figure says so)."""
     dists = sorted(roe)
     methods = list(next(iter(roe.values())).keys()) if roe else []
     fig, axs = plt.subplots(1, 2, figsize=(11, 4))
@@ -160,6 +161,7 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
                 box.set_facecolor(colors[m % len(colors)])
             ax.plot([], [], color=colors[m % len(colors)], lw=6, label=name)
         ax.set_xticks(np.arange(len(dists)), [f"{d:g} m" for d in dists])
+        ax.set_xlabel("travelled distance (boxes: quartiles; whiskers: 1.5 IQR; outliers not drawn)")
         ax.set_yscale("log")
         ax.set_ylabel(("3D" if a == 0 else "yaw") + " ROE (deg)")
         ax.grid(alpha=0.3, which="both")

@@ -186,3 +186,20 @@ def training_overlap_warning(meta: dict, parts: list[tuple[str, float]]) -> str 
         f"model {name} was trained on the {span} of {', '.join(dict.fromkeys(seen))}: its figures there are "
         "training figures, not held-out ones (evaluate it on sequences it did not see, e.g. a cross-validation fold)."
     )
+
+
+def other_imu_warning(meta: dict, dataset: str, sensor: dict | None = None) -> str | None:
+    """The warning for scoring a model on a dataset it was not trained on, unless both name the same IMU model
+    (own recordings of the same sensor); None when the metadata does not say (older files)."""
+    trained = meta.get("dataset")
+    if not trained or trained == dataset:
+        return None
+    model_sensor, data_sensor = (meta.get("sensor") or {}).get("model"), (sensor or {}).get("model")
+    if model_sensor and model_sensor == data_sensor:
+        return None
+    imu = f" ({model_sensor})" if model_sensor else ""
+    name = meta.get("name", meta.get("path", "this model"))
+    return (
+        f"model {name} was trained on {trained}{imu}, not on {dataset}: it learned the errors of another IMU, so "
+        f"its figures here say little about the method (train one on {dataset}, or pass weights.proposed=...)."
+    )
