@@ -179,6 +179,21 @@ def test_acc_norm_not_g_at_rest(tmp_path, model_file, capsys, scale, hint):
     assert "at rest" in err or "no rest" in err
 
 
+def test_a_corrupted_sample_is_refused_and_a_clipped_gyro_warns(tmp_path, model_file, capsys):
+    """One finite but impossible value passed the unit check (a 99th percentile) and spoiled ~2.5 s of outputs
+    (a 'mean correction' of 2e26 deg/s); a gyro clipped at its range was corrected without a word."""
+    gyro = synth()[1]
+    gyro[1500, 2] = 1e30
+    f = bad_file(tmp_path, gyro=gyro)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "o"], f"{f}:1502", "beyond what any IMU measures")
+    gyro = synth()[1]
+    gyro[:, 2] = np.clip(gyro[:, 2], -0.5, 0.5)
+    code, _, err = run([bad_file(tmp_path, "clipped.csv", gyro=gyro), "-m", model_file, "-o", tmp_path / "c"], capsys)
+    assert code == 0 and "column 4" in err and "looks saturated" in err and "0.5 rad/s" in err
+    code, _, err = run([bad_file(tmp_path, "clean.csv"), "-m", model_file, "-o", tmp_path / "n"], capsys)
+    assert code == 0 and "saturated" not in err
+
+
 def test_acc_m_s2_read_as_g(tmp_path, model_file, capsys):
     f = bad_file(tmp_path)
     expect_error(capsys, [f, "-m", model_file, "-o", tmp_path, "--acc-unit", "g"], "--acc-unit m/s^2")

@@ -83,6 +83,22 @@ def test_non_finite_sample_is_refused_and_leaves_the_state(backend):
     assert np.abs(np.concatenate([first, rest]) - ref).max() < ATOL
 
 
+@pytest.mark.parametrize("value", [1e30, 1e39])  # finite in float64, beyond any IMU; 1e39 is inf in float32
+def test_a_sample_beyond_any_sensor_is_refused_and_leaves_the_state(value):
+    model, imu = random_model(), random_imu(200)
+    ref = StreamingCorrector(model).push_chunk(imu)
+    sc = StreamingCorrector(model)
+    first = sc.push_chunk(imu[:50])
+    bad = imu[50].copy()
+    bad[2] = value
+    with pytest.raises(ValueError, match="NaN/inf|beyond any sensor"):
+        sc.push(bad)
+    with pytest.raises(ValueError, match="NaN/inf|beyond any sensor"):
+        sc.push_chunk(bad[None])
+    rest = sc.push_chunk(imu[50:])
+    assert np.abs(np.concatenate([first, rest]) - ref).max() < ATOL
+
+
 def test_bad_sample_shape():
     sc = StreamingCorrector(random_model())
     with pytest.raises(ValueError, match=r"\(6,\)"):

@@ -30,6 +30,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import special
 from torch import nn
 
+from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
@@ -52,14 +53,27 @@ NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
-def _finite(x, what: str) -> None:
-    """A NaN or inf enters every layer's buffer and spoils the outputs of a whole receptive field (~2.5 s)
-    after it, without an error: refused before the state changes."""
-    if not np.isfinite(np.asarray(x)).all():
-        raise ValueError(
-            f"{what}: a NaN/inf IMU value would corrupt the outputs of the next receptive field (~2.5 s at 200 Hz) "
-            "without an error; repair or drop the sample first (the state is unchanged)"
+def _checked(x, dtype, what: str) -> np.ndarray:
+    """`x` as `dtype`, refused before the state changes when a value is NaN/inf (also after the cast: 1e39 is inf in
+    float32) or beyond what any IMU measures: it would enter every layer's buffer and spoil the outputs of a whole
+    receptive field (~2.5 s) after it, without an error."""
+    x = np.asarray(x, dtype=dtype)
+    if not np.isfinite(x).all():  # (a wrong shape is left to the caller's message)
+        problem = "a NaN/inf IMU value"
+    elif (
+        x.size
+        and x.shape[-1] == 6
+        and (np.abs(x[..., :3]).max() > GYRO_ABS_MAX or np.abs(x[..., 3:]).max() > ACC_ABS_MAX)
+    ):
+        problem = (
+            f"an IMU value beyond any sensor's range (|gyro| > {GYRO_ABS_MAX:g} rad/s or |acc| > {ACC_ABS_MAX:g} m/s^2)"
         )
+    else:
+        return x
+    raise ValueError(
+        f"{what}: {problem} would corrupt the outputs of the next receptive field (~2.5 s at 200 Hz) without an "
+        "error; repair or drop the sample first (the state is unchanged)"
+    )
 
 
 @dataclass
@@ -229,10 +243,9 @@ class StreamingCorrector:
         """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean)."""
         if self.members is not None:
             return self.push_with_spread(sample)[0]
-        _finite(sample, "push")
+        x = _checked(sample, self.np_dtype, "push")
         if self.backend == "torch":
-            return self._push_torch(sample)
-        x = np.asarray(sample, dtype=self.np_dtype)
+            return self._push_torch(x)
         if x.shape != (6,):
             raise ValueError(f"push expects one (6,) sample (gyro rad/s, acc m/s^2), got shape {x.shape}")
         h = (x - self._mean) * self._inv_std
@@ -281,8 +294,7 @@ class StreamingCorrector:
         """
         if self.members is not None:
             return self.push_chunk_with_spread(chunk)[0]
-        x = np.asarray(chunk, dtype=self.np_dtype)
-        _finite(x, "push_chunk")
+        x = _checked(chunk, self.np_dtype, "push_chunk")
         if x.ndim != 2 or x.shape[1] != 6:
             raise ValueError(f"push_chunk expects (N, 6) samples, got shape {x.shape}")
         if len(x) == 0:

@@ -18,6 +18,11 @@ from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording
 from gyrodenoise.data.readers import DataFormatError
 
 GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well below at the 99th percentile
+# beyond these no MEMS IMU measures (gyro full scales stop at ~4000 deg/s, accelerometers at a few hundred g):
+# such a value is a corrupted sample, and one of them spoils a whole receptive field of outputs
+GYRO_ABS_MAX = 100.0  # rad/s (5730 deg/s)
+ACC_ABS_MAX = 5000.0  # m/s^2 (~510 g)
+SATURATED_RUNS = 2  # an axis at its largest magnitude in this many separate runs looks clipped
 RATE_RANGE_HZ = (5.0, 20_000.0)  # outside this, the time unit is wrong
 GAP_FACTOR = 3.0  # a step longer than this x the median period is a gap
 RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
@@ -139,6 +144,40 @@ def check_gyro_units(rec: ImuRecording, report: CheckReport, force: bool = False
         )
 
 
+def check_physical_range(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
+    """No sample beyond what any MEMS IMU measures (a corrupted register read, a unit slip of 1e3 and more)."""
+    for what, values, limit, unit in (
+        ("gyro", rec.gyro, GYRO_ABS_MAX, "rad/s"),
+        ("acc", rec.acc, ACC_ABS_MAX, "m/s^2"),
+    ):
+        bad = np.flatnonzero(np.abs(values).max(axis=1) > limit)
+        if bad.size:
+            k = int(bad[0])
+            _fail_or_warn(
+                report,
+                force,
+                f"{_where(rec, k)}: {what} sample {values[k].tolist()} {unit} is beyond what any IMU measures "
+                f"(|{what}| > {limit:g} {unit}; {bad.size} such samples). A corrupted sample: repair or remove it, "
+                "or split the recording there; one such sample spoils ~2.5 s of corrected outputs.",
+            )
+
+
+def check_saturation(rec: ImuRecording, report: CheckReport) -> None:
+    """Warn when a gyro axis sits at its largest magnitude in separate runs: clipped at the sensor's range."""
+    for axis, name in enumerate(("wx", "wy", "wz")):
+        mag = np.abs(rec.gyro[:, axis])
+        top = float(mag.max())
+        at = mag >= top * (1 - 1e-9)
+        starts = np.flatnonzero(at & ~np.r_[False, at[:-1]])
+        if top > 0 and len(starts) >= SATURATED_RUNS and at.sum() >= 2 * SATURATED_RUNS:
+            report.warn(
+                f"{_where(rec, int(starts[0]))}: gyro {rec.describe(name)} sits at {top:.4g} rad/s "
+                f"({np.degrees(top):.0f} deg/s), its largest magnitude, in {int(at.sum())} samples ({len(starts)} "
+                "separate runs): the gyro looks saturated (clipped at its range). What was cut cannot be corrected "
+                "and the orientation drifts by it: record with a larger gyro range."
+            )
+
+
 def check_acc_at_rest(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
     """|acc| at rest must be g (the model needs specific force, gravity included, in m/s^2)."""
     acc_norm = np.linalg.norm(rec.acc, axis=1)
@@ -215,7 +254,7 @@ def run_checks(
     check_gaps(rec, report, resample=resample)
     # the two unit checks are independent: a file in deg/s and in g is told both at once, not one run per problem
     problems = []
-    for check in (check_gyro_units, check_acc_at_rest):
+    for check in (check_physical_range, check_gyro_units, check_acc_at_rest):
         try:
             check(rec, report, force)
         except SanityCheckError as e:
@@ -224,6 +263,7 @@ def run_checks(
         raise SanityCheckError(problems[0])
     if problems:
         raise SanityCheckError(f"{len(problems)} problems:\n" + "\n".join(f"- {p}" for p in problems))
+    check_saturation(rec, report)
     return rec, report, check_rate(rec, model_rate_hz, report, resample)
 
 
