@@ -82,6 +82,12 @@ def test_cli(tiny, tmp_path, capsys):
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "out.onnx")).metadata_props}
     assert props["gyrodenoise.rate_hz"] == "200" and "gyro x, y, z [rad/s]" in props["gyrodenoise.input"]
     assert props["gyrodenoise.outputs"] == "gyro_corrected (batch, samples, 3) [rad/s]"
+    # what onboard use needs and the graph does not say: the history a call must hold, the accelerometer's content
+    rf = tiny.receptive_field
+    assert (
+        props["gyrodenoise.receptive_field_samples"] == str(rf) and f">= {rf} samples" in props["gyrodenoise.start_up"]
+    )
+    assert "gravity included" in props["gyrodenoise.accelerometer"] and props["gyrodenoise.exported_by"]
 
 
 def test_cli_error_is_one_line(tmp_path, capsys):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import importlib.metadata
 import sys
 from pathlib import Path
 
@@ -84,11 +85,32 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None) -> dict[str,
         "IMU body frame, consecutive samples at the training rate, oldest first",
         "gyrodenoise.outputs": ", ".join(output_names(model)) + " (batch, samples, 3) [rad/s]",
     }
+    rf = int(getattr(model, "receptive_field", 1))
+    out["gyrodenoise.receptive_field_samples"] = str(rf)
+    out["gyrodenoise.start_up"] = (
+        f"each call pads its start with {rf - 1} copies of its first sample: output n is exact once the call holds "
+        f"the {rf - 1} samples before n. Back-to-back short calls are not a stream: keep a window of >= {rf} samples "
+        "(one call per sample), or stream with gyrodenoise.streaming.StreamingCorrector (state kept between samples)"
+    )
+    out["gyrodenoise.accelerometer"] = (
+        "specific force, gravity included (about +9.81 m/s^2 up at rest), not gravity-free"
+    )
+    out["gyrodenoise.normalization"] = "inside the graph: feed raw SI values"
+    if isinstance(model, EnsembleCorrection):
+        out["gyrodenoise.ensemble_members"] = str(len(model.members))
+        out["gyrodenoise.gyro_std"] = (
+            f"per-sample std of the members' corrected gyro (ddof 1) x spread_scale {float(model.spread_scale):g}; "
+            "it ranks the error but underestimates it (see the model card)"
+        )
     if meta.get("rate_hz"):
         out["gyrodenoise.rate_hz"] = f"{float(meta['rate_hz']):g}"
+    sensor = (meta.get("sensor") or {}).get("model")
+    if sensor:
+        out["gyrodenoise.sensor"] = f"{sensor}: learned the errors of this IMU model; another IMU needs its own model"
     for key in ("name", "dataset", "beats_calibrated"):
         if meta.get(key) is not None:
             out[f"gyrodenoise.{key}"] = str(meta[key])
+    out["gyrodenoise.exported_by"] = f"gyrodenoise {importlib.metadata.version('gyrodenoise')}"
     return out
 
 
