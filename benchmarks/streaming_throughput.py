@@ -1,6 +1,6 @@
 """Throughput of the streaming corrector on ONE CPU core, in IMU samples per second.
 
-    python benchmarks/streaming_throughput.py [--model euroc] [--seconds 3]
+    python benchmarks/streaming_throughput.py [--models euroc tumvi-denoiser tumvi] [--seconds 3]
 
 Pins the process to one core and one thread (torch, BLAS), feeds a real EuRoC IMU stream when the
 shared data is there (else synthetic samples: the cost does not depend on the values), and times:
@@ -29,7 +29,7 @@ from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.models.build import build_model  # noqa: E402
 from gyrodenoise.models.denoiser import count_parameters, predict_gyro  # noqa: E402
 from gyrodenoise.paths import portable_command  # noqa: E402
-from gyrodenoise.pretrained import available_models, load_model  # noqa: E402
+from gyrodenoise.pretrained import load_model  # noqa: E402
 from gyrodenoise.streaming import StreamingCorrector  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -60,27 +60,20 @@ def rate(fn, n_samples: int, min_seconds: float) -> float:
     return best
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", default="euroc", help="shipped name or path; random weights if absent")
-    ap.add_argument("--seconds", type=float, default=3.0, help="minimum timing per case")
-    ap.add_argument("--out", default=str(HERE / "results" / "streaming_throughput"))
-    args = ap.parse_args()
+def latency_us(sc: StreamingCorrector, stream: np.ndarray) -> dict[str, float]:
+    """Per-sample `push` latency (microseconds): median, 99th percentile and max over the stream."""
+    times = np.empty(len(stream))
+    for k, sample in enumerate(stream):
+        t0 = time.perf_counter()
+        sc.push(sample)
+        times[k] = time.perf_counter() - t0
+    q50, q99 = np.percentile(times, [50, 99]) * 1e6
+    return {"median": round(float(q50), 1), "p99": round(float(q99), 1), "max": round(float(times.max()) * 1e6, 1)}
 
-    load_at_start = round(os.getloadavg()[0], 2)  # other processes share the machine: note how busy
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    torch.set_num_threads(1)
-    if args.model in available_models() or Path(args.model).is_file():
-        model, meta = load_model(args.model)
-        model_desc = meta["name"]
-    else:  # same architecture, so the same cost
-        model = build_model("denoiser").eval()
-        torch.nn.init.normal_(model.net[-1].weight, std=0.1)  # a non-zero correction for the parity check
-        model_desc = "default denoiser architecture, random weights (no shipped model found)"
 
+def measure(model, imu: np.ndarray, seconds: float) -> dict:
+    """Samples per second of each path, per-sample latency, and the streaming-batch parity, for one model."""
     n = 4000
-    imu, source = load_stream(max(n, 20000))
     results: dict[str, float] = {}
     for backend in ("numpy", "torch"):
         sc = StreamingCorrector(model, backend=backend)
@@ -91,7 +84,7 @@ def main() -> None:
             for s in stream:
                 sc.push(s)
 
-        results[f"push_{backend}"] = rate(per_sample, n, args.seconds)
+        results[f"push_{backend}"] = rate(per_sample, n, seconds)
         for chunk in (10, 200):
             blocks = np.array_split(imu[:20000], 20000 // chunk)
 
@@ -99,15 +92,53 @@ def main() -> None:
                 for b in blocks:
                     sc.push_chunk(b)
 
-            results[f"push_chunk{chunk}_{backend}"] = rate(chunked, 20000, args.seconds)
-    results["batch_predict_gyro_20000"] = rate(lambda: predict_gyro(model, imu[:20000]), 20000, args.seconds)
-
-    # check parity once more on what was timed
+            results[f"push_chunk{chunk}_{backend}"] = rate(chunked, 20000, seconds)
+    results["batch_predict_gyro_20000"] = rate(lambda: predict_gyro(model, imu[:20000]), 20000, seconds)
     sc = StreamingCorrector(model)
+    sc.push_chunk(imu[:600])  # past the start-up
+    lat = latency_us(sc, imu[600 : 600 + n])
+    sc = StreamingCorrector(model)  # parity once more on what was timed
     ref = predict_gyro(model, imu[:3000]).numpy()
     err = float(np.abs(np.stack([sc.push(s) for s in imu[:3000]]) - ref).max())
+    best = max((k for k in results if k.startswith("push_") and "chunk" not in k), key=results.get)
+    return {
+        "parameters": count_parameters(model),
+        "members": len(model.members) if hasattr(model, "members") else 1,
+        "receptive_field": int(getattr(model, "receptive_field", 1)),
+        "samples_per_second": {k: round(v) for k, v in results.items()},
+        "push_numpy_latency_us": lat,
+        "best_per_sample": {"path": best, "samples_per_second": round(results[best])},
+        "realtime_factor_at_200Hz": round(results[best] / 200.0, 1),
+        "parity_max_abs_err_rad_s": err,
+    }
 
-    best_key = max((k for k in results if k.startswith("push_") and "chunk" not in k), key=results.get)
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--models", nargs="+", default=["euroc", "tumvi-denoiser", "tumvi"],
+        help="shipped names or paths (default: the 8-network euroc ensemble, one network, the calibrated model); "
+        "'random' = the default denoiser architecture with random weights",
+    )  # fmt: skip
+    ap.add_argument("--seconds", type=float, default=3.0, help="minimum timing per case")
+    ap.add_argument("--out", default=str(HERE / "results" / "streaming_throughput"))
+    args = ap.parse_args()
+
+    load_at_start = round(os.getloadavg()[0], 2)  # other processes share the machine: note how busy
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    torch.set_num_threads(1)
+    imu, source = load_stream(20000)
+    per_model = {}
+    for name in args.models:
+        if name == "random":  # same architecture as a shipped network, so the same cost
+            model = build_model("denoiser").eval()
+            torch.nn.init.normal_(model.net[-1].weight, std=0.1)  # a non-zero correction for the parity check
+            name = "random (default denoiser architecture, random weights)"
+        else:
+            model = load_model(name)[0]
+        per_model[name] = measure(model, imu, args.seconds)
+        print(name, json.dumps(per_model[name]), flush=True)
     report = {
         "command": "python " + portable_command(sys.argv),
         "machine": f"{platform.node()} ({platform.processor() or platform.machine()}, "
@@ -116,42 +147,48 @@ def main() -> None:
         "python": platform.python_version(),
         "torch": torch.__version__,
         "numpy": np.__version__,
-        "model": model_desc,
-        "parameters": count_parameters(model),
-        "receptive_field": int(getattr(model, "receptive_field", 1)),
         "input": source,
-        "samples_per_second": {k: round(v) for k, v in results.items()},
-        "best_per_sample": {"path": best_key, "samples_per_second": round(results[best_key])},
-        "realtime_factor_at_200Hz": round(results[best_key] / 200.0),
-        "parity_max_abs_err_rad_s": err,
+        "models": per_model,
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text(out.with_suffix(".json"), json.dumps(report, indent=2) + "\n")
     write_text(out.with_suffix(".md"), markdown(report))
-    print(json.dumps(report, indent=2))
 
 
 def markdown(r: dict) -> str:
-    rows = "\n".join(f"| `{k}` | {v:,} |" for k, v in r["samples_per_second"].items())
+    models = r["models"]
+    head = "| path | " + " | ".join(f"`{m}`" for m in models) + " |\n|---|" + "---:|" * len(models)
+    paths = next(iter(models.values()))["samples_per_second"]
+    rows = "\n".join(
+        f"| `{k}` | " + " | ".join(f"{m['samples_per_second'][k]:,}" for m in models.values()) + " |" for k in paths
+    )
+    facts = "\n".join(
+        f"- `{name}`: {m['members']} network(s), {m['parameters']:,} parameters, receptive field "
+        f"{m['receptive_field']} samples; `push` (numpy) per sample: median {m['push_numpy_latency_us']['median']} us, "
+        f"p99 {m['push_numpy_latency_us']['p99']} us, max {m['push_numpy_latency_us']['max']} us; best per-sample path "
+        f"{m['best_per_sample']['samples_per_second']:,} samples/s = {m['realtime_factor_at_200Hz']}x real time at "
+        f"200 Hz; max |streaming - batch| on 3,000 samples {m['parity_max_abs_err_rad_s']:.2e} rad/s"
+        for name, m in models.items()
+    )
     return f"""# Streaming corrector throughput (one CPU core)
 
 Command: `{r["command"]}`
 Machine: {r["machine"]}; 1-min load average at start {r["load_average_1min_at_start"]}.
 Python {r["python"]}, torch {r["torch"]}, numpy {r["numpy"]}; {r["date"]}.
-Model: {r["model"]}, {r["parameters"]:,} parameters, receptive field {r["receptive_field"]} samples.
 Input: {r["input"]}.
 
-| path | samples/s |
-|---|---:|
+Samples per second:
+
+{head}
 {rows}
 
+{facts}
+
 `push_*`: one sample per call (what an onboard loop does); `push_chunkN_*`: N samples per call;
-`batch_predict_gyro_20000`: the batch model on 20,000 samples at once, for reference.
-Best sample-by-sample path: `{r["best_per_sample"]["path"]}`, {r["best_per_sample"]["samples_per_second"]:,} samples/s,
-{r["realtime_factor_at_200Hz"]}x real time for a 200 Hz IMU.
-Max |streaming - batch| on 3,000 samples: {r["parity_max_abs_err_rad_s"]:.2e} rad/s.
+`batch_predict_gyro_20000`: the batch model on 20,000 samples at once, for reference. An ensemble of K networks
+costs about K times one network.
 """
 
 
