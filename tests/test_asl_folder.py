@@ -158,6 +158,10 @@ def test_missing_sequences_fail_before_training(asl_root):
     with pytest.raises(FileNotFoundError, match=r"nowhere: data folder not found .*GYRODENOISE_DATA") as err:
         nowhere.check_sequences(train=False, test=True, test_hint="pass test=false")
     assert "test=false" not in str(err.value)
+    # a root one level too high (the folder that holds the dataset's folder): the folder to give is named
+    too_high = ImuDataModule(name="my_imu", root=str(asl_root.parent), train_seqs=["walk_1"], test_seqs=[], window=256)
+    with pytest.raises(FileNotFoundError, match=rf"holds walk_1: set dataset.root={asl_root}\.$"):
+        too_high.check_sequences(test=False)
 
 
 def test_fit_calibrated_alone(asl_root, tmp_path):

@@ -269,8 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     if summary["model_trained_on"]:
         print(
-            f"note: {meta['name']} learned the errors of {summary['model_trained_on']}; on a recording of another IMU "
-            "it is not expected to help: train a model on that IMU's own data (README: train on your own ASL folders)",
+            f"note: {meta['name']} learned the errors of {summary['model_trained_on']}; it is meant for recordings "
+            "of that IMU model (for another IMU, train a model on its own data: README, train on your own ASL folders)",
             file=sys.stderr,
         )
     return 0

@@ -182,6 +182,12 @@ class ImuDataModule(L.LightningDataModule):
                 "configs read $GYRODENOISE_DATA/<dataset>)."
             )
         if missing:
+            inside = [d for d in (Path(self.root) / self.name, *Path(self.root).glob("*")) if (d / missing[0]).is_dir()]
+            if inside:  # a root one level too high (the folder that holds euroc/, not euroc/ itself)
+                raise FileNotFoundError(
+                    f"{self.root}: sequence folder(s) not found: {', '.join(missing)}, but {inside[0]} holds "
+                    f"{missing[0]}: set dataset.root={inside[0]}."
+                )
             only_test = set(missing) <= set(self.test_names)
             here = sequences_in(self.root)
             typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := misspelt(n, here)))
