@@ -226,7 +226,8 @@ class StreamingCorrector:
         """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
         if self.members is None:
             return self.push(sample), None
-        outs = [m.push(sample) for m in self.members]  # a NaN/inf sample: the first member refuses it, no state changed
+        x = _checked(sample, self.members[0].np_dtype, "push")  # once for all members, before any state changes
+        outs = [m._push_checked(x) for m in self.members]
         self.n_pushed += 1
         return self._mean_std(outs)
 
@@ -234,7 +235,8 @@ class StreamingCorrector:
         """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
         if self.members is None:
             return self.push_chunk(chunk), None
-        outs = [m.push_chunk(chunk) for m in self.members]
+        x = _checked(chunk, self.members[0].np_dtype, "push_chunk")
+        outs = [m._push_chunk_checked(x) for m in self.members]
         self.n_pushed += len(outs[0])
         return self._mean_std(outs)
 
@@ -243,7 +245,10 @@ class StreamingCorrector:
         """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean)."""
         if self.members is not None:
             return self.push_with_spread(sample)[0]
-        x = _checked(sample, self.np_dtype, "push")
+        return self._push_checked(_checked(sample, self.np_dtype, "push"))
+
+    def _push_checked(self, x: np.ndarray) -> np.ndarray:
+        """`push` of a sample `_checked` already cast and checked."""
         if self.backend == "torch":
             return self._push_torch(x)
         if x.shape != (6,):
@@ -294,7 +299,10 @@ class StreamingCorrector:
         """
         if self.members is not None:
             return self.push_chunk_with_spread(chunk)[0]
-        x = _checked(chunk, self.np_dtype, "push_chunk")
+        return self._push_chunk_checked(_checked(chunk, self.np_dtype, "push_chunk"))
+
+    def _push_chunk_checked(self, x: np.ndarray) -> np.ndarray:
+        """`push_chunk` of samples `_checked` already cast and checked."""
         if x.ndim != 2 or x.shape[1] != 6:
             raise ValueError(f"push_chunk expects (N, 6) samples, got shape {x.shape}")
         if len(x) == 0:
