@@ -19,6 +19,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -71,6 +72,39 @@ def latency_us(sc: StreamingCorrector, stream: np.ndarray) -> dict[str, float]:
     return {"median": round(float(q50), 1), "p99": round(float(q99), 1), "max": round(float(times.max()) * 1e6, 1)}
 
 
+def onnx_stateful_rates(model, imu: np.ndarray, n: int, seconds: float) -> dict[str, float]:
+    """The stateful ONNX export (`export --stateful`) in onnxruntime, one thread: one sample per call and chunks,
+    the state passed back each call. Empty without the [export] extra or for a model that keeps no state."""
+    try:
+        import onnxruntime as ort
+
+        from gyrodenoise.export import export_onnx
+        from gyrodenoise.stateful_graph import StatefulCorrection
+    except ImportError:
+        return {}
+    size = StatefulCorrection(model).state_size
+    if size == 0:
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = export_onnx(model, Path(tmp) / "step.onnx", stateful=True)
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = opts.inter_op_num_threads = 1
+        sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+    x = imu.astype(np.float32)[None]
+    out: dict[str, float] = {}
+    for chunk, total in ((1, n), (10, 20000), (200, 20000)):
+
+        def stream(chunk=chunk, total=total):
+            state, first = np.zeros((1, size), np.float32), True
+            for start in range(0, total, chunk):
+                feed = {"imu": x[:, start : start + chunk], "state": state, "reset": np.array([first])}
+                state = sess.run(None, feed)[-1]
+                first = False
+
+        out["onnx_stateful" + (f"_chunk{chunk}" if chunk > 1 else "")] = rate(stream, total, seconds)
+    return out
+
+
 def measure(model, imu: np.ndarray, seconds: float) -> dict:
     """Samples per second of each path, per-sample latency, and the streaming-batch parity, for one model."""
     n = 4000
@@ -93,6 +127,7 @@ def measure(model, imu: np.ndarray, seconds: float) -> dict:
                     sc.push_chunk(b)
 
             results[f"push_chunk{chunk}_{backend}"] = rate(chunked, 20000, seconds)
+    results.update(onnx_stateful_rates(model, imu, n, seconds))
     results["batch_predict_gyro_20000"] = rate(lambda: predict_gyro(model, imu[:20000]), 20000, seconds)
     sc = StreamingCorrector(model)
     sc.push_chunk(imu[:600])  # past the start-up
@@ -160,10 +195,12 @@ def main() -> None:
 def markdown(r: dict) -> str:
     models = r["models"]
     head = "| path | " + " | ".join(f"`{m}`" for m in models) + " |\n|---|" + "---:|" * len(models)
-    paths = next(iter(models.values()))["samples_per_second"]
+    paths = list(dict.fromkeys(k for m in models.values() for k in m["samples_per_second"]))
     rows = "\n".join(
-        f"| `{k}` | " + " | ".join(f"{m['samples_per_second'][k]:,}" for m in models.values()) + " |" for k in paths
-    )
+        f"| `{k}` | " + " | ".join(f"{m['samples_per_second'][k]:,}" if k in m["samples_per_second"] else "-"
+                                   for m in models.values()) + " |"
+        for k in paths
+    )  # fmt: skip
     facts = "\n".join(
         f"- `{name}`: {m['members']} network(s), {m['parameters']:,} parameters, receptive field "
         f"{m['receptive_field']} samples; `push` (numpy) per sample: median {m['push_numpy_latency_us']['median']} us, "
@@ -187,6 +224,8 @@ Samples per second:
 {facts}
 
 `push_*`: one sample per call (what an onboard loop does); `push_chunkN_*`: N samples per call;
+`onnx_stateful*`: the stateful ONNX export (`python -m gyrodenoise.export MODEL --onnx F --stateful`) in onnxruntime
+with one thread, the state passed back at each call (`-`: a model without state, or no onnxruntime);
 `batch_predict_gyro_20000`: the batch model on 20,000 samples at once, for reference. An ensemble of K networks
 costs about K times one network.
 """

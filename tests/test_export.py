@@ -7,9 +7,10 @@ import pytest
 import torch
 from _models import random_imu, random_model
 
-from gyrodenoise.export import INPUT_NAME, export_onnx, export_pt2, main
+from gyrodenoise.export import INPUT_NAME, ExportWrapper, export_onnx, export_pt2, main
 from gyrodenoise.models.build import build_model
 from gyrodenoise.pretrained import save_model
+from gyrodenoise.stateful_graph import StatefulCorrection
 
 TINY = {"channels": (8, 16), "kernel_size": 5, "dilations": (1, 4), "act": "gelu", "dropout": 0.1}
 ATOL = 1e-5
@@ -95,3 +96,99 @@ def test_cli_error_is_one_line(tmp_path, capsys):
     assert main([str(tmp_path / "missing.pt"), "--onnx", str(tmp_path / "out.onnx")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "missing.pt" in err and not (tmp_path / "out.onnx").exists()
+
+
+# ---------------------------------------------------------------- the stateful (streaming) step
+CHUNKS = (1, 1, 5, 130, 2, 260, 1)  # one-sample calls, shorter and longer than the receptive field (17)
+
+
+def _stream(run, x: np.ndarray, n_outputs: int) -> list[np.ndarray]:
+    """Feed x (B, N, 6) through `run(chunk, state, reset) -> (*outputs, state)` in CHUNKS; outputs concatenated."""
+    outs: list[list[np.ndarray]] = [[] for _ in range(n_outputs)]
+    state, start = None, 0
+    for size in CHUNKS:
+        *ys, state = run(x[:, start : start + size], state, np.full(len(x), start == 0))
+        for o, y in zip(outs, ys, strict=True):
+            o.append(np.asarray(y))
+        start += size
+    assert start == x.shape[1]
+    return [np.concatenate(o, 1) for o in outs]
+
+
+def _batch_outputs(model, x: np.ndarray) -> list[np.ndarray]:
+    with torch.no_grad():
+        y = ExportWrapper(model)(torch.as_tensor(x, dtype=torch.float32))
+    return [t.numpy() for t in (y if isinstance(y, tuple) else (y,))]
+
+
+def _ensemble():
+    from gyrodenoise.models.ensemble import EnsembleCorrection
+
+    cal = build_model("calibrated")
+    cal.bias.data[:] = torch.tensor([0.01, 0.02, -0.03])
+    big = random_model(seed=5, channels=(4, 8, 8), kernel_size=3, dilations=(1, 2, 8))
+    return EnsembleCorrection([random_model(seed=3, **TINY), big, cal], spread_scale=1.5).eval()
+
+
+@pytest.mark.parametrize("which", ["single", "ensemble"])
+def test_stateful_step_streams_like_the_batch_model(tiny, which):
+    model = tiny if which == "single" else _ensemble()
+    step = StatefulCorrection(model)
+    x = np.stack([random_imu(sum(CHUNKS), seed=s) for s in (7, 8)]).astype(np.float32)  # two streams side by side
+
+    def run(chunk, state, reset):
+        state = step.initial_state(len(chunk)) if state is None else state
+        with torch.no_grad():
+            return step(torch.from_numpy(chunk), state, torch.from_numpy(reset))
+
+    ref = _batch_outputs(model, x)
+    got = _stream(run, x, len(ref))
+    assert max(np.abs(g - r).max() for g, r in zip(got, ref, strict=True)) < ATOL
+    # reset=True forgets the state passed in: a new stream's first call equals the batch model on it alone
+    with torch.no_grad():
+        *y, _ = step(torch.from_numpy(x[:, 100:160]), torch.randn(2, step.state_size), torch.tensor([True, True]))
+    assert np.abs(y[0].numpy() - _batch_outputs(model, x[:, 100:160])[0]).max() < ATOL
+
+
+def test_onnx_stateful_export_streams_in_chunks(tmp_path):
+    pytest.importorskip("onnxscript")
+    ort = pytest.importorskip("onnxruntime")
+    import onnx
+
+    model = _ensemble()
+    path = export_onnx(model, tmp_path / "s.onnx", stateful=True)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    size = StatefulCorrection(model).state_size
+    assert [i.name for i in sess.get_inputs()] == ["imu", "state", "reset"]
+    assert [o.name for o in sess.get_outputs()] == ["gyro_corrected", "gyro_std", "state_out"]
+    x = np.stack([random_imu(sum(CHUNKS), seed=s) for s in (9, 10)]).astype(np.float32)
+
+    def run(chunk, state, reset):
+        state = np.zeros((len(chunk), size), np.float32) if state is None else state
+        return sess.run(None, {"imu": chunk, "state": state, "reset": reset})
+
+    ref = _batch_outputs(model, x)
+    got = _stream(run, x, 2)
+    assert max(np.abs(g - r).max() for g, r in zip(got, ref, strict=True)) < ATOL
+    props = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+    assert f"state (batch, {size})" in props["gyrodenoise.inputs"] and "state_out" in props["gyrodenoise.outputs"]
+
+
+def test_stateful_export_of_a_model_without_state_is_refused(tmp_path, capsys):
+    pytest.importorskip("onnxscript")
+    model_file = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {})
+    assert main([str(model_file), "--onnx", str(tmp_path / "c.onnx"), "--stateful"]) == 2
+    assert "keeps no state" in capsys.readouterr().err and not (tmp_path / "c.onnx").exists()
+
+
+def test_stateful_torch_export_streams_in_chunks(tiny, tmp_path):
+    program = torch.export.load(export_pt2(tiny, tmp_path / "s.pt2", stateful=True)).module()
+    x = random_imu(sum(CHUNKS), seed=11)[None].astype(np.float32)
+
+    def run(chunk, state, reset):
+        state = torch.zeros(1, StatefulCorrection(tiny).state_size) if state is None else state
+        with torch.no_grad():
+            return program(torch.from_numpy(chunk), state, torch.from_numpy(reset))
+
+    (got,) = _stream(run, x, 1)
+    assert np.abs(got - _batch_outputs(tiny, x)[0]).max() < ATOL

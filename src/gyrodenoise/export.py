@@ -6,7 +6,12 @@ left padding and C_hat are inside the graph; the length N (and batch B) are dyna
 (`EnsembleCorrection`) exports to one graph with two outputs: the members' mean `gyro_corrected`
 and their per-sample std `gyro_std` (B, N, 3) rad/s.
 
-    python -m gyrodenoise.export euroc --onnx euroc.onnx [--pt2 euroc.pt2]
+That graph keeps no state: every call pads its start. `--stateful` exports the streaming step instead
+(`gyrodenoise.stateful_graph`): inputs `imu` (B, N, 6), `state` (B, S) and `reset` (B,) bool, outputs the
+corrected gyro (and std), and `state_out` to feed back with the next chunk; chunks of any length, one sample
+included, then give the batch model's outputs on the whole stream.
+
+    python -m gyrodenoise.export euroc --onnx euroc.onnx [--pt2 euroc.pt2] [--stateful]
 
 ONNX uses the torch.export-based exporter (`dynamo=True`, torch's default since 2.9), which needs
 `onnx` and `onnxscript` (pip install "gyrodenoise[export]").
@@ -18,6 +23,7 @@ import argparse
 import copy
 import importlib.metadata
 import sys
+import warnings
 from pathlib import Path
 
 import torch
@@ -27,8 +33,10 @@ from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.stateful_graph import StatefulCorrection
 
 INPUT_NAME, OUTPUT_NAME, STD_NAME = "imu", "gyro_corrected", "gyro_std"
+STATE_NAME, RESET_NAME, STATE_OUT_NAME = "state", "reset", "state_out"
 OPSET = 18
 
 
@@ -61,23 +69,37 @@ def _dynamic_shapes() -> dict:
     return {"imu": {0: torch.export.Dim("batch", min=1), 1: torch.export.Dim("length", min=1)}}
 
 
-def export_program(model: CorrectionModel) -> torch.export.ExportedProgram:
-    """torch.export program with dynamic batch and length."""
-    wrapper = ExportWrapper(model)
+def _graph(model: CorrectionModel, stateful: bool) -> tuple[nn.Module, tuple, dict, tuple[list[str], list[str]]]:
+    """The module to export, example inputs, their dynamic shapes, and the input and output names."""
+    if not stateful:
+        return ExportWrapper(model), (_example(model),), _dynamic_shapes(), ([INPUT_NAME], output_names(model))
+    step = StatefulCorrection(model)
+    if step.state_size == 0:
+        raise ValueError("this model keeps no state (a calibrated model): export it without --stateful")
+    batch = torch.export.Dim("batch", min=1)  # shared by the three inputs
+    imu = _example(step)
+    args = (imu, torch.randn(len(imu), step.state_size), torch.tensor([True, False]))
+    shapes = {"imu": {0: batch, 1: torch.export.Dim("length", min=1)}, "state": {0: batch}, "reset": {0: batch}}
+    return step, args, shapes, ([INPUT_NAME, STATE_NAME, RESET_NAME], [*output_names(model), STATE_OUT_NAME])
+
+
+def export_program(model: CorrectionModel, stateful: bool = False) -> torch.export.ExportedProgram:
+    """torch.export program with dynamic batch and length (`stateful`: the streaming step, as `export_onnx`)."""
+    module, args, shapes, _ = _graph(model, stateful)
     with torch.no_grad():
-        return torch.export.export(wrapper, (_example(model),), dynamic_shapes=_dynamic_shapes())
+        return torch.export.export(module, args, dynamic_shapes=shapes)
 
 
-def export_pt2(model: CorrectionModel, path: str | Path) -> Path:
+def export_pt2(model: CorrectionModel, path: str | Path, stateful: bool = False) -> Path:
     """Save the torch.export program (load with torch.export.load(path).module())."""
     path = Path(path)
-    program = export_program(model)
+    program = export_program(model, stateful)
     with atomic_path(path, ".pt2") as tmp:
         torch.export.save(program, tmp)
     return path
 
 
-def onnx_metadata(model: CorrectionModel, meta: dict | None = None) -> dict[str, str]:
+def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bool = False) -> dict[str, str]:
     """What a user of the .onnx file needs and the graph does not say: units, channel order, rate, origin."""
     meta = meta or {}
     out = {
@@ -87,11 +109,26 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None) -> dict[str,
     }
     rf = int(getattr(model, "receptive_field", 1))
     out["gyrodenoise.receptive_field_samples"] = str(rf)
-    out["gyrodenoise.start_up"] = (
-        f"each call pads its start with {rf - 1} copies of its first sample: output n is exact once the call holds "
-        f"the {rf - 1} samples before n. Back-to-back short calls are not a stream: keep a window of >= {rf} samples "
-        "(one call per sample), or stream with gyrodenoise.streaming.StreamingCorrector (state kept between samples)"
-    )
+    if stateful:
+        size = StatefulCorrection(model).state_size
+        out["gyrodenoise.inputs"] = (
+            f"{INPUT_NAME} (batch, samples >= 1, 6); {STATE_NAME} (batch, {size}) float32: the {STATE_OUT_NAME} of "
+            f"the stream's previous call; {RESET_NAME} (batch,) bool: true on a stream's first call ({STATE_NAME} is "
+            "then not read)"
+        )
+        out["gyrodenoise.outputs"] = ", ".join(output_names(model)) + f" (batch, samples, 3) [rad/s], {STATE_OUT_NAME}"
+        out["gyrodenoise.start_up"] = (
+            f"a stream starts as if preceded by {rf - 1} copies of its first sample (the first ~{rf} samples are less "
+            f"accurate); after that, calls of any length that pass {STATE_OUT_NAME} back as {STATE_NAME} give the "
+            "outputs of one call on the whole stream"
+        )
+    else:
+        out["gyrodenoise.start_up"] = (
+            f"each call pads its start with {rf - 1} copies of its first sample: output n is exact once the call "
+            f"holds the {rf - 1} samples before n. Back-to-back short calls are not a stream: keep a window of >= "
+            f"{rf} samples (one call per sample), export with --stateful (state passed between calls), or stream "
+            "with gyrodenoise.streaming.StreamingCorrector"
+        )
     out["gyrodenoise.accelerometer"] = (
         "specific force, gravity included (about +9.81 m/s^2 up at rest), not gravity-free"
     )
@@ -114,29 +151,34 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None) -> dict[str,
     return out
 
 
-def export_onnx(model: CorrectionModel, path: str | Path, opset: int = OPSET, meta: dict | None = None) -> Path:
+def export_onnx(
+    model: CorrectionModel, path: str | Path, opset: int = OPSET, meta: dict | None = None, stateful: bool = False
+) -> Path:
     """Write a self-contained ONNX file (weights inside) with dynamic batch and length; `meta` (the model file's
-    metadata) adds the training rate and origin to the file's metadata_props (`onnx_metadata`)."""
+    metadata) adds the training rate and origin to the file's metadata_props (`onnx_metadata`). `stateful`: the
+    streaming step (inputs imu, state, reset; outputs ..., state_out), see `gyrodenoise.stateful_graph`."""
     for mod in ("onnx", "onnxscript"):
         try:
             __import__(mod)
         except ImportError:
             raise ImportError(f"ONNX export needs the '{mod}' package: pip install 'gyrodenoise[export]'") from None
     path = Path(path)
-    wrapper = ExportWrapper(model)
-    with torch.no_grad():
+    wrapper, args, shapes, names = _graph(model, stateful)
+    with torch.no_grad(), warnings.catch_warnings():
+        # the stateful graph's inputs share one batch dimension on purpose; the exporter warns it keeps one name
+        warnings.filterwarnings("ignore", message=r"\W*The axis name: .* will not be used, since it shares")
         program = torch.onnx.export(
             wrapper,
-            (_example(model),),
+            args,
             dynamo=True,
-            input_names=[INPUT_NAME],
-            output_names=output_names(model),
-            dynamic_shapes=_dynamic_shapes(),
+            input_names=names[0],
+            output_names=names[1],
+            dynamic_shapes=shapes,
             opset_version=opset,
             external_data=False,
             verbose=False,
         )
-    program.model.metadata_props.update(onnx_metadata(model, meta))
+    program.model.metadata_props.update(onnx_metadata(model, meta, stateful))
     with atomic_path(path, ".onnx") as tmp:
         program.save(str(tmp), external_data=False)
     return path
@@ -155,6 +197,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length)")
     ap.add_argument("--pt2", type=Path, help="output torch.export program (.pt2)")
     ap.add_argument("--opset", type=int, default=OPSET)
+    ap.add_argument(
+        "--stateful",
+        action="store_true",
+        help="export the streaming step (inputs imu, state, reset; outputs ..., state_out): feed state_out back "
+        "with the next chunk of any length and the outputs equal one call on the whole stream",
+    )
     ap.add_argument("--no-check", action="store_true", help="skip the onnxruntime parity check")
     args = ap.parse_args(argv)
     if not (args.onnx or args.pt2):
@@ -162,13 +210,18 @@ def main(argv: list[str] | None = None) -> int:
     try:
         model, meta = load_model(args.model)
         if args.pt2:
-            print(f"wrote {export_pt2(model, args.pt2)}")
+            print(f"wrote {export_pt2(model, args.pt2, args.stateful)}")
         if args.onnx:
-            export_onnx(model, args.onnx, args.opset, meta)
+            export_onnx(model, args.onnx, args.opset, meta, args.stateful)
             msg = f"wrote {args.onnx}"
             if not args.no_check:
-                err = onnx_parity(model, args.onnx)
-                msg += f" (onnxruntime vs PyTorch: max |diff| {err:.2e} rad/s over {', '.join(output_names(model))})"
+                parity = onnx_stream_parity if args.stateful else onnx_parity
+                err = parity(model, args.onnx)
+                how = "in chunks of 1 to 700 samples, " if args.stateful else ""
+                msg += (
+                    f" (onnxruntime {how}vs PyTorch on the whole sequence: max |diff| {err:.2e} rad/s over "
+                    f"{', '.join(output_names(model))})"
+                )
             print(msg)
     except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
         print(f"error: {e}", file=sys.stderr)
@@ -191,6 +244,34 @@ def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> floa
         ref = ExportWrapper(model)(x)
     refs = ref if isinstance(ref, tuple) else (ref,)
     return max(float(np.abs(y - r.numpy()).max()) for y, r in zip(ys, refs, strict=True))
+
+
+def onnx_stream_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> float:
+    """Max |onnxruntime - PyTorch| of a stateful export fed in chunks (1 to 700 samples, state passed back), against
+    the model on the whole sequence."""
+    import numpy as np
+    import onnxruntime as ort
+
+    x = _example(model, n)[:1]
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    names = output_names(model)
+    state = np.zeros((1, StatefulCorrection(model).state_size), np.float32)
+    outs: list[list[np.ndarray]] = [[] for _ in names]
+    start = 0
+    for size in (1, 1, 5, 300, 700, 2, n):
+        chunk = x[:, start : start + size].numpy()
+        if chunk.shape[1] == 0:
+            break
+        *ys, state = sess.run(
+            [*names, STATE_OUT_NAME], {INPUT_NAME: chunk, STATE_NAME: state, RESET_NAME: np.array([start == 0])}
+        )
+        for o, y in zip(outs, ys, strict=True):
+            o.append(y)
+        start += size
+    with torch.no_grad():
+        ref = ExportWrapper(model)(x)
+    refs = ref if isinstance(ref, tuple) else (ref,)
+    return max(float(np.abs(np.concatenate(o, 1) - r.numpy()).max()) for o, r in zip(outs, refs, strict=True))
 
 
 if __name__ == "__main__":
