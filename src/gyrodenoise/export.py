@@ -120,7 +120,9 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
         out["gyrodenoise.start_up"] = (
             f"a stream starts as if preceded by {rf - 1} copies of its first sample (the first ~{rf} samples are less "
             f"accurate); after that, calls of any length that pass {STATE_OUT_NAME} back as {STATE_NAME} give the "
-            "outputs of one call on the whole stream"
+            "outputs of one call on the whole stream. The graph does not check its input: a NaN/inf or impossible "
+            f"sample enters the state and spoils the next {rf} outputs, so check samples before the call "
+            "(StreamingCorrector refuses them)"
         )
     else:
         out["gyrodenoise.start_up"] = (
