@@ -14,6 +14,9 @@ Batch norm (eval mode) is folded into its convolution; dropout is the identity a
     W = sc.push_chunk(imu_block)            # (N, 6) -> (N, 3), same state
     w, s = sc.push_with_spread(imu_sample)  # an ensemble: mean and std over its members
 
+    sc = StreamingCorrector.load("euroc")   # a shipped name or a model file; knows the training rate
+    w = sc.push(imu_sample, t_ns=stamp)     # timestamps checked: order, gaps, rate (`stream_clock`)
+
 An ensemble streams as one state per member; the output is the members' mean and their sample
 standard deviation (K - 1 denominator) times its `spread_scale`, as `EnsembleCorrection.forward_with_spread`.
 """
@@ -33,6 +36,7 @@ from torch import nn
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
+from gyrodenoise.stream_clock import StreamClock
 
 BACKENDS = ("numpy", "torch")
 
@@ -139,13 +143,17 @@ class StreamingCorrector:
     """Stateful causal gyro corrector, equal to the batch model run on everything pushed so far.
 
     backend: "numpy" (fastest for single samples) or "torch". dtype: float32 (as the batch model
-    runs) or float64. Outputs are float64 rad/s.
+    runs) or float64. Outputs are float64 rad/s. rate_hz: the model's training rate, against which
+    the timestamps given to `push`/`push_chunk` (optional, int ns) are checked; `load` sets it.
     """
 
-    def __init__(self, model: CorrectionModel, backend: str = "numpy", dtype: str = "float32") -> None:
+    def __init__(
+        self, model: CorrectionModel, backend: str = "numpy", dtype: str = "float32", rate_hz: float | None = None
+    ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r}; choose one of {BACKENDS}")
         self.backend = backend
+        self.clock = StreamClock(rate_hz)
         self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
         if isinstance(model, EnsembleCorrection):
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
@@ -175,6 +183,15 @@ class StreamingCorrector:
         self._prepare()
         self.reset()
 
+    @classmethod
+    def load(cls, model: str, backend: str = "numpy", dtype: str = "float32") -> StreamingCorrector:
+        """A shipped model name (e.g. "euroc") or a model file, with the training rate its file records."""
+        from gyrodenoise.pretrained import load_model
+
+        net, meta = load_model(model)
+        rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
+        return cls(net, backend, dtype, float(rate) if rate else None)
+
     # ------------------------------------------------------------------ setup
     def _prepare(self) -> None:
         dt = self.np_dtype
@@ -199,6 +216,7 @@ class StreamingCorrector:
         """Forget the past: the next sample pushed is treated as the first of a sequence."""
         for m in self.members or []:
             m.reset()
+        self.clock.reset()
         self._buf: list = []
         self._pos = 0
         self.n_pushed = 0
@@ -222,30 +240,47 @@ class StreamingCorrector:
         std = stack.std(0, ddof=1) * self.spread_scale if len(outs) > 1 else np.zeros_like(stack[0])
         return stack.mean(0), std
 
-    def push_with_spread(self, sample) -> tuple[np.ndarray, np.ndarray | None]:
-        """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
-        if self.members is None:
-            return self.push(sample), None
-        x = _checked(sample, self.members[0].np_dtype, "push")  # once for all members, before any state changes
-        outs = [m._push_checked(x) for m in self.members]
-        self.n_pushed += 1
-        return self._mean_std(outs)
+    def _stamps(self, t_ns, n: int) -> np.ndarray | None:
+        """The call's timestamps, checked against the stream's before anything changes (None: not given)."""
+        if t_ns is None:
+            if self.clock.last_ns is not None:
+                raise ValueError("this stream was given timestamps: give t_ns with every push (or reset() first)")
+            return None
+        return self.clock.check(t_ns, n)
 
-    def push_chunk_with_spread(self, chunk) -> tuple[np.ndarray, np.ndarray | None]:
-        """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
+    def _run(self, sample, t_ns, chunk: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Check the input and its stamps once (for all members), push, and record the stamps."""
+        what = "push_chunk" if chunk else "push"
+        dtype = (self.members[0] if self.members else self).np_dtype
+        x = _checked(sample, dtype, what)
+        t = self._stamps(t_ns, len(x) if chunk and x.ndim == 2 else 1)
+        one = (lambda m, v: m._push_chunk_checked(v)) if chunk else (lambda m, v: m._push_checked(v))
         if self.members is None:
-            return self.push_chunk(chunk), None
-        x = _checked(chunk, self.members[0].np_dtype, "push_chunk")
-        outs = [m._push_chunk_checked(x) for m in self.members]
-        self.n_pushed += len(outs[0])
-        return self._mean_std(outs)
+            out, std = one(self, x), None
+        else:
+            outs = [one(m, x) for m in self.members]
+            self.n_pushed += len(outs[0]) if chunk else 1
+            out, std = self._mean_std(outs)
+        if t is not None:
+            self.clock.commit(t)
+        return out, std
+
+    def push_with_spread(self, sample, t_ns=None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
+        return self._run(sample, t_ns, chunk=False)
+
+    def push_chunk_with_spread(self, chunk, t_ns=None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
+        return self._run(chunk, t_ns, chunk=True)
 
     # ------------------------------------------------------------------ per sample
-    def push(self, sample) -> np.ndarray:
-        """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean)."""
-        if self.members is not None:
-            return self.push_with_spread(sample)[0]
-        return self._push_checked(_checked(sample, self.np_dtype, "push"))
+    def push(self, sample, t_ns=None) -> np.ndarray:
+        """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean).
+
+        t_ns (optional, int nanoseconds): the sample's timestamp; a stamp out of order or after a gap is refused
+        (`StreamTimeError`, state unchanged) and a stream at another rate than the model's warns.
+        """
+        return self._run(sample, t_ns, chunk=False)[0]
 
     def _push_checked(self, x: np.ndarray) -> np.ndarray:
         """`push` of a sample `_checked` already cast and checked."""
@@ -291,15 +326,13 @@ class StreamingCorrector:
         return out.double().numpy()
 
     # ------------------------------------------------------------------ chunks
-    def push_chunk(self, chunk) -> np.ndarray:
+    def push_chunk(self, chunk, t_ns=None) -> np.ndarray:
         """(N, 6) raw IMU samples -> (N, 3) corrected gyro, float64; continues the same state.
 
         Each layer runs as a valid convolution over [its past inputs, the chunk], vectorised over
-        the chunk (O(1) per sample, amortised).
+        the chunk (O(1) per sample, amortised). t_ns: (N,) int timestamps, checked as in `push`.
         """
-        if self.members is not None:
-            return self.push_chunk_with_spread(chunk)[0]
-        return self._push_chunk_checked(_checked(chunk, self.np_dtype, "push_chunk"))
+        return self._run(chunk, t_ns, chunk=True)[0]
 
     def _push_chunk_checked(self, x: np.ndarray) -> np.ndarray:
         """`push_chunk` of samples `_checked` already cast and checked."""

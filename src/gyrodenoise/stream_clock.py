@@ -1,0 +1,93 @@
+"""Timestamp checks for a stream of IMU samples fed to the streaming corrector, one call at a time.
+
+The network's dilated convolutions count samples, not seconds: samples out of order, a gap (the samples
+either side taken as consecutive) or a stream at another rate than the model's training rate all give a
+wrong correction without any error. `correct` checks a whole file for these (`gyrodenoise.data.checks`);
+`StreamClock` checks the same things incrementally, before the corrector's state changes.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from gyrodenoise.data.checks import GAP_FACTOR, RATE_TOL, SanityWarning
+
+RATE_WINDOW = 400  # steps (2 s at 200 Hz) averaged before the rate is compared with the model's
+
+
+class StreamTimeError(ValueError):
+    """A timestamp the stream cannot take (out of order, or after a gap); the corrector's state is unchanged."""
+
+
+class StreamClock:
+    """The last timestamp of a stream and its period; `check` refuses what would corrupt the correction.
+
+    rate_hz: the model's training rate (None: the period is learnt from the stream's own steps, so gaps are still
+    found but a wrong rate is not).
+    """
+
+    def __init__(self, rate_hz: float | None = None, gap_factor: float = GAP_FACTOR) -> None:
+        if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"rate_hz={rate_hz}: give the model's training rate in Hz, or None")
+        self.rate_hz = rate_hz
+        self.gap_factor = gap_factor
+        self.reset()
+
+    def reset(self) -> None:
+        self.last_ns: int | None = None
+        self._steps_sum, self._steps_n = 0, 0
+        self._rate_checked = False
+
+    @property
+    def period_ns(self) -> float | None:
+        if self.rate_hz:
+            return 1e9 / self.rate_hz
+        return self._steps_sum / self._steps_n if self._steps_n else None
+
+    def check(self, t_ns, n: int) -> np.ndarray:
+        """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
+        t = np.atleast_1d(np.asarray(t_ns))
+        if t.shape != (n,) or not np.issubdtype(t.dtype, np.integer):
+            raise StreamTimeError(
+                f"t_ns: expected {n} integer nanosecond timestamp(s), one per sample, got {t.dtype} of shape {t.shape}"
+            )
+        t = t.astype(np.int64)
+        full = t if self.last_ns is None else np.concatenate([[self.last_ns], t])
+        steps = np.diff(full)
+        offset = 0 if self.last_ns is None else 1  # steps[k] ends at sample k + 1 - offset of this call
+        if (steps <= 0).any():
+            k = int(np.argmax(steps <= 0))
+            raise StreamTimeError(
+                f"sample {k + 1 - offset} of this call: timestamp {int(full[k + 1])} ns is not after the previous "
+                f"one ({int(full[k])} ns); drop repeated or late samples before pushing (the state is unchanged)"
+            )
+        period = self.period_ns or (float(np.median(steps)) if steps.size else None)
+        if period is not None and (steps > self.gap_factor * period).any():
+            k = int(np.argmax(steps > self.gap_factor * period))
+            raise StreamTimeError(
+                f"sample {k + 1 - offset} of this call comes {steps[k] * 1e-6:.1f} ms after the previous one, more "
+                f"than {self.gap_factor:g} periods ({period * 1e-6:.2f} ms): the model would take the samples either "
+                "side of the gap as consecutive. Call reset() and push it as the first sample of a new stream (the "
+                "start-up of one receptive field follows), or fill the gap first (the state is unchanged)"
+            )
+        return t
+
+    def commit(self, t: np.ndarray) -> None:
+        """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
+        steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
+        self._steps_sum += int(steps.sum())
+        self._steps_n += steps.size
+        self.last_ns = int(t[-1])
+        if self.rate_hz and not self._rate_checked and self._steps_n >= RATE_WINDOW:
+            self._rate_checked = True
+            measured = 1e9 * self._steps_n / self._steps_sum
+            if abs(measured / self.rate_hz - 1.0) > RATE_TOL:
+                warnings.warn(
+                    f"the stream runs at {measured:.4g} Hz but the model was trained at {self.rate_hz:.4g} Hz: its "
+                    "convolutions span a fixed number of samples, so it sees another time window; resample the "
+                    "stream to the model's rate, or train a model at this rate",
+                    SanityWarning,
+                    stacklevel=4,
+                )

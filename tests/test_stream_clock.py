@@ -1,0 +1,89 @@
+"""Timestamps given to the streaming corrector: out of order, gaps and a wrong rate are caught before the state
+changes; a clean stream gives the same outputs as without timestamps."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from _models import random_imu, random_model
+
+from gyrodenoise.data.checks import SanityWarning
+from gyrodenoise.models.ensemble import EnsembleCorrection
+from gyrodenoise.stream_clock import StreamTimeError
+from gyrodenoise.streaming import StreamingCorrector
+
+PERIOD = 5_000_000  # ns, 200 Hz
+ATOL = 2e-5  # rad/s: chunks of other lengths sum in another order
+
+
+def stamps(n: int, start: int = 10**18, period: int = PERIOD) -> np.ndarray:
+    return start + period * np.arange(n, dtype=np.int64)
+
+
+@pytest.mark.parametrize("ensemble", [False, True])
+def test_clean_stamps_change_nothing(ensemble):
+    model = EnsembleCorrection([random_model(seed=1), random_model(seed=2)]).eval() if ensemble else random_model()
+    imu, t = random_imu(700), stamps(700)
+    plain, timed = StreamingCorrector(model), StreamingCorrector(model, rate_hz=200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a stream at the model's rate gives no warning
+        out = [timed.push(imu[k], t_ns=t[k]) for k in range(10)] + [timed.push_chunk(imu[10:], t_ns=t[10:])]
+    ref = [plain.push(imu[k]) for k in range(10)] + [plain.push_chunk(imu[10:])]
+    assert all(np.array_equal(a, b) for a, b in zip(out, ref, strict=True))
+
+
+def test_a_gap_is_refused_and_leaves_the_state():
+    model, imu = random_model(), random_imu(400)
+    t = stamps(400)
+    t[300:] += 40 * PERIOD  # 200 ms without samples
+    ref = StreamingCorrector(model).push_chunk(imu[:300])
+    sc = StreamingCorrector(model, rate_hz=200.0)
+    sc.push_chunk(imu[:250], t_ns=t[:250])
+    with pytest.raises(StreamTimeError, match=r"sample 50 of this call comes 205\.0 ms after.*reset\(\)"):
+        sc.push_chunk(imu[250:310], t_ns=t[250:310])
+    # nothing of the refused call went in: the stream goes on as if it had not been made
+    assert np.abs(sc.push_chunk(imu[250:300], t_ns=t[250:300]) - ref[250:]).max() < ATOL
+    with pytest.raises(StreamTimeError, match="ms after"):
+        sc.push(imu[300], t_ns=t[300])
+    sc.reset()  # what the message says to do: a new stream starts at the sample after the gap
+    assert np.array_equal(sc.push(imu[300], t_ns=t[300]), StreamingCorrector(model).push(imu[300]))
+
+
+def test_stamps_out_of_order_or_repeated_are_refused():
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    imu, t = random_imu(10), stamps(10)
+    sc.push_chunk(imu[:5], t_ns=t[:5])
+    with pytest.raises(StreamTimeError, match="sample 0 of this call: timestamp .* is not after the previous"):
+        sc.push(imu[5], t_ns=t[4])
+    with pytest.raises(StreamTimeError, match="sample 2 of this call"):
+        sc.push_chunk(imu[5:9], t_ns=t[[5, 6, 6, 7]])
+    with pytest.raises(StreamTimeError, match="integer nanosecond"):
+        sc.push(imu[5], t_ns=float(t[5]) * 1e-9)  # seconds as a float: refused, not misread
+    with pytest.raises(ValueError, match="give t_ns with every push"):
+        sc.push(imu[5])
+    assert sc.n_pushed == 5
+
+
+def test_a_stream_at_another_rate_warns_once():
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    imu, t = random_imu(1000), stamps(1000, period=4_000_000)  # 250 Hz
+    with pytest.warns(SanityWarning, match="runs at 250 Hz but the model was trained at 200 Hz"):
+        sc.push_chunk(imu[:500], t_ns=t[:500])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sc.push_chunk(imu[500:], t_ns=t[500:])
+
+
+def test_without_a_rate_gaps_are_found_from_the_stream_itself():
+    sc = StreamingCorrector(random_model())
+    imu, t = random_imu(100), stamps(100)
+    sc.push_chunk(imu[:50], t_ns=t[:50])
+    with pytest.raises(StreamTimeError, match="more than 3 periods"):
+        sc.push(imu[50], t_ns=t[50] + 10 * PERIOD)
+
+
+def test_load_knows_the_training_rate():
+    sc = StreamingCorrector.load("tumvi-denoiser")
+    assert sc.clock.rate_hz is not None and 190 < sc.clock.rate_hz < 210
