@@ -66,11 +66,16 @@ def test_stamps_out_of_order_or_repeated_are_refused():
     assert sc.n_pushed == 5
 
 
-def test_a_stream_at_another_rate_warns_once():
+@pytest.mark.parametrize("one_by_one", [False, True])
+def test_a_stream_at_another_rate_warns_once(one_by_one):
     sc = StreamingCorrector(random_model(), rate_hz=200.0)
     imu, t = random_imu(1000), stamps(1000, period=4_000_000)  # 250 Hz
     with pytest.warns(SanityWarning, match="runs at 250 Hz but the model was trained at 200 Hz"):
-        sc.push_chunk(imu[:500], t_ns=t[:500])
+        if one_by_one:
+            for k in range(500):
+                sc.push(imu[k], t_ns=int(t[k]))
+        else:
+            sc.push_chunk(imu[:500], t_ns=t[:500])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sc.push_chunk(imu[500:], t_ns=t[500:])

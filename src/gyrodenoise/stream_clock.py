@@ -46,8 +46,12 @@ class StreamClock:
             return 1e9 / self.rate_hz
         return self._steps_sum / self._steps_n if self._steps_n else None
 
-    def check(self, t_ns, n: int) -> np.ndarray:
+    def check(self, t_ns, n: int) -> np.ndarray | int:
         """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
+        if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
+            step, period = int(t_ns) - self.last_ns, self.period_ns  # one sample: plain ints (~1 us, not ~100)
+            if 0 < step and (period is None or step <= self.gap_factor * period):
+                return int(t_ns)
         t = np.atleast_1d(np.asarray(t_ns))
         if t.shape != (n,) or not np.issubdtype(t.dtype, np.integer):
             raise StreamTimeError(
@@ -74,12 +78,17 @@ class StreamClock:
             )
         return t
 
-    def commit(self, t: np.ndarray) -> None:
+    def commit(self, t: np.ndarray | int) -> None:
         """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
-        steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
-        self._steps_sum += int(steps.sum())
-        self._steps_n += steps.size
-        self.last_ns = int(t[-1])
+        if isinstance(t, int):  # check's one-sample path
+            self._steps_sum += t - self.last_ns
+            self._steps_n += 1
+            self.last_ns = t
+        else:
+            steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
+            self._steps_sum += int(steps.sum())
+            self._steps_n += steps.size
+            self.last_ns = int(t[-1])
         if self.rate_hz and not self._rate_checked and self._steps_n >= RATE_WINDOW:
             self._rate_checked = True
             measured = 1e9 * self._steps_n / self._steps_sum

@@ -240,7 +240,7 @@ class StreamingCorrector:
         std = stack.std(0, ddof=1) * self.spread_scale if len(outs) > 1 else np.zeros_like(stack[0])
         return stack.mean(0), std
 
-    def _stamps(self, t_ns, n: int) -> np.ndarray | None:
+    def _stamps(self, t_ns, n: int) -> np.ndarray | int | None:
         """The call's timestamps, checked against the stream's before anything changes (None: not given)."""
         if t_ns is None:
             if self.clock.last_ns is not None:
