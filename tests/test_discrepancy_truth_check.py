@@ -264,3 +264,21 @@ def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_p
 
     entries, _ = load_error_model(tmp_path / "out" / "error_model.yaml")  # the fitted model, for the simulator
     assert [e["name"] for e in entries][:2] == ["bias", "white_noise"]
+
+
+@pytest.mark.parametrize(
+    "text", ["1.6968e-4", "1.6968e-4 rad/s/sqrt(Hz)", "0.00972deg/s/sqrt(Hz)", "0.583 deg/sqrt(h)", "35deg/h/√Hz"]
+)
+def test_the_noise_density_is_read_in_the_units_datasheets_use(text):
+    from gyrodenoise.discrepancy.__main__ import noise_density
+
+    assert noise_density(text) == pytest.approx(1.6968e-4, rel=2e-3)  # EuRoC's ADIS16448, however it is written
+
+
+@pytest.mark.parametrize("text", ["0.00972", "1.7e-4 deg/s", "-1e-4", "lots"])
+def test_a_noise_density_in_another_unit_or_none_is_refused(text, capsys):
+    from gyrodenoise.discrepancy.__main__ import parse_args
+
+    with pytest.raises(SystemExit):  # 0.00972 without a unit: the deg/s/sqrt(Hz) figure read as rad/s/sqrt(Hz)
+        parse_args(["--root", ".", "--fit", "A", "--holdout", "B", "--out", "o", "--gyro-noise-density", text])
+    assert "--gyro-noise-density" in capsys.readouterr().err

@@ -10,6 +10,7 @@ Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import sys
@@ -128,10 +129,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--gyro-noise-density",
-        type=float,
+        type=noise_density,
         default=None,
-        metavar="SIGMA",
-        help="the gyro's datasheet white-noise density in rad/s/sqrt(Hz) (EuRoC's ADIS16448: 1.6968e-4); with it "
+        metavar="SIGMA[UNIT]",
+        help="the gyro's datasheet white-noise density, in rad/s/sqrt(Hz) unless a unit follows the number: "
+        f"{', '.join(NOISE_DENSITY_UNITS)} (EuRoC's ADIS16448: 1.6968e-4, or 0.583deg/sqrt(h)); with it "
         "the report checks per band whether a sequence's ground truth follows the gyro, and effects judged "
         "against a fit sequence's truth that follows it inside the compared band are withheld (default: no check)",
     )
@@ -144,6 +146,41 @@ def build_parser() -> argparse.ArgumentParser:
         help="output folder for report.md, report.json and the plots; required",
     )
     return p
+
+
+# the units datasheets give a gyro's white noise in, and their factor to rad/s/sqrt(Hz)
+NOISE_DENSITY_UNITS = {
+    "rad/s/sqrt(Hz)": 1.0,
+    "deg/s/sqrt(Hz)": math.pi / 180,
+    "deg/h/sqrt(Hz)": math.pi / 180 / 3600,
+    "deg/sqrt(h)": math.pi / 180 / 60,  # angle random walk: 1 deg/sqrt(h) = (pi/180)/60 rad/s/sqrt(Hz)
+}
+NOISE_DENSITY_RANGE = (1e-6, 5e-3)  # rad/s/sqrt(Hz): navigation-grade fibre optics to the noisiest MEMS (0.29 deg/s/sqrt(Hz))
+
+
+def noise_density(text: str) -> float:
+    """'1.7e-4', '0.583deg/sqrt(h)' or '0.0097 deg/s/sqrt(Hz)' -> rad/s/sqrt(Hz); refuses what no gyro has."""
+    compact = text.replace(" ", "").replace("√", "sqrt")
+    number = compact.rstrip("abcdefghijklmnopqrstuvwxyz/()ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+    unit = compact[len(number) :] or "rad/s/sqrt(Hz)"
+    units = {u.lower().replace("(", "").replace(")", ""): f for u, f in NOISE_DENSITY_UNITS.items()}
+    factor = units.get(unit.lower().replace("(", "").replace(")", ""))
+    try:
+        value = float(number)
+    except ValueError:
+        value = math.nan
+    if factor is None or not value > 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give a positive number, optionally followed by one of {', '.join(NOISE_DENSITY_UNITS)}"
+        )
+    sigma = value * factor
+    lo, hi = NOISE_DENSITY_RANGE
+    if not lo <= sigma <= hi:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is {sigma:.3g} rad/s/sqrt(Hz), outside what gyros have ({lo:g} to {hi:g}): is the unit right? "
+            f"(a number without a unit is read in rad/s/sqrt(Hz); units: {', '.join(NOISE_DENSITY_UNITS)})"
+        )
+    return sigma
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -159,8 +196,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         k, v = item.split("=", 1)
         gt[k] = v
     args.gt_files = gt
-    if args.gyro_noise_density is not None and not args.gyro_noise_density > 0:
-        p.error(f"--gyro-noise-density {args.gyro_noise_density}: must be positive (rad/s/sqrt(Hz))")
     if not args.knot_spacing > 0:
         p.error(f"--knot-spacing {args.knot_spacing}: must be positive (seconds between the truth spline's knots)")
     return args
