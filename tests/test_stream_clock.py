@@ -63,7 +63,8 @@ def test_stamps_out_of_order_or_repeated_are_refused():
         sc.push(imu[5], t_ns=float(t[5]) * 1e-9)  # seconds as a float: refused, not misread
     with pytest.raises(ValueError, match="give t_ns with every push"):
         sc.push(imu[5])
-    assert sc.n_pushed == 5
+    assert sc.push_chunk(imu[:0], t_ns=t[:0]).shape == (0, 3)  # an empty call is no sample and no stamp
+    assert sc.n_pushed == 5 and sc.clock.last_ns == t[4]
 
 
 @pytest.mark.parametrize("one_by_one", [False, True])

@@ -84,7 +84,7 @@ class StreamClock:
             self._steps_sum += t - self.last_ns
             self._steps_n += 1
             self.last_ns = t
-        else:
+        elif t.size:
             steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
             self._steps_sum += int(steps.sum())
             self._steps_n += steps.size
