@@ -276,6 +276,7 @@ def train(cfg: DictConfig) -> dict:
         if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
             metrics = {k: v for k, v in {**val, **test}.items() if k.count("/") == 1}
             lg.log_hyperparams(flat_hparams(cfg), metrics)
+            lg.experiment.flush()  # on disk now, not when the writer's thread next flushes (a reader could miss it)
     return summary
 
 
