@@ -192,3 +192,8 @@ def test_stateful_torch_export_streams_in_chunks(tiny, tmp_path):
 
     (got,) = _stream(run, x, 1)
     assert np.abs(got - _batch_outputs(tiny, x)[0]).max() < ATOL
+    # called as a user would, outside no_grad: state_out carries no autograd graph that the next call would extend
+    y, state = program(
+        torch.from_numpy(x[:, :5]), torch.zeros(1, StatefulCorrection(tiny).state_size), torch.tensor([True])
+    )
+    assert y.grad_fn is None and state.grad_fn is None

@@ -72,8 +72,11 @@ def _dynamic_shapes() -> dict:
 def _graph(model: CorrectionModel, stateful: bool) -> tuple[nn.Module, tuple, dict, tuple[list[str], list[str]]]:
     """The module to export, example inputs, their dynamic shapes, and the input and output names."""
     if not stateful:
-        return ExportWrapper(model), (_example(model),), _dynamic_shapes(), ([INPUT_NAME], output_names(model))
-    step = StatefulCorrection(model)
+        wrapper = ExportWrapper(model).requires_grad_(False)  # an exported program that records no autograd graph
+        return wrapper, (_example(model),), _dynamic_shapes(), ([INPUT_NAME], output_names(model))
+    # without requires_grad: a loaded .pt2 called outside no_grad would chain state_out's autograd graph across
+    # every call and grow without bound (~16 MB/s at 200 Hz for one network)
+    step = StatefulCorrection(model).requires_grad_(False)
     if step.state_size == 0:
         raise ValueError("this model keeps no state (a calibrated model): export it without --stateful")
     batch = torch.export.Dim("batch", min=1)  # shared by the three inputs
@@ -122,7 +125,8 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
             f"accurate); after that, calls of any length that pass {STATE_OUT_NAME} back as {STATE_NAME} give the "
             "outputs of one call on the whole stream. The graph does not check its input: a NaN/inf or impossible "
             f"sample enters the state and spoils the next {rf} outputs, so check samples before the call "
-            "(StreamingCorrector refuses them)"
+            "(StreamingCorrector refuses them). A state belongs to this file's graph: another model's state of the "
+            "same size is accepted and spoils a receptive field of outputs"
         )
     else:
         out["gyrodenoise.start_up"] = (

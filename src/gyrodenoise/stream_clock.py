@@ -12,9 +12,13 @@ import warnings
 
 import numpy as np
 
-from gyrodenoise.data.checks import GAP_FACTOR, RATE_TOL, SanityWarning
+from gyrodenoise.data.checks import RATE_TOL, SanityWarning
 
 RATE_WINDOW = 400  # steps (2 s at 200 Hz) averaged before the rate is compared with the model's
+# a step longer than this many periods is a gap: halfway between two and three periods, so that two missing samples
+# are refused whatever the IMU's rate (at 3.0 they fell either side with a rate 0.3% off); one missing sample passes
+STREAM_GAP_FACTOR = 2.5
+UNITS_HINT = "t_ns must be integer nanoseconds (seconds: int(round(t_s * 1e9)))"
 
 
 class StreamTimeError(ValueError):
@@ -25,14 +29,15 @@ class StreamClock:
     """The last timestamp of a stream and its period; `check` refuses what would corrupt the correction.
 
     rate_hz: the model's training rate (None: the period is learnt from the stream's own steps, so gaps are still
-    found but a wrong rate is not).
+    found but a wrong rate or time unit is not). gaps=False: a model without memory (a calibrated one), for which
+    a gap changes nothing.
     """
 
-    def __init__(self, rate_hz: float | None = None, gap_factor: float = GAP_FACTOR) -> None:
+    def __init__(self, rate_hz: float | None = None, gap_factor: float = STREAM_GAP_FACTOR, gaps: bool = True) -> None:
         if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"rate_hz={rate_hz}: give the model's training rate in Hz, or None")
         self.rate_hz = rate_hz
-        self.gap_factor = gap_factor
+        self.gap_factor = gap_factor if gaps else np.inf
         self.reset()
 
     def reset(self) -> None:
@@ -48,33 +53,48 @@ class StreamClock:
 
     def check(self, t_ns, n: int) -> np.ndarray | int:
         """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
+        period = self.period_ns
         if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
-            step, period = int(t_ns) - self.last_ns, self.period_ns  # one sample: plain ints (~1 us, not ~100)
-            if 0 < step and (period is None or step <= self.gap_factor * period):
+            step = int(t_ns) - self.last_ns  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
+            if 0 < step if period is None else 0.5 * period <= step <= self.gap_factor * period:
                 return int(t_ns)
         t = np.atleast_1d(np.asarray(t_ns))
         if t.shape != (n,) or not np.issubdtype(t.dtype, np.integer):
             raise StreamTimeError(
-                f"t_ns: expected {n} integer nanosecond timestamp(s), one per sample, got {t.dtype} of shape {t.shape}"
+                f"t_ns: expected {n} integer timestamp(s), one per sample, got {t.dtype} of shape {t.shape}; "
+                + UNITS_HINT
             )
         t = t.astype(np.int64)
         full = t if self.last_ns is None else np.concatenate([[self.last_ns], t])
         steps = np.diff(full)
         offset = 0 if self.last_ns is None else 1  # steps[k] ends at sample k + 1 - offset of this call
+
+        def where(k: int) -> str:
+            return f"sample {k + 1 - offset} of this call"
+
         if (steps <= 0).any():
             k = int(np.argmax(steps <= 0))
             raise StreamTimeError(
-                f"sample {k + 1 - offset} of this call: timestamp {int(full[k + 1])} ns is not after the previous "
-                f"one ({int(full[k])} ns); drop repeated or late samples before pushing (the state is unchanged)"
+                f"{where(k)}: timestamp {int(full[k + 1])} is not after the previous one ({int(full[k])}); drop "
+                f"repeated or late samples before pushing (the state is unchanged); {UNITS_HINT}"
             )
-        period = self.period_ns or (float(np.median(steps)) if steps.size else None)
+        at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
+        if self.rate_hz and (steps < 0.5 * period).any():
+            k = int(np.argmax(steps < 0.5 * period))
+            raise StreamTimeError(
+                f"{where(k)} comes {steps[k]} ns after the previous one, under half the model's period "
+                f"({period * 1e-6:.3f} ms{at}): {UNITS_HINT} (micro- or milliseconds look like this), or the stream "
+                "is faster than the model's rate: resample it (the state is unchanged)"
+            )
+        period = period or (float(np.median(steps)) if steps.size else None)
         if period is not None and (steps > self.gap_factor * period).any():
             k = int(np.argmax(steps > self.gap_factor * period))
             raise StreamTimeError(
-                f"sample {k + 1 - offset} of this call comes {steps[k] * 1e-6:.1f} ms after the previous one, more "
-                f"than {self.gap_factor:g} periods ({period * 1e-6:.2f} ms): the model would take the samples either "
-                "side of the gap as consecutive. Call reset() and push it as the first sample of a new stream (the "
-                "start-up of one receptive field follows), or fill the gap first (the state is unchanged)"
+                f"{where(k)} comes {steps[k] * 1e-6:.3f} ms after the previous one, more than {self.gap_factor:g} "
+                f"periods ({period * 1e-6:.3f} ms{at}): the model would take the samples either side as consecutive. "
+                "After a gap, call reset() and push it as the first sample of a new stream (the start-up of one "
+                "receptive field follows), or fill the gap first; a stream slower than the model's rate looks the "
+                "same: resample it (the state is unchanged)"
             )
         return t
 

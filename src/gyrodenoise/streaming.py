@@ -153,12 +153,12 @@ class StreamingCorrector:
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r}; choose one of {BACKENDS}")
         self.backend = backend
-        self.clock = StreamClock(rate_hz)
         self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
         if isinstance(model, EnsembleCorrection):
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
             self.spread_scale = model.spread_scale
             self.receptive_field = max(m.receptive_field for m in self.members)
+            self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)
             self.reset()
             return
         self.np_dtype = np.dtype(dtype)
@@ -180,6 +180,7 @@ class StreamingCorrector:
         else:
             raise TypeError(f"no streaming implementation for {type(model).__name__}")
         self.receptive_field = 1 + sum(ly.span - 1 for ly in self.layers)
+        self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)  # a memoryless model is blind to gaps
         self._prepare()
         self.reset()
 

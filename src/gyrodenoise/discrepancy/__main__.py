@@ -155,7 +155,8 @@ NOISE_DENSITY_UNITS = {
     "deg/h/sqrt(Hz)": math.pi / 180 / 3600,
     "deg/sqrt(h)": math.pi / 180 / 60,  # angle random walk: 1 deg/sqrt(h) = (pi/180)/60 rad/s/sqrt(Hz)
 }
-NOISE_DENSITY_RANGE = (1e-6, 5e-3)  # rad/s/sqrt(Hz): navigation-grade fibre optics to the noisiest MEMS (0.29 deg/s/sqrt(Hz))
+# rad/s/sqrt(Hz): navigation-grade fibre optics to the noisiest MEMS (0.29 deg/s/sqrt(Hz))
+NOISE_DENSITY_RANGE = (1e-6, 5e-3)
 
 
 def noise_density(text: str) -> float:
