@@ -59,3 +59,17 @@ def test_gaps_and_a_shifted_truth_warn(seq):
     )
     with pytest.warns(consistency.DataConsistencyWarning, match=r"best -[23]\.\d+ s away .* not on the IMU"):
         consistency.check(late)
+
+
+def test_a_truth_about_other_axes_warns(seq):
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(seq.rot).as_quat()  # scalar last: a file of x, y, z, w read as w, x, y, z
+    swapped = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+    with pytest.warns(consistency.DataConsistencyWarning, match=r"turns about axes \d+ deg away .* quaternion order"):
+        m = consistency.check(dataclasses.replace(seq, rot=swapped))
+    assert m.axes_angle_deg > 30 and 0.5 < m.rate_ratio < 2  # the magnitude checks alone pass it
+    tilted = (Rotation.from_matrix(seq.rot) * Rotation.from_euler("x", 20, degrees=True)).as_matrix()
+    with pytest.warns(consistency.DataConsistencyWarning, match="20 deg away"):  # the pose of another body
+        consistency.check(dataclasses.replace(seq, rot=tilted))
+    assert consistency.measure(seq).axes_angle_deg < 1.0

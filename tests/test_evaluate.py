@@ -221,3 +221,36 @@ def test_figures_shade_where_the_ground_truth_is_missing():
         assert "no ground truth" in [h.get_label() for h in fig.axes[0].patches]
         plt.close(fig)
     assert len(orientation_figure(t, R, {"x": R}).axes[0].patches) == 0  # no mask: nothing shaded
+
+
+def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):
+    """A truth whose quaternion columns are in another order: the warning is in table.md and results.json, not
+    only on the console (found by a walkthrough: raw AOE 110 deg and no word in the outputs)."""
+    import json
+
+    from _asl import write_asl_sequence
+
+    from gyrodenoise.models.build import build_model
+    from gyrodenoise.pretrained import save_model
+
+    root = tmp_path / "data"
+    write_asl_sequence(root / "seq", seconds=20.0, seed=4)
+    gt = root / "seq" / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    lines = gt.read_text().splitlines()
+    rows = [ln.split(",") for ln in lines[1:]]  # t, p x3, q w x y z -> write x y z w where w x y z belong
+    gt.write_text("\n".join([lines[0]] + [",".join(r[:4] + r[5:8] + [r[4]]) for r in rows]) + "\n")
+    model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    run_evaluate(
+        "dataset=asl_folder",
+        f"dataset.root={root}",
+        "dataset.train_seqs=[]",
+        "dataset.test_seqs=[seq]",
+        f"weights.proposed={model}",
+        f"weights.calibrated={model}",
+        "threads=1",
+        f"out_dir={out}",
+    )
+    assert "turns about axes" in (out / "table.md").read_text()
+    assert any("quaternion order" in w for w in json.loads((out / "results.json").read_text())["warnings"])

@@ -23,11 +23,12 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import hydra
@@ -39,6 +40,7 @@ from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
 from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.consistency import DataConsistencyWarning
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
@@ -149,6 +151,23 @@ def csv_text(header: list[str], rows: list[list[str]]) -> str:
     return buf.getvalue()
 
 
+@contextlib.contextmanager
+def noting_data_warnings() -> Iterator[list[str]]:
+    """Collect the data checks' warnings (`DataConsistencyWarning`: IMU gaps, a truth on another clock, of another
+    scale or about other axes) raised inside, into the list it yields once the block ends, so that the table and
+    results.json carry them, not only the console (they are printed with the command's other warnings, after its
+    table). Other warnings pass as usual."""
+    found: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        yield found
+    for w in caught:
+        if issubclass(w.category, DataConsistencyWarning):
+            found.append(str(w.message))
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    found[:] = dict.fromkeys(found)
+
+
 def evaluate(cfg: DictConfig) -> dict:
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
@@ -157,10 +176,11 @@ def evaluate(cfg: DictConfig) -> dict:
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
-    dm.check_sequences(
-        train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
-    )
-    dm.setup("test" if split == "test" else "fit")
+    with noting_data_warnings() as data_warnings:  # the sequences are read and checked here
+        dm.check_sequences(
+            train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
+        )
+        dm.setup("test" if split == "test" else "fit")
     try:
         proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
         calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)
@@ -187,12 +207,12 @@ def evaluate(cfg: DictConfig) -> dict:
             )
 
     parts = [dm.origin(seq) for seq in sequences.values()]
-    data_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
-    data_warnings += [
+    model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
+    model_warnings += [
         w for w in (other_imu_warning(m, dm.name, dm.sensor) for m in (proposed_meta, calibrated_meta)) if w
     ]
-    warned = [w for w in (proposed_warning, calibrated_warning, *data_warnings) if w]
-    for w in data_warnings:
+    warned = [w for w in (proposed_warning, calibrated_warning, *model_warnings, *data_warnings) if w]
+    for w in model_warnings:
         warnings.warn(w, ModelQualityWarning, stacklevel=2)
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
