@@ -144,7 +144,10 @@ def not_better_warning(meta: dict) -> str | None:
         model_val, name = meta.get("member_val_aoe_deg_mean"), f"{name} (none of its {len(members)} members)"
     numbers = ""
     if model_val is not None and cal_val is not None:
-        numbers = f" (validation AOE {float(model_val):.2f} deg vs {float(cal_val):.2f} deg)"
+        numbers = (
+            f" (validation AOE {float(model_val):.2f} deg vs {float(cal_val):.2f} deg for the calibrated baseline "
+            "fitted on the same data)"
+        )
     instead = meta.get("calibrated_model")
     if instead and meta.get("path") and not Path(instead).is_absolute():
         # recorded as a file name beside the model file: say where it is
