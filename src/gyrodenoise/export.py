@@ -256,7 +256,11 @@ def onnx_stream_parity(model: CorrectionModel, path: str | Path, n: int = 1500) 
     """Max |onnxruntime - PyTorch| of a stateful export fed in chunks (1 to 700 samples, state passed back), against
     the model on the whole sequence."""
     import numpy as np
-    import onnxruntime as ort
+
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        raise ImportError("the parity check needs onnxruntime: pip install 'gyrodenoise[export]'") from None
 
     x = _example(model, n)[:1]
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
