@@ -56,7 +56,8 @@ class StreamClock:
         period = self.period_ns
         if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
             step = int(t_ns) - self.last_ns  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
-            if 0 < step if period is None else 0.5 * period <= step <= self.gap_factor * period:
+            lo, hi = (1, np.inf) if period is None else (0.5 * period, self.gap_factor * period)
+            if lo <= step <= hi:
                 return int(t_ns)
         t = np.atleast_1d(np.asarray(t_ns))
         if t.shape != (n,) or not np.issubdtype(t.dtype, np.integer):

@@ -43,9 +43,8 @@ class Consistency:
     best_lag_s: float  # lag of the gyro behind the truth that best aligns their rate magnitudes
     corr_at_best: float
     corr_at_zero: float
-    axes_angle_deg: float = (
-        np.nan
-    )  # rotation that best maps the truth's body rate onto the gyro (nan: too little motion)
+    # the rotation that best maps the truth's body rate onto the gyro (nan: too little motion)
+    axes_angle_deg: float = np.nan
 
 
 def measure(seq: Sequence) -> Consistency:
