@@ -35,7 +35,7 @@ from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecor
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.pretrained import load_model, not_better_warning
+from gyrodenoise.pretrained import load_model, model_rate, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.streaming import StreamingCorrector
 from gyrodenoise.trajectory_files import tum_text
@@ -52,12 +52,6 @@ class Correction:
     R: np.ndarray  # (N, 3, 3) open-loop orientation
     report: CheckReport
     resampled_to_hz: float | None
-
-
-def model_rate(meta: dict) -> float | None:
-    """Training rate of a model, from its metadata (None when unknown)."""
-    rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
-    return float(rate) if rate else None
 
 
 def find_imu_file(path: str | Path) -> Path:

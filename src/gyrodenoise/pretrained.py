@@ -131,6 +131,12 @@ class ModelQualityWarning(UserWarning):
     """A loaded model's metadata says it is worse than a simpler model."""
 
 
+def model_rate(meta: dict) -> float | None:
+    """Training rate of a model, from its metadata (None when unknown)."""
+    rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
+    return float(rate) if rate else None
+
+
 def not_better_warning(meta: dict) -> str | None:
     """The warning for a model whose metadata says it did not beat the calibrated baseline, else None."""
     members = meta.get("members_beat_calibrated") or []

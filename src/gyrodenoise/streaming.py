@@ -187,11 +187,10 @@ class StreamingCorrector:
     @classmethod
     def load(cls, model: str, backend: str = "numpy", dtype: str = "float32") -> StreamingCorrector:
         """A shipped model name (e.g. "euroc") or a model file, with the training rate its file records."""
-        from gyrodenoise.pretrained import load_model
+        from gyrodenoise.pretrained import load_model, model_rate
 
         net, meta = load_model(model)
-        rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
-        return cls(net, backend, dtype, float(rate) if rate else None)
+        return cls(net, backend, dtype, model_rate(meta))
 
     # ------------------------------------------------------------------ setup
     def _prepare(self) -> None:
@@ -255,7 +254,7 @@ class StreamingCorrector:
         dtype = (self.members[0] if self.members else self).np_dtype
         x = _checked(sample, dtype, what)
         t = self._stamps(t_ns, len(x) if chunk and x.ndim == 2 else 1)
-        one = (lambda m, v: m._push_chunk_checked(v)) if chunk else (lambda m, v: m._push_checked(v))
+        one = StreamingCorrector._push_chunk_checked if chunk else StreamingCorrector._push_checked
         if self.members is None:
             out, std = one(self, x), None
         else:
