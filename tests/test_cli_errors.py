@@ -105,3 +105,19 @@ def test_a_misspelt_config_key_is_named_with_the_key_it_was_meant_to_be(tmp_path
         proc.stderr.strip()
         == "error: trainer.max_epoch is not a key of the 'train' config: did you mean trainer.max_epochs?"
     )
+
+
+@pytest.mark.parametrize("threads", ["one", 0, -2, 2.5, True])
+def test_a_thread_count_that_is_not_a_whole_number_ends_in_one_line(threads, monkeypatch, capsys):
+    import torch
+
+    from gyrodenoise.cli_errors import set_torch_threads
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    before = torch.get_num_threads()
+    with pytest.raises(SystemExit), user_errors():
+        set_torch_threads(threads)
+    assert f"threads={threads!r}: a whole number >= 1" in capsys.readouterr().err
+    assert torch.get_num_threads() == before
+    set_torch_threads(None)  # null: torch's default, untouched
+    assert torch.get_num_threads() == before

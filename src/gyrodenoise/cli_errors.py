@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+import torch
 from hydra.errors import ConfigCompositionException, InstantiationException
 from lightning.fabric.utilities.exceptions import MisconfigurationException
 from omegaconf import DictConfig, OmegaConf
@@ -45,6 +46,16 @@ def user_errors() -> Iterator[None]:
         if "no supported gpu backend" not in str(e).lower():
             raise
         _one_line("no supported GPU backend on this machine: leave out trainer=gpu, or set trainer.accelerator=cpu.")
+
+
+def set_torch_threads(threads: Any) -> None:
+    """`threads=N` of train and evaluate: torch's CPU threads, or torch's default when null. Checked here, so
+    `threads=one` or `threads=0` ends the command with one line instead of a traceback or a silent default."""
+    if threads is None:
+        return
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ConfigError(f"threads={threads!r}: a whole number >= 1, or threads=null (torch's default)")
+    torch.set_num_threads(threads)
 
 
 def _one_line(message: str) -> None:

@@ -33,12 +33,11 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-import torch
 from omegaconf import DictConfig
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.consistency import DataConsistencyWarning
 from gyrodenoise.data.sequence import Sequence
@@ -169,8 +168,7 @@ def noting_data_warnings() -> Iterator[list[str]]:
 
 
 def evaluate(cfg: DictConfig) -> dict:
-    if cfg.get("threads"):
-        torch.set_num_threads(int(cfg.threads))
+    set_torch_threads(cfg.get("threads"))
     out = Path(cfg.out_dir)
     dm = hydra.utils.instantiate(cfg.dataset)
     split = cfg.get("split", "test")

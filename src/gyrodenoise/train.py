@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
-from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.job_log import console_to_job_log
@@ -158,8 +158,7 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, valida
 def train(cfg: DictConfig) -> dict:
     if cfg.get("retain_freed_memory", True):
         retain_freed_memory()
-    if cfg.get("threads"):
-        torch.set_num_threads(int(cfg.threads))
+    set_torch_threads(cfg.get("threads"))
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     out_dir = Path(cfg.paths.output_dir)
