@@ -221,6 +221,11 @@ def test_figures_shade_where_the_ground_truth_is_missing():
         assert "no ground truth" in [h.get_label() for h in fig.axes[0].patches]
         plt.close(fig)
     assert len(orientation_figure(t, R, {"x": R}).axes[0].patches) == 0  # no mask: nothing shaded
+    fig = error_figure(t, {"x": (np.full(1000, 0.1), np.full(1000, 0.2))}, "e", mask)
+    for ax in fig.axes:  # no error drawn against interpolated truth; drawn everywhere else
+        y = ax.lines[0].get_ydata()
+        assert np.isnan(y[~mask]).all() and np.isfinite(y[mask]).all()
+    plt.close(fig)
 
 
 def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):

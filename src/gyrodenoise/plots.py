@@ -65,10 +65,13 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 def error_figure(
     t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = "", gt_mask: np.ndarray | None = None
 ):
-    """3D and yaw orientation error (deg) over time for each method (Fig. 7); `gt_mask` as orientation_figure."""
+    """3D and yaw orientation error (deg) over time for each method (Fig. 7); `gt_mask` as orientation_figure:
+    no error is drawn where it is False (against interpolated ground truth it would not be an error)."""
     fig, axs = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     _shade_gaps(axs, t, gt_mask)
     for name, (e3d, eyaw) in errors.items():
+        if gt_mask is not None:
+            e3d, eyaw = np.where(gt_mask, e3d, np.nan), np.where(gt_mask, eyaw, np.nan)
         axs[0].plot(t, np.degrees(e3d), lw=1, label=name)
         axs[1].plot(t, np.degrees(np.abs(eyaw)), lw=1, label=name)
     axs[0].set_ylabel("3D error (deg)")
@@ -161,12 +164,13 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
                 box.set_facecolor(colors[m % len(colors)])
             ax.plot([], [], color=colors[m % len(colors)], lw=6, label=name)
         ax.set_xticks(np.arange(len(dists)), [f"{d:g} m" for d in dists])
-        ax.set_xlabel("travelled distance (boxes: quartiles; whiskers: 1.5 IQR; outliers not drawn)")
+        ax.set_xlabel("travelled distance")
         ax.set_yscale("log")
         ax.set_ylabel(("3D" if a == 0 else "yaw") + " ROE (deg)")
         ax.grid(alpha=0.3, which="both")
     axs[0].legend(fontsize=8)
-    fig.suptitle(title)
+    # the box legend once, under the title: as each panel's x label it was wider than the panel and clipped
+    fig.suptitle(f"{title}\nboxes: quartiles; whiskers: 1.5 x interquartile range; outliers not drawn".strip())
     fig.tight_layout()
     return fig
 
