@@ -37,6 +37,7 @@ from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import load_model, model_rate, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.streaming import StreamingCorrector
 from gyrodenoise.trajectory_files import tum_text
 
@@ -210,8 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     except (DataFormatError, FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    model_warning = not_better_warning(meta)
-    for w in [*([model_warning] if model_warning else []), *res.report.warnings]:
+    ratio = spread_ratio(res.std, meta)
+    model_warnings = [w for w in (not_better_warning(meta), spread_warning(ratio, str(path), meta)) if w]
+    for w in [*model_warnings, *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
     out_dir = args.out_dir or default_out_dir(path)
     out_csv = args.out_csv or out_dir / "imu_corrected.csv"
@@ -243,9 +245,10 @@ def main(argv: list[str] | None = None) -> int:
         "mean_correction_deg_s": float(np.degrees(delta.mean())),
         "ensemble_members": len(model.members) if res.std is not None else None,
         "mean_std_deg_s": None if res.std is None else float(np.degrees(np.linalg.norm(res.std, axis=1).mean())),
+        "spread_ratio_to_training": ratio,  # None: a single model, or an ensemble without a spread reference
         "beats_calibrated": meta.get("beats_calibrated"),
         "model_trained_on": trained_on(meta),
-        "warnings": ([model_warning] if model_warning else []) + res.report.warnings,
+        "warnings": model_warnings + res.report.warnings,
         "outputs": {"imu_csv": portable_path(out_csv), "orientation_tum": portable_path(out_tum)},
     }
     write_json(summary_file, summary)

@@ -3,6 +3,7 @@
     python -m gyrodenoise.ensemble build outputs/train/a/model.pt outputs/train/b/model.pt --out euroc-ensemble.pt
     python -m gyrodenoise.ensemble build --from-multirun multirun/train/<date> [--out ...]
     python -m gyrodenoise.ensemble scale ens.pt --by 1.3 --fitted-by "..." --out ens.pt   # calibrate the spread
+    python -m gyrodenoise.ensemble reference ens.pt --out ens.pt [dataset=euroc dataset.root=...]
 
 Training K members with one command is a Hydra multirun over seeds; `experiment=ensemble` sweeps
 seeds 0-3 and builds `<sweep dir>/ensemble.pt` when the last run has finished:
@@ -14,13 +15,16 @@ seeds 0-3 and builds `<sweep dir>/ensemble.pt` when the last run has finished:
 The ensemble's metadata records each member's file, seed, fold, training data and metrics. Members
 must share the input conventions: same sampling rate, and (unless --allow-mixed) the same dataset
 and sensor. The file loads like any model: `gyrodenoise.pretrained.load_model(path)`, or by name
-once copied into gyrodenoise/weights/.
+once copied into gyrodenoise/weights/. `reference` records the members' spread on their training
+recordings, against which `correct` and `evaluate` check new recordings (`gyrodenoise.spread_check`);
+`experiment=ensemble` records it when it builds the file.
 """
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import re
 import sys
 import warnings
@@ -28,6 +32,7 @@ from pathlib import Path
 
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
+from gyrodenoise.paths import portable_path
 from gyrodenoise.pretrained import load_model, save_model
 
 RATE_RTOL = 0.01  # members trained at rates further apart than this see different physics per sample
@@ -178,6 +183,37 @@ def scale_spread(
     return save_model(scaled, cfg, out, meta)
 
 
+def add_spread_reference(
+    model_path: str | Path, out: str | Path, overrides: list[str] | None = None, command: str | None = None
+) -> Path:
+    """Write a copy of the ensemble file `model_path` with its `spread_reference`, taken on the members' training
+    recordings read through the training config's dataset (`overrides`; default: dataset=<the members' dataset>)."""
+    import hydra
+
+    from gyrodenoise.config import compose_config
+
+    model, meta = load_model(model_path)
+    if not isinstance(model, EnsembleCorrection):
+        raise TypeError(f"{model_path}: a single model has no spread; give an ensemble file")
+    overrides = list(overrides or [f"dataset={meta.get('dataset')}"])
+    return _save_with_reference(
+        model, meta, hydra.utils.instantiate(compose_config("train", overrides).dataset), out, command
+    )
+
+
+def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | Path, command: str | None) -> Path:
+    from gyrodenoise.spread_check import spread_reference
+
+    names = meta.get("train_seqs") or []
+    if not names:
+        raise ValueError("the ensemble's metadata names no training sequences to take the spread reference on")
+    reference = spread_reference(model, ((n, dm.load(n).imu) for n in names))
+    cfg = dict(meta["model"])
+    meta = {k: v for k, v in meta.items() if k not in ("model", "path")}
+    meta["spread_reference"] = {**reference, "data_root": portable_path(dm.root), "command": command}
+    return save_model(model, cfg, out, meta)
+
+
 def multirun_members(sweep_dir: str | Path) -> list[Path]:
     """`<sweep dir>/*/model.pt` in job order (Hydra's numbered subfolders)."""
     d = Path(sweep_dir)
@@ -229,6 +265,13 @@ class BuildEnsembleCallback(_HydraCallback):
             return
         out = build_ensemble(paths, sweep / self.filename, command=f"BuildEnsembleCallback on {sweep}")
         print(f"ensemble of {len(paths)} models: {out}")
+        try:  # the members' training data are the sweep's dataset
+            import hydra
+
+            model, meta = load_model(out)
+            _save_with_reference(model, meta, hydra.utils.instantiate(config.dataset), out, "BuildEnsembleCallback")
+        except Exception as e:  # noqa: BLE001 - the ensemble stands without it; say how to add it
+            print(f"no spread reference recorded ({e}): add it with `python -m gyrodenoise.ensemble reference`")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -252,8 +295,33 @@ def main(argv: list[str] | None = None) -> int:
         "--fitted-by", required=True, help="where S comes from (a command, a result file): kept in the file"
     )
     sc.add_argument("--out", type=Path, required=True, help="output file (may be the input file: written atomically)")
-    args = ap.parse_args(argv)
+    rf = sub.add_parser(
+        "reference",
+        help="record the members' spread on their training recordings (correct and evaluate check new data against it)",
+    )
+    rf.add_argument("model", help="ensemble file or shipped name")
+    rf.add_argument("--out", type=Path, required=True, help="output file (may be the input file: written atomically)")
+    rf.add_argument(
+        "overrides", nargs="*", help="training-config overrides that find the data (default: dataset=<its dataset>)"
+    )
+    args, extra = ap.parse_known_args(argv)  # overrides may follow --out: argparse leaves them over
+    if extra and (args.cmd != "reference" or any(a.startswith("-") for a in extra)):
+        ap.error(f"unrecognized arguments: {' '.join(extra)}")
+    if args.cmd == "reference":
+        args.overrides += extra
     command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
+    if args.cmd == "reference":
+        from gyrodenoise.cli_errors import USER_ERRORS
+
+        try:
+            out = add_spread_reference(args.model, args.out, args.overrides, command)
+        except (*USER_ERRORS, ValueError, TypeError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        ref = load_model(out)[1]["spread_reference"]
+        cells = ", ".join(f"{k} {math.degrees(v):.3f}" for k, v in ref["per_recording_rad_s"].items())
+        print(f"wrote {out}: spread reference {math.degrees(ref['reference_rad_s']):.3f} deg/s ({cells})")
+        return 0
     if args.cmd == "scale":
         try:
             out = scale_spread(args.model, args.by, args.out, args.fitted_by, command)

@@ -55,6 +55,7 @@ from gyrodenoise.pretrained import (
 )
 from gyrodenoise.provenance import machine_description
 from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.trajectory_files import tum_text
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
@@ -215,11 +216,17 @@ def evaluate(cfg: DictConfig) -> dict:
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
     calib: dict[str, uncertainty.CalibrationResult] = {}
+    spread_ratios: dict[str, float] = {}  # against the ensemble's training recordings (gyrodenoise.spread_check)
     for label, seq in sequences.items():
         gyros = {m: fn(seq) for m, fn in methods.items()}
         gyros["proposed"], spread = predict_with_spread(proposed, seq.imu)
         if spread is not None:
             calib[label] = uncertainty.calibration(gyros["proposed"], spread, seq.dt, seq.rot, seq.gt_mask)
+        if (ratio := spread_ratio(spread, proposed_meta)) is not None:
+            spread_ratios[label] = ratio
+            if w := spread_warning(ratio, label, proposed_meta):
+                warned.append(w)
+                warnings.warn(w, ModelQualityWarning, stacklevel=2)
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
         write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
@@ -295,6 +302,7 @@ def evaluate(cfg: DictConfig) -> dict:
             "ensemble_members": len(proposed.members),
             "sequences": {n: c.summary() for n, c in calib.items()},
             "pooled": pooled.summary(),
+            "spread_ratio_to_training": spread_ratios or None,  # None: the file records no spread reference
         }
         if cfg.figures:
             plots.save(

@@ -1,0 +1,63 @@
+"""Is a recording like the data an ensemble learned? Its members' disagreement as a check on the input.
+
+The members of an ensemble agree where they were trained and disagree on inputs unlike their training data:
+another IMU, gyro or accelerometer in other units, another rate. An ensemble file carries a reference, the
+median over samples of the norm of its members' per-sample std on each of its training recordings (whole), and
+the largest of those is the figure a new recording is compared with. `correct` and `evaluate` warn when a
+recording's median spread is more than SPREAD_RATIO_LIMIT times that reference.
+
+The limit comes from `python benchmarks/spread_ood.py` (benchmarks/results/spread_ood.md): the shipped `euroc`
+ensemble's unseen EuRoC test flights sit at 0.6-1.1 times its reference, TUM-VI's BMI160 (another IMU, real
+data this project did not make) at ~39 times, and EuRoC with a unit mistake far above.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, predict_with_spread
+
+SPREAD_RATIO_LIMIT = 3.0
+STATISTIC = "median over samples of ||members' std|| (rad/s), members' raw std (no spread_scale), whole recordings"
+
+
+def median_spread(std: np.ndarray) -> float:
+    """Median over samples of the norm (rad/s) of a per-sample std (N, 3)."""
+    return float(np.median(np.linalg.norm(std, axis=1)))
+
+
+def spread_reference(model: CorrectionModel, recordings: Iterable[tuple[str, np.ndarray]]) -> dict:
+    """The reference an ensemble file records (metadata key `spread_reference`) from its training recordings,
+    (name, (N, 6) raw IMU) pairs."""
+    if not isinstance(model, EnsembleCorrection) or len(model) < 2:
+        raise TypeError("only an ensemble of two or more members has a spread to take a reference of")
+    per = {name: median_spread(predict_with_spread(model, imu)[1]) / model.spread_scale for name, imu in recordings}
+    if not per:
+        raise ValueError("no recordings to take the spread reference on")
+    return {"per_recording_rad_s": per, "reference_rad_s": max(per.values()), "statistic": STATISTIC}
+
+
+def spread_ratio(std: np.ndarray | None, meta: dict) -> float | None:
+    """A recording's median spread over the ensemble's reference, or None (a single model, or a file without a
+    reference: `python -m gyrodenoise.ensemble reference` adds one)."""
+    ref = (meta.get("spread_reference") or {}).get("reference_rad_s")
+    if std is None or not ref:
+        return None
+    scale = float((meta.get("model") or {}).get("spread_scale", 1.0))
+    return median_spread(std) / scale / ref
+
+
+def spread_warning(ratio: float | None, what: str, meta: dict) -> str | None:
+    """The warning for a recording `what` whose spread ratio is above the limit, else None."""
+    if ratio is None or ratio <= SPREAD_RATIO_LIMIT:
+        return None
+    ref_deg = np.degrees(meta["spread_reference"]["reference_rad_s"])
+    return (
+        f"{what}: the members of {meta.get('name', 'this ensemble')} disagree {ratio:.1f} times more than on their "
+        f"own training recordings (median spread {ratio * ref_deg:.3f} vs {ref_deg:.3f} deg/s; the check warns above "
+        f"{SPREAD_RATIO_LIMIT:g}): the recording is unlike the data the model learned (another IMU, gyro or "
+        "accelerometer in other units, another rate), so its correction is not to be trusted. Check the units; for "
+        "another IMU, fit a calibrated model (python -m gyrodenoise.fit_calibrated) or train on its own data."
+    )
