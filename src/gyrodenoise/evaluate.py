@@ -27,6 +27,7 @@ import contextlib
 import csv
 import io
 import math
+import time
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -169,6 +170,7 @@ def noting_data_warnings() -> Iterator[list[str]]:
 
 
 def evaluate(cfg: DictConfig) -> dict:
+    start = time.time()
     set_torch_threads(cfg.get("threads"))
     out = Path(cfg.out_dir)
     dm = hydra.utils.instantiate(cfg.dataset)
@@ -309,6 +311,7 @@ def evaluate(cfg: DictConfig) -> dict:
                 plots.calibration_figure(pooled, f"ensemble spread on {dm.name} {split}"),
                 out / "figures" / "uncertainty_calibration.png",
             )
+    summary["wall_s"] = round(time.time() - start, 1)  # data reading, models, figures and tables included
     write_json(out / "results.json", summary)
     print(f"\nAOE 3D/yaw (deg) on {dm.name} {'test sequences' if split == 'test' else 'validation parts'}:\n")
     print(markdown_table(header, rows))
