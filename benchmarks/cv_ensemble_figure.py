@@ -19,6 +19,7 @@ import json
 import math
 import platform
 import re
+import sys
 import time
 from pathlib import Path
 
@@ -130,6 +131,8 @@ def main() -> None:
         help="folders of the runs' committed summary JSONs (to check each member's figure)",
     )
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/cv_ensemble_figure"))
+    ap.add_argument("--rule", default="benchmarks/queues/cv_round3.txt", help="the queue file that holds the rule")
+    ap.add_argument("--title", default="Round 3 of the EuRoC recipe selection", help="the report's heading")
     args = ap.parse_args()
     start = time.time()
     runs = find_runs(args.roots)
@@ -169,11 +172,9 @@ def main() -> None:
         return [float(np.mean(list(f[r]["members"].values()))) for f in folds]
 
     result = {
-        "command": "python benchmarks/cv_ensemble_figure.py "
-        + " ".join(map(str, args.roots))
-        + " --seeds "
-        + " ".join(map(str, args.seeds)),
-        "rule": "benchmarks/queues/cv_round3.txt",
+        "command": "python benchmarks/cv_ensemble_figure.py " + " ".join(sys.argv[1:]),  # as invoked: options too
+        "title": args.title,
+        "rule": args.rule,
         "machine": f"{platform.node()} ({platform.machine()}, CPU)",
         "wall_s": time.time() - start,
         "folds": folds,
@@ -209,7 +210,7 @@ def report(result: dict, recipes: list[str], seeds: list[int]) -> str:
             row += [" / ".join(f"{v:.2f}" for v in f[r]["members"].values()), f"**{f[r]['ensemble']:.2f}**"]
         rows.append(row)
     lines = [
-        "# Round 3 of the EuRoC recipe selection: fold ensembles on the held-out flight",
+        f"# {result.get('title', 'Round 3 of the EuRoC recipe selection')}: fold ensembles on the held-out flight",
         "",
         f"`{result['command']}` on {result['machine']}, {result['wall_s']:.0f} s. Rule: `{result['rule']}` "
         "(written before the runs). Held-out-flight AOE 3D (deg), each flight whole.",

@@ -8,7 +8,8 @@ folder `<recipe>_f<fold>_s<seed>` under the roots holds csv/metrics.csv, with va
 training flights) and val/aoe_deg (the held-out flight, whole) at every validation. Per run: e* = the validation
 epoch with the lowest val_tail figure; d = held-out AOE at e* - held-out AOE at the last validation (the final
 weights). Decision: recipe ref, d averaged per fold, 95% t-interval of the per-fold means below 0 -> best_val.
-Writes --out .md and .json. Reads logs only: a few seconds.
+Writes --out .md and .json. Reads the runs' logs only (no model is run): a few seconds, but the run folders
+(runs/cv2 ... runs/cv4, from the queues named in reports/accuracy.md) are not committed: retrain them to rerun this.
 """
 
 from __future__ import annotations
