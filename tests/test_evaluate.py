@@ -38,6 +38,21 @@ def run_evaluate(*overrides: str) -> dict:
     return evaluate(compose_config("evaluate", overrides))
 
 
+def run_evaluate_asl(root, proposed, calibrated, out, *overrides: str) -> dict:
+    """evaluate of the sequence `seq` of an ASL folder `root` as the test, by two model files."""
+    return run_evaluate(
+        "dataset=asl_folder",
+        f"dataset.root={root}",
+        "dataset.train_seqs=[]",
+        "dataset.test_seqs=[seq]",
+        f"weights.proposed={proposed}",
+        f"weights.calibrated={calibrated}",
+        "threads=1",
+        f"out_dir={out}",
+        *overrides,
+    )
+
+
 def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     summary = run_evaluate(
         "dataset=euroc", f"dataset.root={euroc_root}", "dataset.test_seqs=[V1_01_easy]", f"out_dir={tmp_path}"
@@ -247,16 +262,7 @@ def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):
     model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
     monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "out"
-    run_evaluate(
-        "dataset=asl_folder",
-        f"dataset.root={root}",
-        "dataset.train_seqs=[]",
-        "dataset.test_seqs=[seq]",
-        f"weights.proposed={model}",
-        f"weights.calibrated={model}",
-        "threads=1",
-        f"out_dir={out}",
-    )
+    run_evaluate_asl(root, model, model, out)
     assert "turns about axes" in (out / "table.md").read_text()
     results = json.loads((out / "results.json").read_text())
     assert any("quaternion order" in w for w in results["warnings"])

@@ -99,7 +99,7 @@ def test_reference_cli_reads_the_members_training_recordings(tmp_path, monkeypat
 
 
 def test_evaluate_writes_the_spread_warning_into_its_outputs(tmp_path, monkeypatch):
-    from test_evaluate import run_evaluate
+    from test_evaluate import run_evaluate_asl
 
     from gyrodenoise.models.build import build_model
 
@@ -110,17 +110,7 @@ def test_evaluate_writes_the_spread_warning_into_its_outputs(tmp_path, monkeypat
     ens = save_model(two_members(), CFG, tmp_path / "ens.pt", {"rate_hz": 200.0, "spread_reference": ref})
     cal = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
     out = tmp_path / "out"
-    run_evaluate(
-        "dataset=asl_folder",
-        f"dataset.root={root}",
-        "dataset.train_seqs=[]",
-        "dataset.test_seqs=[seq]",
-        f"weights.proposed={ens}",
-        f"weights.calibrated={cal}",
-        "figures=false",
-        "threads=1",
-        f"out_dir={out}",
-    )
+    run_evaluate_asl(root, ens, cal, out, "figures=false")
     results = json.loads((out / "results.json").read_text())
     assert results["uncertainty"]["spread_ratio_to_training"]["seq"] > 1e3
     assert "disagree" in (out / "table.md").read_text() and any("disagree" in w for w in results["warnings"])
