@@ -239,6 +239,8 @@ def test_experiment_ensemble_trains_members_and_builds(tmp_path):
     )
     ens, meta = load_model(sweep / "ensemble.pt")
     assert len(ens) == 2 and [r["seed"] for r in meta["members"]] == [0, 1]
+    ref = meta["spread_reference"]  # taken on the members' training sequence, read through the sweep's dataset
+    assert list(ref["per_recording_rad_s"]) == ["seq_a"] and ref["reference_rad_s"] > 0
 
 
 # ------------------------------------------------------------------ users: streaming, ONNX, correct
