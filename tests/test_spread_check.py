@@ -114,3 +114,11 @@ def test_evaluate_writes_the_spread_warning_into_its_outputs(tmp_path, monkeypat
     results = json.loads((out / "results.json").read_text())
     assert results["uncertainty"]["spread_ratio_to_training"]["seq"] > 1e3
     assert "disagree" in (out / "table.md").read_text() and any("disagree" in w for w in results["warnings"])
+
+
+def test_onnx_metadata_carries_the_spread_check_for_onboard_code():
+    from gyrodenoise.export import onnx_metadata
+
+    props = onnx_metadata(two_members(), {"spread_reference": {"reference_rad_s": 0.0024031}})
+    assert f"above {SPREAD_RATIO_LIMIT:g} x 0.0024031 rad/s" in props["gyrodenoise.spread_check"]
+    assert "gyrodenoise.spread_check" not in onnx_metadata(two_members(), {})  # no reference recorded: nothing said

@@ -33,6 +33,7 @@ from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
 from gyrodenoise.stateful_graph import StatefulCorrection
 
 INPUT_NAME, OUTPUT_NAME, STD_NAME = "imu", "gyro_corrected", "gyro_std"
@@ -145,6 +146,12 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
             f"per-sample std of the members' corrected gyro (ddof 1) x spread_scale {float(model.spread_scale):g}; "
             "it ranks the error but underestimates it (see the model card)"
         )
+        if ref := (meta.get("spread_reference") or {}).get("reference_rad_s"):
+            out["gyrodenoise.spread_check"] = (
+                f"the median over a recording of ||gyro_std|| / spread_scale above {SPREAD_RATIO_LIMIT:g} x "
+                f"{float(ref):.6g} rad/s (the largest median on the training recordings): the recording is unlike the "
+                "training data (another IMU, units or mounting) and the correction is not to be trusted"
+            )
     if meta.get("rate_hz"):
         out["gyrodenoise.rate_hz"] = f"{float(meta['rate_hz']):g}"
     sensor = (meta.get("sensor") or {}).get("model")
