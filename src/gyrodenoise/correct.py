@@ -225,6 +225,8 @@ def main(argv: list[str] | None = None) -> int:
         except (ValueError, AttributeError):  # not our summary: it is replaced all the same
             earlier = "?"
         print(f"note: replacing the outputs of an earlier run in {out_csv.parent} (model {earlier})", file=sys.stderr)
+    for stale in (summary_file, out_tum):  # an interrupted rerun must not leave them beside the new CSV
+        stale.unlink(missing_ok=True)
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
     write_text(
         out_tum, tum_text(res.rec.t_ns, res.R, "open-loop orientation from the corrected gyro; translation zero")

@@ -173,6 +173,9 @@ def evaluate(cfg: DictConfig) -> dict:
     start = time.time()
     set_torch_threads(cfg.get("threads"))
     out = Path(cfg.out_dir)
+    # results.json, written last, is the mark of a finished evaluation: an earlier one's must not outlive a rerun
+    # stopped halfway beside the new tables
+    (out / "results.json").unlink(missing_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
     split = cfg.get("split", "test")
     if split not in ("test", "val"):

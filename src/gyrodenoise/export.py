@@ -220,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not (args.onnx or args.pt2):
         ap.error("give at least one of --onnx PATH, --pt2 PATH")
+    for flag, target in (("--onnx", args.onnx), ("--pt2", args.pt2)):
+        if target is not None and target.is_dir():  # found only after the export's work otherwise, with a raw error
+            ap.error(f"{flag} {target} is a folder: give a file path, e.g. {target / ('model' + target.suffix)}")
     try:
         model, meta = load_model(args.model)
         if args.pt2:

@@ -99,13 +99,15 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     path = resolve(name_or_path)
     try:
         blob = torch.load(path, map_location=map_location, weights_only=True)
-    except OSError:
+    except (FileNotFoundError, PermissionError, IsADirectoryError):
         raise
     except Exception:  # a CSV, a JSON, a truncated file: torch's unpickler fails in many ways (its message
-        # advises weights_only=False, i.e. running code from the file: not advice to pass on)
+        # advises weights_only=False, i.e. running code from the file: not advice to pass on; a truncated zip
+        # can also end in a bare OSError 'Invalid argument' that names no file)
         raise ModelFileError(
-            f"{path}: not a model file (torch cannot read it as one). Give a shipped model name "
-            f"({', '.join(available_models())}), a training run's folder, its model.pt or calibrated.pt, or a .ckpt."
+            f"{path}: not a model file, or a truncated or damaged one (torch cannot read it). Give a shipped model "
+            f"name ({', '.join(available_models())}), a training run's folder, its model.pt or calibrated.pt, or a "
+            ".ckpt."
         ) from None
     if not isinstance(blob, dict):
         raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")

@@ -11,8 +11,10 @@ shipped-model format) and summary.json (wall time, best validation and test metr
 from __future__ import annotations
 
 import math
+import sys
 import time
 import warnings
+import zipfile
 from pathlib import Path
 
 import hydra
@@ -155,6 +157,17 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, valida
     return val, test
 
 
+def _say_how_to_resume(trainer: L.Trainer) -> None:
+    cb = trainer.checkpoint_callback
+    last = Path(cb.dirpath) / "last.ckpt" if cb is not None and cb.dirpath else None
+    where = f"ckpt_path={last}" if last is not None and last.is_file() else "ckpt_path=<a run's checkpoints/last.ckpt>"
+    print(
+        f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where} (checkpoints are "
+        "written every 50 epochs)",
+        file=sys.stderr,
+    )
+
+
 def train(cfg: DictConfig) -> dict:
     if cfg.get("retain_freed_memory", True):
         retain_freed_memory()
@@ -180,6 +193,11 @@ def train(cfg: DictConfig) -> dict:
 
     # one optimiser step per epoch: log_every_n_steps counts steps across epochs, as intended here
     warnings.filterwarnings("ignore", message=r"The number of training batches \(\d+\) is smaller than the logging")
+    if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # missing, truncated, or not a checkpoint
+        raise ConfigError(
+            f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
+            "a run's checkpoints/last.ckpt (written every 50 epochs), or leave ckpt_path out to start afresh"
+        )
     if cfg.get("ckpt_path"):
         # Lightning warns that a checkpoint from another folder does not bring its best-score bookkeeping: true and
         # expected when resuming into a new run folder; said once, plainly
@@ -189,7 +207,12 @@ def train(cfg: DictConfig) -> dict:
             "best-validation checkpoint is tracked afresh in this run's folder (the earlier run's stays in its own)"
         )
     start = time.time()
-    trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
+    try:
+        trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
+    except SystemExit:  # Ctrl-C: Lightning shuts down and exits; say what was kept and how to go on
+        if trainer.interrupted:
+            _say_how_to_resume(trainer)
+        raise
     wall_s = time.time() - start
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
     raw_final = _raw_final_weights(trainer, module) if cfg.get("test_other_rule") else None

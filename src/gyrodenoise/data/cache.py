@@ -9,6 +9,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -72,10 +74,13 @@ def load_sequence(
         key = cache_key([imu_path, gt_path], settings)
         cache_path = Path(cache_dir or default_cache_dir()) / f"{name}-{key}.npz"
         if cache_path.is_file():
-            with np.load(cache_path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-                seq = Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
-                return seq.from_first_ground_truth()
+            try:
+                with np.load(cache_path, allow_pickle=False) as z:
+                    meta = json.loads(str(z["meta"]))
+                    seq = Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
+                    return seq.from_first_ground_truth()
+            except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # damaged on disk: rebuild
+                warnings.warn(f"{cache_path}: unreadable cache file ({e}); rebuilt from {mav0}", stacklevel=2)
     seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
     if cache_path is not None:
         atomic_save_npz(

@@ -6,6 +6,7 @@ and what to do. Nothing is dropped silently.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,10 @@ class GroundTruthData:
     path: Path
 
 
+class DataFormatWarning(UserWarning):
+    """A data file that reads, but shows a sign of damage; the message names the file and line."""
+
+
 def _first_undecodable(path: Path) -> tuple[int, int, int]:
     """(1-based line, byte offset, byte value) of the first byte that is not UTF-8; (0, -1, 0) if none."""
     offset = 0
@@ -65,11 +70,21 @@ def text_lines(path: Path, expected: str) -> Iterator[tuple[int, str]]:
         "converted to CSV first; a text file in another encoding (e.g. Latin-1) must be saved as UTF-8."
     )
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:  # -sig: a byte-order mark (Windows editors) is not data
+            lineno, line = 0, "\n"
             for lineno, line in enumerate(fh, start=1):
                 if "\x00" in line:  # NUL is valid UTF-8 but never in a text CSV: a binary file
                     raise DataFormatError(f"{path}:{lineno}: NUL byte (binary data). {advice}")
                 yield lineno, line
+            if not line.endswith("\n") and line.strip() and not line.lstrip().startswith("#"):
+                # the mark of a write that stopped mid-line: its last number may be cut (-2.1819 for -2.18198)
+                warnings.warn(
+                    f"{path}:{lineno}: the file does not end with a line break, so its last line may have been cut "
+                    "by an interrupted write; it is read as it stands. Check that line (or end the file with a line "
+                    "break if it is whole).",
+                    DataFormatWarning,
+                    stacklevel=2,
+                )
     except UnicodeDecodeError:
         lineno, offset, byte = _first_undecodable(path)
         raise DataFormatError(f"{path}:{lineno}: byte 0x{byte:02x} at offset {offset} is not UTF-8. {advice}") from None

@@ -1,0 +1,134 @@
+"""Damaged files and interrupted runs (found by a bad-input audit): each is named, rebuilt or refused, and an
+interrupted rerun leaves no earlier run's summary beside its new outputs."""
+
+from __future__ import annotations
+
+import json
+import signal
+import warnings
+from pathlib import Path
+
+import lightning.pytorch as L
+import numpy as np
+import pytest
+from _asl import write_asl_sequence
+from test_train import config
+
+from gyrodenoise.cli_errors import ConfigError
+from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.readers import DataFormatWarning, read_imu
+from gyrodenoise.models.build import build_model
+from gyrodenoise.pretrained import ModelFileError, load_model, save_model
+from gyrodenoise.train import train
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("asl_damaged")
+    for i, name in enumerate(["a", "b", "c"]):
+        write_asl_sequence(root / name, seconds=6.0, seed=20 + i)
+    return root
+
+
+def imu_file(root: Path, name: str = "a") -> Path:
+    return root / name / "mav0" / "imu0" / "data.csv"
+
+
+def test_a_byte_order_mark_is_not_data(root, tmp_path):
+    f = tmp_path / "bom.csv"
+    f.write_text("\ufeff" + imu_file(root).read_text(), encoding="utf-8")
+    np.testing.assert_array_equal(read_imu(f).gyro, read_imu(imu_file(root)).gyro)
+
+
+def test_a_file_cut_mid_line_is_named(root, tmp_path):
+    f = tmp_path / "cut.csv"
+    text = imu_file(root).read_text()
+    f.write_text(text.rstrip("\n")[:-4])  # the last number loses digits, every column still there
+    n_lines = text.count("\n")
+    with pytest.warns(DataFormatWarning, match=f"cut.csv:{n_lines}: the file does not end with a line break"):
+        read_imu(f)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataFormatWarning)
+        read_imu(imu_file(root))  # a whole file: nothing said
+
+
+def test_a_truncated_model_file_is_named(tmp_path):
+    whole = save_model(build_model("denoiser", channels=(4, 8), dilations=(1, 2)), {"name": "denoiser",
+                       "channels": (4, 8), "dilations": (1, 2)}, tmp_path / "m.pt", {})  # fmt: skip
+    data = whole.read_bytes()
+    for k, n in enumerate(np.linspace(100, len(data) - 100, 12).astype(int)):
+        cut = tmp_path / f"cut{k}.pt"
+        cut.write_bytes(data[:n])
+        with pytest.raises(ModelFileError, match=f"cut{k}.pt: not a model file, or a truncated or damaged one"):
+            load_model(cut)
+
+
+def test_a_damaged_cache_file_is_rebuilt(root, tmp_path):
+    cache = tmp_path / "cache"
+    first = load_sequence(root, "a", cache_dir=cache)
+    (npz,) = cache.glob("a-*.npz")
+    npz.write_bytes(npz.read_bytes()[:5000])
+    with pytest.warns(UserWarning, match="unreadable cache file"):
+        again = load_sequence(root, "a", cache_dir=cache)
+    np.testing.assert_array_equal(again.gyro, first.gyro)
+    np.testing.assert_array_equal(load_sequence(root, "a", cache_dir=cache).gyro, first.gyro)  # rewritten whole
+
+
+def test_a_truncated_checkpoint_to_resume_from_is_refused(root, tmp_path):
+    bad = tmp_path / "last.ckpt"
+    bad.write_bytes(b"PK\x03\x04" + b"\0" * 100)
+    with pytest.raises(ConfigError, match="not a readable Lightning checkpoint"):
+        train(config(root, tmp_path / "run", f"ckpt_path={bad}"))
+
+
+class InterruptAtEpoch(L.Callback):
+    """Ctrl-C during the fit, as Lightning sees it."""
+
+    def __init__(self, epoch: int = 1) -> None:
+        self.epoch = epoch
+
+    def on_train_epoch_end(self, trainer, module) -> None:
+        if trainer.current_epoch == self.epoch:
+            raise KeyboardInterrupt
+
+
+def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
+    handler = signal.getsignal(signal.SIGINT)
+    cb = "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtEpoch"
+    try:
+        with pytest.raises(SystemExit):
+            train(config(root, tmp_path / "run", cb, "trainer.max_epochs=4"))
+    finally:
+        signal.signal(signal.SIGINT, handler)  # Lightning ignores further Ctrl-C while it shuts down
+    err = capsys.readouterr().err
+    assert "interrupted at epoch 1: no model.pt written; resume with ckpt_path=" in err
+    assert not (tmp_path / "run" / "model.pt").exists()
+
+
+def test_an_interrupted_correct_rerun_leaves_no_earlier_summary(root, tmp_path, monkeypatch):
+    import gyrodenoise.correct as correct
+
+    out = tmp_path / "out"
+    cal = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
+    assert correct.main([str(imu_file(root)), "-m", str(cal), "-o", str(out)]) == 0
+    assert json.loads((out / "correct_summary.json").read_text())["model"]
+    real_write = correct.write_text
+
+    def stop_after_the_csv(path, text):
+        if Path(path).name != "imu_corrected.csv":
+            raise KeyboardInterrupt
+        return real_write(path, text)
+
+    monkeypatch.setattr(correct, "write_text", stop_after_the_csv)
+    with pytest.raises(KeyboardInterrupt):
+        correct.main([str(imu_file(root)), "-m", str(cal), "-o", str(out)])
+    assert (out / "imu_corrected.csv").is_file()
+    assert not (out / "correct_summary.json").exists() and not (out / "orientation.txt").exists()
+
+
+def test_export_to_a_folder_is_refused_before_the_work(tmp_path, capsys):
+    from gyrodenoise.export import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["euroc-calibrated", "--onnx", str(tmp_path)])
+    assert e.value.code == 2 and "is a folder: give a file path" in capsys.readouterr().err
