@@ -132,3 +132,19 @@ def test_export_to_a_folder_is_refused_before_the_work(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["euroc-calibrated", "--onnx", str(tmp_path)])
     assert e.value.code == 2 and "is a folder: give a file path" in capsys.readouterr().err
+
+
+def test_a_truth_covering_part_of_the_recording_is_said(root, tmp_path):
+    from gyrodenoise.data import consistency
+
+    part = tmp_path / "part"
+    write_asl_sequence(part / "a", seconds=6.0, seed=20)
+    gt = part / "a" / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    lines = gt.read_text().splitlines(keepends=True)
+    gt.write_text("".join(lines[: 1 + 400]))  # 2 s of truth for 6 s of IMU
+    seq = load_sequence(part, "a", cache_dir="")
+    with pytest.warns(consistency.DataConsistencyWarning, match=r"801 of 1201 IMU samples lie outside"):
+        consistency.check(seq)
+    gt.write_text("".join(lines[: 1 + 20]))  # 0.1 s: too short to train on, said in one line
+    with pytest.raises(ConfigError, match="check that the ground truth covers the recording"):
+        train(config(part, tmp_path / "run", "dataset.train_seqs=[a]", "dataset.test_seqs=[]", "test=false"))

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data.datamodule import gt_increments
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.losses import IncrementLoss
@@ -72,7 +73,11 @@ def fit_calibrated(
     loss_fn = IncrementLoss(**dict(loss or {}))
     terms = _loss_terms(sequences, loss_fn.base, max(loss_fn.increments))
     if not terms:
-        raise ValueError("fit_calibrated: no training sequence has a ground-truth increment to fit")
+        raise ConfigError(  # a ValueError too
+            "fit_calibrated: no training sequence has a ground-truth increment to fit (each needs more samples "
+            "inside the ground truth's span than the longest loss increment): check that the ground truth covers the "
+            "recording"
+        )
     weights = torch.tensor([float(t[3].sum()) for t in terms], dtype=torch.float64)
     weights = weights / weights.sum()
     model = CalibratedImu(g_sensitivity).double()

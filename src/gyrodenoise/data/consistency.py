@@ -25,6 +25,7 @@ from gyrodenoise.data.sequence import Sequence
 
 DEG_PER_RAD = 180.0 / np.pi
 RATIO_RANGE = (0.5, 2.0)  # gyro / truth rate magnitude outside it: a scale or unit problem
+MAX_CROPPED_SHARE = 0.10  # IMU samples outside the truth's span, as a share of the file
 AXES_MAX_DEG = 10.0  # gyro axes this far from the truth's body axes: quaternion order, frame or convention
 MAX_LAG_S = 0.05  # a best lag beyond it: the truth is not on the IMU's clock
 SEARCH_S = 60.0  # lags searched either way
@@ -88,6 +89,14 @@ def check(seq: Sequence) -> Consistency:
         raise DataFormatError(
             f"{where}: the gyro is {m.rate_ratio:.1f} times the rate of the ground truth's orientation: it looks "
             "like deg/s. gyrodenoise reads rad/s (the ASL format's unit): convert the gyro columns."
+        )
+    cropped = int(seq.meta.get("imu_samples_cropped", 0))
+    if cropped > MAX_CROPPED_SHARE * (cropped + len(seq)):  # EuRoC/TUM-VI: 0-2.8 %, the IMU running before the mocap
+        warnings.warn(
+            f"{where}: {cropped} of {cropped + len(seq)} IMU samples lie outside the ground truth's time span and "
+            f"are left out (the truth covers {seq.t[-1] - seq.t[0]:.1f} s): check that the truth file is whole.",
+            DataConsistencyWarning,
+            stacklevel=2,
         )
     if m.gaps:
         warnings.warn(

@@ -75,7 +75,10 @@ class RandomCrops(Dataset):
         shortest = min(len(s) for s in seqs)
         self.window = min(window, ((shortest - 1) // block) * block)
         if self.window < block:
-            raise ValueError(f"training sequences are too short ({shortest} samples) for one {block}-sample block")
+            raise ConfigError(  # a ValueError too
+                f"training sequences are too short ({shortest} samples inside the ground truth's span) for one "
+                f"{block}-sample block: check that the ground truth covers the recording"
+            )
         self.increments = [gt_increments(s, step) for s in seqs]  # computed once
         self.imu = [torch.from_numpy(s.imu).float() for s in seqs]
         self.dt = [torch.from_numpy(s.dt) for s in seqs]
