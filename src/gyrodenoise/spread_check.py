@@ -1,14 +1,16 @@
 """Is a recording like the data an ensemble learned? Its members' disagreement as a check on the input.
 
-The members of an ensemble agree where they were trained and disagree on inputs unlike their training data:
-another IMU, gyro or accelerometer in other units, another rate. An ensemble file carries a reference, the
+The members of an ensemble agree where they were trained and disagree on many inputs unlike their training data
+(another IMU, a gyro in other units, a turned mounting), though not on all. An ensemble file carries a reference, the
 median over samples of the norm of its members' per-sample std on each of its training recordings (whole), and
 the largest of those is the figure a new recording is compared with. `correct` and `evaluate` warn when a
 recording's median spread is more than SPREAD_RATIO_LIMIT times that reference.
 
 The limit comes from `python benchmarks/spread_ood.py` (benchmarks/results/spread_ood.md): the shipped `euroc`
 ensemble's unseen EuRoC test flights sit at 0.6-1.1 times its reference, TUM-VI's BMI160 (another IMU, real
-data this project did not make) at ~39 times, and EuRoC with a unit mistake far above.
+data this project did not make) at ~39 times, a gyro in deg/s at 45-115 and a mounting turned 90 deg at 14-15. It
+does not see an accelerometer in g (2.2-2.5; the data checks of `correct` refuse that), a halved rate (0.9-1.6) or
+another gyro bias (unchanged): a quiet spread is no proof that a recording suits the model.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ def spread_warning(ratio: float | None, what: str, meta: dict) -> str | None:
     return (
         f"{what}: the members of {meta.get('name', 'this ensemble')} disagree {ratio:.1f} times more than on their "
         f"own training recordings (median spread {ratio * ref_deg:.3f} vs {ref_deg:.3f} deg/s; the check warns above "
-        f"{SPREAD_RATIO_LIMIT:g}): the recording is unlike the data the model learned (another IMU, gyro or "
-        "accelerometer in other units, another rate), so its correction is not to be trusted. Check the units; for "
+        f"{SPREAD_RATIO_LIMIT:g}): the recording is unlike the data the model learned (another IMU, a gyro in other "
+        "units, another mounting), so its correction is not to be trusted. Check the units; for "
         "another IMU, fit a calibrated model (python -m gyrodenoise.fit_calibrated) or train on its own data."
     )
