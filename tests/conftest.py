@@ -33,6 +33,17 @@ def tumvi_root() -> Path:
     return require_data("tumvi")
 
 
+@pytest.fixture(scope="session")
+def tiny_asl_root(tmp_path_factory) -> Path:
+    """Three 6-s synthetic sequences a, b, c in the ASL layout (tests that train or read on tiny data)."""
+    from _asl import write_asl_sequence
+
+    root = tmp_path_factory.mktemp("asl_tiny")
+    for i, name in enumerate(["a", "b", "c"]):
+        write_asl_sequence(root / name, seconds=6.0, seed=10 + i)
+    return root
+
+
 @pytest.fixture(autouse=True)
 def _isolated_cache(tmp_path_factory, monkeypatch):
     """Keep the preprocessing cache of tests out of the user's home."""

@@ -22,12 +22,9 @@ from gyrodenoise.pretrained import ModelFileError, load_model, save_model
 from gyrodenoise.train import train
 
 
-@pytest.fixture(scope="module")
-def root(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("asl_damaged")
-    for i, name in enumerate(["a", "b", "c"]):
-        write_asl_sequence(root / name, seconds=6.0, seed=20 + i)
-    return root
+@pytest.fixture
+def root(tiny_asl_root) -> Path:
+    return tiny_asl_root
 
 
 def imu_file(root: Path, name: str = "a") -> Path:

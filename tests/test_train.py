@@ -6,19 +6,15 @@ from pathlib import Path
 
 import pytest
 import torch
-from _asl import write_asl_sequence
 
 from gyrodenoise.config import compose_config
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.train import format_test_table, train
 
 
-@pytest.fixture(scope="module")
-def root(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("asl_train")
-    for i, name in enumerate(["a", "b", "c"]):
-        write_asl_sequence(root / name, seconds=6.0, seed=10 + i)
-    return root
+@pytest.fixture
+def root(tiny_asl_root) -> Path:
+    return tiny_asl_root
 
 
 def config(root: Path, out: Path, *extra: str):
