@@ -172,6 +172,11 @@ def train(cfg: DictConfig) -> dict:
     if cfg.get("retain_freed_memory", True):
         retain_freed_memory()
     set_torch_threads(cfg.get("threads"))
+    if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # before any data is read
+        raise ConfigError(
+            f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
+            "a run's checkpoints/last.ckpt (written every 50 epochs), or leave ckpt_path out to start afresh"
+        )
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     out_dir = Path(cfg.paths.output_dir)
@@ -193,11 +198,6 @@ def train(cfg: DictConfig) -> dict:
 
     # one optimiser step per epoch: log_every_n_steps counts steps across epochs, as intended here
     warnings.filterwarnings("ignore", message=r"The number of training batches \(\d+\) is smaller than the logging")
-    if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # missing, truncated, or not a checkpoint
-        raise ConfigError(
-            f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
-            "a run's checkpoints/last.ckpt (written every 50 epochs), or leave ckpt_path out to start afresh"
-        )
     if cfg.get("ckpt_path"):
         # Lightning warns that a checkpoint from another folder does not bring its best-score bookkeeping: true and
         # expected when resuming into a new run folder; said once, plainly

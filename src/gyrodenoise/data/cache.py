@@ -74,13 +74,14 @@ def load_sequence(
         key = cache_key([imu_path, gt_path], settings)
         cache_path = Path(cache_dir or default_cache_dir()) / f"{name}-{key}.npz"
         if cache_path.is_file():
-            try:
+            try:  # only the reading: an error of the sequence itself is not a damaged file
                 with np.load(cache_path, allow_pickle=False) as z:
                     meta = json.loads(str(z["meta"]))
                     seq = Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
-                    return seq.from_first_ground_truth()
             except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # damaged on disk: rebuild
                 warnings.warn(f"{cache_path}: unreadable cache file ({e}); rebuilt from {mav0}", stacklevel=2)
+            else:
+                return seq.from_first_ground_truth()
     seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
     if cache_path is not None:
         atomic_save_npz(
