@@ -15,8 +15,10 @@ import os
 import platform
 import sys
 import time
+import warnings
 from pathlib import Path
 
+from gyrodenoise.data.consistency import DataConsistencyWarning
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
@@ -217,10 +219,20 @@ def main(argv: list[str] | None = None) -> int:
 
     left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
 
+    data_warnings: list[str] = []  # the IMU against its truth (`consistency`): shown now, kept in the report
+
     def load(names: list[str]) -> list:
         out = []
         for n in names:
-            fcs, left = load_fit_contexts(args.root, n, args.gt_files.get(n), args.knot_spacing)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", DataConsistencyWarning)
+                fcs, left = load_fit_contexts(args.root, n, args.gt_files.get(n), args.knot_spacing)
+            for w in caught:
+                if issubclass(w.category, DataConsistencyWarning):
+                    data_warnings.append(str(w.message))
+                    print(f"warning: {w.message}", file=sys.stderr)
+                else:
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
             out += fcs
             left_out.extend(left)
         return out
@@ -246,6 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
     report["truth_check"] = checks
+    report["data_warnings"] = data_warnings
     report["ground_truth_gaps"] = {"max_gap_s": MAX_GT_GAP_S, "min_stretch_s": MIN_STRETCH_S, "left_out": left_out}
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects

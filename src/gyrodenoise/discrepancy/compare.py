@@ -9,6 +9,7 @@ import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise.data import consistency
 from gyrodenoise.data.readers import (
     DataFormatError,
     GroundTruthData,
@@ -17,7 +18,7 @@ from gyrodenoise.data.readers import (
     read_groundtruth,
     read_imu,
 )
-from gyrodenoise.data.sequence import sequence_folder
+from gyrodenoise.data.sequence import build_sequence, sequence_folder
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 from gyrodenoise.so3 import integrate_gyro
@@ -46,11 +47,13 @@ def load_fit_contexts(
     occlusions: a spline through them invents the motion, and its rate there would dominate the residual).
     Returns (one context per gap-free stretch of at least `min_stretch_s` after the margins, named
     'NAME@A-Bs' when the sequence is split; the stretches left out, with why). A sequence without such gaps
-    gives one context named NAME."""
+    gives one context named NAME. The IMU is first checked against its truth as training data is
+    (`consistency.check`: an error for a gyro in deg/s, warnings for another clock, axes or scale)."""
     mav0 = sequence_folder(root, name)
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     imu = read_imu(mav0 / "imu0" / "data.csv")
     gt = read_groundtruth(gt_path)
+    consistency.check(build_sequence(name, imu, gt))
     stretches = gap_free_stretches(gt.t_ns, max_gap_s)
     if len(stretches) == 1:
         return [_context(name, name, imu, gt, gt_path, knot_spacing, margin_s)], []

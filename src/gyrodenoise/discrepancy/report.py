@@ -250,7 +250,14 @@ def _gt_gaps_md(report: dict) -> list[str]:
 
 
 def _truth_caution(report: dict) -> list[str]:
-    """One line under the verdict when the ground truth of a sequence follows the gyro (`truth_check`)."""
+    """Lines under the verdict: the IMU disagreed with its truth (`consistency`), or the ground truth of a
+    sequence follows the gyro (`truth_check`)."""
+    lines = [f"**Data check:** {w}" for w in report.get("data_warnings") or []]
+    lines += [""] if lines else []
+    return lines + _truth_follows_gyro(report)
+
+
+def _truth_follows_gyro(report: dict) -> list[str]:
     followed = {n: c["follows_gyro_bands_hz"] for n, c in (report.get("truth_check") or {}).items()}
     followed = {n: b for n, b in followed.items() if b}
     if not followed:
