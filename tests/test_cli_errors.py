@@ -121,3 +121,20 @@ def test_a_thread_count_that_is_not_a_whole_number_ends_in_one_line(threads, mon
     assert torch.get_num_threads() == before
     set_torch_threads(None)  # null: torch's default, untouched
     assert torch.get_num_threads() == before
+
+
+def test_a_root_one_level_off_is_named_with_the_root_to_give(tiny_asl_root, tmp_path):
+    import hydra
+
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.data.sequence import sequence_folder
+
+    with pytest.raises(FileNotFoundError, match=f"give its parent, {tiny_asl_root}, as the root"):
+        sequence_folder(tiny_asl_root / "a", "a")  # the sequence folder itself
+    (tmp_path / "mine").symlink_to(tiny_asl_root)
+    with pytest.raises(FileNotFoundError, match=f"one level further down: give {tmp_path / 'mine'} as the root"):
+        sequence_folder(tmp_path, "a")
+    seqs = "dataset.train_seqs=[a] dataset.val_seqs=[a] dataset.test_seqs=[b]".split()
+    cfg = compose_config("train", ["dataset=euroc", f"dataset.root={tiny_asl_root / 'a'}", *seqs])
+    with pytest.raises(FileNotFoundError, match=f"give its parent, {tiny_asl_root}, as dataset.root"):
+        hydra.utils.instantiate(cfg.dataset).check_sequences()

@@ -27,7 +27,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.sequence import Sequence, misspelt, sequences_in
+from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -183,6 +183,11 @@ class ImuDataModule(L.LightningDataModule):
                 f"{', '.join(missing)} in the ASL layout (<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root "
                 f"to that folder, or GYRODENOISE_DATA to the folder that holds '{self.name}/' (the shipped dataset "
                 "configs read $GYRODENOISE_DATA/<dataset>)."
+            )
+        if missing and (Path(self.root) / "mav0").is_dir():  # a root one level too deep (a sequence folder)
+            raise FileNotFoundError(
+                f"{self.root}: sequence folder(s) not found: {', '.join(missing)}. "
+                + root_level_hint(Path(self.root), missing[0]).replace("as the root", "as dataset.root").rstrip()
             )
         if missing:
             inside = [d for d in (Path(self.root) / self.name, *Path(self.root).glob("*")) if (d / missing[0]).is_dir()]

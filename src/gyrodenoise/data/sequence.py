@@ -145,6 +145,17 @@ def sequence_folder(root: str | Path, name: str) -> Path:
             f"{mav0}: sequence folder not found. "
             + (f"Did you mean {typo}? " if typo else "")
             + (f"{root} holds {', '.join(here)}. " if here else f"{root} holds no sequence folder. ")
+            + root_level_hint(Path(root), name)
             + f"The data root must be the folder that holds '{name}/mav0/imu0/data.csv' (ASL layout)."
         )
     return mav0
+
+
+def root_level_hint(root: Path, name: str) -> str:
+    """A root one level too deep (a sequence folder itself) or too shallow (a folder of datasets)."""
+    if (root / "mav0").is_dir():
+        return f"{root} is itself a sequence folder (it holds mav0): give its parent, {root.parent}, as the root. "
+    below = sorted(p.parent.parent for p in root.glob(f"*/{name}/mav0") if p.is_dir())
+    if below:
+        return f"{name} is one level further down: give {below[0]} as the root. "
+    return ""
