@@ -58,6 +58,8 @@ class Selection:
     delay_or_lowpass: dict | None = None
     # quantization is named from the raw samples, not by regression: the lattice step and the share of samples on it
     lattice: dict | None = None
+    # named sensor constants refitted on the held-out sequences (`transfer.transfer_check`): chi-square, Birge ratio
+    transfer: dict[str, dict] = field(default_factory=dict)
 
     @property
     def equivalences(self) -> list[str]:

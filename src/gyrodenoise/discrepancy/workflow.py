@@ -22,6 +22,7 @@ from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribut
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG, MIN_GAIN, Selection, residuals_after, select_effects
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
 from gyrodenoise.discrepancy.spectral import psd_gap
+from gyrodenoise.discrepancy.transfer import apply_transfer_check
 from gyrodenoise.sim.context import FitContext, SignalContext
 from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
 
@@ -214,6 +215,7 @@ def decide(
         null = cache[key]
         thresholds = null.thresholds(bic_threshold)
     sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
+    apply_transfer_check(sel, holdout)
     return sel_base, sel, null
 
 
