@@ -132,3 +132,37 @@ def test_real_euroc_and_tumvi_sequences(euroc_root, tumvi_root):
     room = load_sequence(tumvi_root, "dataset-room1_512_16")
     assert abs(room.rate_hz - 199.4) < 0.5  # read from the data, not assumed
     assert 0.8 < room.gt_mask.mean() < 1.0  # mocap occlusions masked, not bridged
+
+
+@pytest.mark.parametrize(
+    ("header", "said"),
+    [
+        ("#t,a_x,a_y,a_z,w_x,w_y,w_z\n", r"imu.csv:1: column 2 is 'a_x' where gyro x is expected.*reorder"),
+        ("#t,temperature [C],w_x,w_y,w_z,a_x,a_y\n", r"column 2 is 'temperature \[C\]' where gyro x"),
+        (
+            "#t,gx [deg/s],gy [deg/s],gz [deg/s],ax [g],ay [g],az [g]\n",
+            r"'gx \[deg/s\]' is in deg/s.*'ax \[g\]' is in g",
+        ),
+        ("#timestamp [us],w_x,w_y,w_z,a_x,a_y,a_z\n", r"timestamps in µs.*integer nanoseconds"),
+    ],
+)
+def test_an_imu_header_that_contradicts_the_column_order_or_units_is_refused(tmp_path, header, said):
+    with pytest.raises(DataFormatError, match=said):
+        read_imu(write(tmp_path / "imu.csv", header, imu_rows()))
+
+
+def test_imu_headers_that_agree_or_say_nothing_are_read(tmp_path):
+    for header in [IMU_HEADER, "#t,gx,gy,gz,ax,ay,az\n", "#c1,c2,c3,c4,c5,c6,c7\n", "", "# a comment\n"]:
+        assert len(read_imu(write(tmp_path / "imu.csv", header, imu_rows())).t_ns) == 50, header
+
+
+def test_a_truth_header_with_the_quaternion_w_last_is_refused(tmp_path):
+    header = "#timestamp, p_x, p_y, p_z, q_x, q_y, q_z, q_w\n"
+    with pytest.raises(DataFormatError, match=r"gt.csv:1: column 5 is 'q_x' .* stored x, y, z, w: move its w"):
+        read_groundtruth(write(tmp_path / "gt.csv", header, gt_rows()))
+
+
+@pytest.mark.parametrize(("dt", "unit"), [(5_000, "µs"), (5, "ms")])
+def test_imu_stamps_that_are_not_ns_are_refused(tmp_path, dt, unit):
+    with pytest.raises(DataFormatError, match=f"rate of 200000*0 Hz.*look like {unit}"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(dt=dt)))

@@ -7,11 +7,13 @@ and what to do. Nothing is dropped silently.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from gyrodenoise.data import asl_header
 
 QUAT_NORM_TOL = 1e-3  # |q| may deviate this much (6-decimal files reach ~1e-6); renormalised after
 IMU_LAYOUT = (
@@ -91,12 +93,17 @@ def text_lines(path: Path, expected: str) -> Iterator[tuple[int, str]]:
 
 
 def read_csv_table(
-    path: Path, min_cols: int, what: str, expected: str = "a comma-separated ASL file"
+    path: Path,
+    min_cols: int,
+    what: str,
+    expected: str = "a comma-separated ASL file",
+    check_header: Callable[[Path, int, list[str]], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a comma-separated numeric table with '#' comment lines.
 
     Returns (t_ns int64, values float64 with the `min_cols - 1` columns after the time, line numbers).
     Columns beyond `min_cols` are ignored (optional extras such as velocity and biases).
+    `check_header(path, line, names)` sees the comment line just before the first data line, split at commas.
     """
     path = Path(path)
     if not path.is_file():
@@ -107,10 +114,14 @@ def read_csv_table(
     stamps: list[int] = []
     rows: list[list[str]] = []
     line_numbers: list[int] = []
+    header: tuple[int, str] | None = None
     for lineno, line in text_lines(path, expected):
         s = line.strip()
         if not s or s.startswith("#"):
+            header = (lineno, s) if s else header
             continue
+        if header is not None and check_header is not None and not rows:
+            check_header(path, header[0], [f.strip() for f in header[1].lstrip("#").split(",")])
         fields = [f.strip() for f in s.split(",")]
         if len(fields) < min_cols:
             raise DataFormatError(
@@ -173,16 +184,44 @@ def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> N
         )
 
 
+def _header_check(problem: Callable[[list[str]], str | None]) -> Callable[[Path, int, list[str]], None]:
+    def check(path: Path, line: int, names: list[str]) -> None:
+        why = problem(names)
+        if why:
+            raise DataFormatError(f"{path}:{line}: {why}")
+
+    return check
+
+
+MAX_IMU_RATE_HZ = 50_000.0  # above it the stamps are not ns (µs stamps at 200 Hz read as 200 kHz)
+
+
+def _check_imu_period(path: Path, t_ns: np.ndarray) -> None:
+    if len(t_ns) < 2:
+        return
+    step = float(np.median(np.diff(t_ns)))
+    if step < 1e9 / MAX_IMU_RATE_HZ:
+        guess = next((u for u, f in (("µs", 1e3), ("ms", 1e6)) if 1e9 / MAX_IMU_RATE_HZ <= step * f <= 1e9), None)
+        raise DataFormatError(
+            f"{path}: the median step between IMU timestamps is {step:g}, which in ns is a rate of {1e9 / step:.0f} "
+            "Hz; the ASL format's stamps are integer nanoseconds"
+            + (f" and these look like {guess}: convert them (and the ground truth's) to ns." if guess else ".")
+        )
+
+
 def read_imu(path: str | Path) -> ImuData:
     """ASL IMU file: t[ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]."""
-    t, v, _ = read_csv_table(Path(path), 7, "IMU", IMU_LAYOUT)
+    t, v, lines = read_csv_table(Path(path), 7, "IMU", IMU_LAYOUT, _header_check(asl_header.imu_header_problem))
+    _check_imu_period(Path(path), t)
     return ImuData(t_ns=t, gyro=v[:, 0:3], acc=v[:, 3:6], path=Path(path))
 
 
 def read_groundtruth(path: str | Path) -> GroundTruthData:
     """ASL ground truth: t[ns], p_x, p_y, p_z [m], q_w, q_x, q_y, q_z, then optional columns."""
     path = Path(path)
-    t, v, lines = read_csv_table(path, 8, "ground truth", GT_LAYOUT)
+    t, v, lines = read_csv_table(
+        path, 8, "ground truth", GT_LAYOUT, _header_check(asl_header.groundtruth_header_problem)
+    )
     q_wxyz = v[:, 3:7]
     norm = np.linalg.norm(q_wxyz, axis=1)
     bad = np.abs(norm - 1.0) > QUAT_NORM_TOL

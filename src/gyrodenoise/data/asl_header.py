@@ -1,0 +1,103 @@
+"""What an ASL file's header line says about its columns, checked against the order the readers assume.
+
+The readers take columns by position (IMU: t, w_x, w_y, w_z, a_x, a_y, a_z; ground truth: t, p_x, p_y, p_z,
+q_w, q_x, q_y, q_z). A file written in another order or unit reads without complaint and trains on garbage;
+its header often says so. Each column name is classified (gyro / accelerometer / position / quaternion /
+something else, and its axis) from its name and unit; a column whose name says neither is not judged, so a
+header in a form not known here never refuses a file. Returns a sentence naming the problem, or None.
+"""
+
+from __future__ import annotations
+
+import re
+
+IMU_ORDER = [("gyro", "x"), ("gyro", "y"), ("gyro", "z"), ("acc", "x"), ("acc", "y"), ("acc", "z")]
+GT_ORDER = [("pos", "x"), ("pos", "y"), ("pos", "z"), ("quat", "w"), ("quat", "x"), ("quat", "y"), ("quat", "z")]
+_KINDS = [  # (kind, pattern on the lowercased name without its unit); the first that matches
+    ("gyro", re.compile(r"^(w|omega|gyr|gyro|angular)[_ ]|gyr|angular_velocity")),
+    ("acc", re.compile(r"^(a|acc)[_ ]|acc|linear_acceleration")),
+    ("pos", re.compile(r"^(p|pos|position)[_ ]|^[xyz]$")),
+    ("quat", re.compile(r"^(q|quat|orientation)[_ ]|^q[wxyz]$")),
+    ("other", re.compile(r"temp|mag|baro|press|^v[_ ]|vel|bias|count|seq|status")),
+]
+_DEG_RATE = re.compile(r"deg|dps|°")
+_G_UNIT = re.compile(r"^\[?\s*m?g\s*\]?$")
+_SHORT = re.compile(r"^([gwapq])_?([wxyz])$")
+_SHORT_KIND = {"g": "gyro", "w": "gyro", "a": "acc", "p": "pos", "q": "quat"}
+_TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s"}
+
+
+def _split(name: str) -> tuple[str, str]:
+    """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1')."""
+    m = re.match(r"^\s*#?\s*([^\[(]*?)\s*(?:[\[(]([^\])]*)[\])])?\s*$", name)
+    return (m.group(1).lower(), (m.group(2) or "").strip().lower()) if m else (name.lower(), "")
+
+
+def classify(name: str) -> tuple[str | None, str | None]:
+    """(kind, axis) of a column name; None where the name does not say."""
+    base, unit = _split(name)
+    short = _SHORT.match(base)  # gx, ax, px, qw
+    if short:
+        return _SHORT_KIND[short.group(1)], short.group(2)
+    kind = next((k for k, pat in _KINDS if pat.search(base)), None)
+    if kind is None and unit:  # by the unit alone
+        kind = "gyro" if re.search(r"rad\s*/?\s*s|deg\s*/?\s*s|dps", unit) else None
+        kind = kind or ("acc" if re.search(r"m\s*/?\s*s\s*\^?-?2|m s\^-2", unit) or _G_UNIT.match(unit) else None)
+    axis = base[-1] if base and base[-1] in "wxyz" and (len(base) == 1 or not base[-2].isalpha()) else None
+    return kind, axis
+
+
+def _mismatches(names: list[str], order: list[tuple[str, str]]) -> str:
+    out = []
+    for col, (name, (kind, axis)) in enumerate(zip(names, order, strict=False), start=2):
+        k, a = classify(name)
+        if (k is not None and k != kind) or (k == kind and a is not None and a != axis):
+            out.append(f"column {col} is '{name}' where {kind} {axis} is expected")
+    return "; ".join(out[:3]) + (f" (and {len(out) - 3} more)" if len(out) > 3 else "")
+
+
+def time_unit_problem(name: str) -> str | None:
+    unit = _split(name)[1]
+    if unit in _TIME_UNITS:
+        return (
+            f"the header gives the timestamps in {_TIME_UNITS[unit]} ('{name}'); the ASL format's unit is ns. "
+            "Convert them to integer nanoseconds"
+        )
+    return None
+
+
+def imu_header_problem(names: list[str]) -> str | None:
+    """Why the header of an ASL IMU file (split at commas, the timestamp first) does not fit the readers."""
+    if not names or len(names) < 2:
+        return None
+    problems = [p for p in [time_unit_problem(names[0])] if p]
+    wrong = _mismatches(names[1:7], IMU_ORDER)
+    if wrong:
+        problems.append(
+            wrong + ". gyrodenoise reads t, w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2] by position: "
+            "reorder the columns (gyrodenoise.data.imu_csv.read_imu_csv(path, columns=...) reads any order, and "
+            "asl_text writes the ASL layout)"
+        )
+    units = {classify(n)[0]: (n, _split(n)[1]) for n in reversed(names[1:7])}  # the first column of each kind
+    if "gyro" in units and _DEG_RATE.search(units["gyro"][1]):
+        problems.append(f"'{units['gyro'][0]}' is in deg/s; gyrodenoise reads rad/s: convert the gyro columns")
+    if "acc" in units and _G_UNIT.match(units["acc"][1]):
+        problems.append(f"'{units['acc'][0]}' is in g; gyrodenoise reads m/s^2: multiply the accelerometer by 9.80665")
+    return "; ".join(problems) + "." if problems else None
+
+
+def groundtruth_header_problem(names: list[str]) -> str | None:
+    """Why the header of an ASL ground-truth file does not fit the readers (quaternion w first)."""
+    if not names or len(names) < 2:
+        return None
+    problems = [p for p in [time_unit_problem(names[0])] if p]
+    wrong = _mismatches(names[1:8], GT_ORDER)
+    if wrong:
+        quats = [classify(n)[1] for n in names[4:8]]
+        hint = (
+            "the quaternion is stored x, y, z, w: move its w column before x"
+            if quats == ["x", "y", "z", "w"]
+            else "reorder the columns"
+        )
+        problems.append(wrong + f". gyrodenoise reads t, p_x, p_y, p_z [m], q_w, q_x, q_y, q_z by position: {hint}")
+    return "; ".join(problems) + "." if problems else None
