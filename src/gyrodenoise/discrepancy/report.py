@@ -358,6 +358,17 @@ def _min_drift(settings: dict) -> float:
     return float(settings.get("min_drift_deg", MIN_DRIFT_DEG))
 
 
+def _agreement(t: dict | None) -> str:
+    """The held-out transfer check of a sensor constant (`transfer.transfer_check`)."""
+    if not t:
+        return ""
+    if not t["separable_on_held_out"]:
+        return "not separable there"
+    return f"R {t['birge_ratio']:.2f}, p {t['p_value']:.2g}" + (
+        f"; SE x{t['se_factor']:.2f}" if t["se_factor"] > 1 else ""
+    )
+
+
 def _closed(e: dict) -> str:
     """What a named effect closes on the held-out sequences: in-band power share, and the reduction
     of the median 10-s drift where it is defined (sensor-constant effects)."""
@@ -488,15 +499,18 @@ def markdown(report: dict) -> str:
         lines += [
             "## Named effects (datasheet units, +- one standard error)",
             "",
-            "The standard errors assume the residual's fitted noise model; on independent test data they were right "
-            "for smooth replayed flights and up to ~2 times too small for fast motion with a noisy sensor "
-            "(benchmarks/results/discrepancy_se_calibration.md): read them as lower bounds.",
+            "A sensor constant's standard errors are the regression's, multiplied by its held-out agreement where "
+            "that exceeds 1: the constant refitted on the held-out sequences, the Birge ratio sqrt(chi2 / dof) of the "
+            "two estimates' difference (`gyrodenoise.discrepancy.transfer`). The regression's alone were up to ~2 "
+            "times too small on independent test data; scaled, they were near calibrated "
+            "(benchmarks/results/discrepancy_se_calibration_from10.md). A small p there means the constant did not "
+            "transfer: the held-out motion gives another value.",
             "",
         ]
         lines += [
             "| effect | parameter | value | unit | delta BIC | threshold | null rank p | explained (fit) | "
-            "closed (held-out) |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "closed (held-out) | held-out agreement |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for e in report["named_effects"]:
             first = True
@@ -506,7 +520,7 @@ def markdown(report: dict) -> str:
                 val = _fmt(d["value"])
                 if "standard_error" in d:
                     val += " +- " + _fmt(d["standard_error"])
-                cells = ["", "", "", "", ""]
+                cells = ["", "", "", "", "", ""]
                 if first:
                     cells = [
                         f"{e['delta_bic']:.1f}" if e.get("delta_bic") is not None else "",
@@ -514,6 +528,7 @@ def markdown(report: dict) -> str:
                         f"{e['null_p_value']:.3f}" if e.get("null_p_value") is not None else "",
                         f"{100 * e['explained_fraction']:.2f}%" if e.get("explained_fraction") else "",
                         _closed(e),
+                        _agreement(e.get("held_out_agreement")),
                     ]
                 lines.append(
                     f"| {_label(e) if first else ''} | {k} | {val} | {d['unit']} | " + " | ".join(cells) + " |"

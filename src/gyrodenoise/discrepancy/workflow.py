@@ -271,6 +271,8 @@ def run(
             entry["lattice"] = sel.lattice
         if name == "saturation" and sel.saturation is not None:
             entry["saturation_check"] = sel.saturation
+        if name in sel.transfer:
+            entry["held_out_agreement"] = sel.transfer[name]
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)
