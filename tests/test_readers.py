@@ -152,7 +152,13 @@ def test_an_imu_header_that_contradicts_the_column_order_or_units_is_refused(tmp
 
 
 def test_imu_headers_that_agree_or_say_nothing_are_read(tmp_path):
-    for header in [IMU_HEADER, "#t,gx,gy,gz,ax,ay,az\n", "#c1,c2,c3,c4,c5,c6,c7\n", "", "# a comment\n"]:
+    agree = [
+        IMU_HEADER,
+        "#t,gx,gy,gz,ax,ay,az\n",
+        "#t,x,y,z,ax,ay,az\n",
+        "#timestamp,omega_x,omega_y,omega_z,alpha_x,alpha_y,alpha_z\n",
+    ]
+    for header in [*agree, "#c1,c2,c3,c4,c5,c6,c7\n", "", "# a comment\n"]:
         assert len(read_imu(write(tmp_path / "imu.csv", header, imu_rows())).t_ns) == 50, header
 
 

@@ -16,7 +16,7 @@ GT_ORDER = [("pos", "x"), ("pos", "y"), ("pos", "z"), ("quat", "w"), ("quat", "x
 _KINDS = [  # (kind, pattern on the lowercased name without its unit); the first that matches
     ("gyro", re.compile(r"^(w|omega|gyr|gyro|angular)[_ ]|gyr|angular_velocity")),
     ("acc", re.compile(r"^(a|acc)[_ ]|acc|linear_acceleration")),
-    ("pos", re.compile(r"^(p|pos|position)[_ ]|^[xyz]$")),
+    ("pos", re.compile(r"^(p|pos|position)[_ ]")),  # a bare x, y, z says nothing of the kind
     ("quat", re.compile(r"^(q|quat|orientation)[_ ]|^q[wxyz]$")),
     ("other", re.compile(r"temp|mag|baro|press|^v[_ ]|vel|bias|count|seq|status")),
 ]
