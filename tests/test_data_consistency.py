@@ -98,3 +98,46 @@ def test_motion_about_one_axis_and_a_noisy_truth_pass(seq):
     with warnings.catch_warnings():  # 2 mrad per sample: ~0.6 rad/s of noise over one 5-ms step
         warnings.simplefilter("error")
         assert 0.9 < consistency.check(dataclasses.replace(seq, rot=noisy)).rate_ratio < 1.1
+
+
+def test_noisy_trackers_on_one_axis_or_at_rest_pass(seq):
+    """A turntable seen by a tracker with 0.05 deg of noise per sample (TUM-VI's level), and a recording at rest
+    with 0.2 deg: the truth's own spread is noise, not motion about other axes or a scale."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(1)
+    for rate, noise_deg in ((0.3, 0.05), (0.0, 0.2)):
+        rot = Rotation.from_rotvec(np.outer(rate * seq.t, [0, 0, 1])) * Rotation.from_rotvec(
+            np.radians(noise_deg) * rng.standard_normal((len(seq), 3))
+        )
+        gyro = np.array([0.01, -0.005, rate]) + 3e-3 * rng.standard_normal((len(seq), 3))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            m = consistency.check(dataclasses.replace(seq, rot=rot.as_matrix(), gyro=gyro))
+        assert (m.axes_angle_deg < 5) if rate else np.isnan(m.axes_angle_deg), (rate, m)
+
+
+def test_a_truth_100_ms_late_warns_with_the_shift_to_apply(seq):
+    shift = 20  # 100 ms at 200 Hz: the truth's stamps late by that much
+    late = dataclasses.replace(
+        seq, t=seq.t[shift:], gyro=seq.gyro[shift:], acc=seq.acc[shift:], rot=seq.rot[:-shift],
+        pos=seq.pos[:-shift], gt_mask=seq.gt_mask[shift:],
+    )  # fmt: skip
+    with pytest.warns(
+        consistency.DataConsistencyWarning, match=r"add -0\.(095|100|105) s to the ground truth's timestamps"
+    ):
+        consistency.check(late)
+
+
+def test_a_large_gyro_about_other_axes_is_not_called_deg_s(seq):
+    """57 times the truth's rate about other axes (e.g. the accelerometer's columns read as the gyro) is not a
+    unit problem to fix by pi/180: it warns about the scale and the axes instead."""
+    from scipy.spatial.transform import Rotation
+
+    turned = Rotation.from_euler("x", 90, degrees=True).apply(np.degrees(seq.gyro))
+    with pytest.warns(consistency.DataConsistencyWarning) as caught:
+        consistency.check(dataclasses.replace(seq, gyro=turned))
+    said = " ".join(str(w.message) for w in caught)
+    assert "accelerometer" in said and "deg away" in said
+    with pytest.raises(DataFormatError, match=r"looks like deg/s.*pi/180"):
+        consistency.check(dataclasses.replace(seq, gyro=np.degrees(seq.gyro)))
