@@ -141,8 +141,10 @@ def test_real_euroc_and_tumvi_sequences(euroc_root, tumvi_root):
         ("#t,temperature [C],w_x,w_y,w_z,a_x,a_y\n", r"column 2 is 'temperature \[C\]' where gyro x"),
         (
             "#t,gx [deg/s],gy [deg/s],gz [deg/s],ax [g],ay [g],az [g]\n",
-            r"'gx \[deg/s\]' is in deg/s.*'ax \[g\]' is in g",
+            r"'gx \[deg/s\]' is in deg/s.*pi/180.*'ax \[g\]' is in g",
         ),
+        ('#"t","a_x","a_y","a_z","w_x","w_y","w_z"\n', r"column 2 is '\"a_x\"' where gyro x"),  # quoted names
+        ("#t,a_x,a_y,a_z,w_x,w_y,w_z\n# end of header\n", r"imu.csv:1: column 2 is 'a_x'"),  # a note below it
         ("#timestamp [us],w_x,w_y,w_z,a_x,a_y,a_z\n", r"timestamps in µs.*integer nanoseconds"),
     ],
 )
@@ -157,6 +159,12 @@ def test_imu_headers_that_agree_or_say_nothing_are_read(tmp_path):
         "#t,gx,gy,gz,ax,ay,az\n",
         "#t,x,y,z,ax,ay,az\n",
         "#timestamp,omega_x,omega_y,omega_z,alpha_x,alpha_y,alpha_z\n",
+        # names other tools write (ROS, MATLAB, phones, aerospace rates)
+        "#t,ang_vel_x,ang_vel_y,ang_vel_z,lin_acc_x,lin_acc_y,lin_acc_z\n",
+        "#t,AngularVelocity_1,AngularVelocity_2,AngularVelocity_3,Acceleration_1,Acceleration_2,Acceleration_3\n",
+        "#t,p_rate,q_rate,r_rate,ax,ay,az\n",
+        "#t,rotationRate.x,rotationRate.y,rotationRate.z,userAcceleration.x,userAcceleration.y,userAcceleration.z\n",
+        IMU_HEADER + "# columns: timestamp, gyro x y z, accel x y z\n",  # a note below the header is not the header
     ]
     for header in [*agree, "#c1,c2,c3,c4,c5,c6,c7\n", "", "# a comment\n"]:
         assert len(read_imu(write(tmp_path / "imu.csv", header, imu_rows())).t_ns) == 50, header
@@ -172,3 +180,8 @@ def test_a_truth_header_with_the_quaternion_w_last_is_refused(tmp_path):
 def test_imu_stamps_that_are_not_ns_are_refused(tmp_path, dt, unit):
     with pytest.raises(DataFormatError, match=f"rate of 200000*0 Hz.*look like {unit}"):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(dt=dt)))
+
+
+def test_a_header_without_its_hash_is_named(tmp_path):
+    with pytest.raises(DataFormatError, match="A header line must start with '#'"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER.lstrip("#"), imu_rows()))

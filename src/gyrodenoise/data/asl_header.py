@@ -14,11 +14,11 @@ import re
 IMU_ORDER = [("gyro", "x"), ("gyro", "y"), ("gyro", "z"), ("acc", "x"), ("acc", "y"), ("acc", "z")]
 GT_ORDER = [("pos", "x"), ("pos", "y"), ("pos", "z"), ("quat", "w"), ("quat", "x"), ("quat", "y"), ("quat", "z")]
 _KINDS = [  # (kind, pattern on the lowercased name without its unit); the first that matches
-    ("gyro", re.compile(r"^(w|omega|gyr|gyro|angular)[_ ]|gyr|angular_velocity")),
-    ("acc", re.compile(r"^(a|acc)[_ ]|acc|linear_acceleration")),
-    ("pos", re.compile(r"^(p|pos|position)[_ ]")),  # a bare x, y, z says nothing of the kind
-    ("quat", re.compile(r"^(q|quat|orientation)[_ ]|^q[wxyz]$")),
-    ("other", re.compile(r"temp|mag|baro|press|^v[_ ]|vel|bias|count|seq|status")),
+    ("gyro", re.compile(r"^(w|omega|gyr|gyro|ang|rot)[_ .]|gyr|angular|ang_?vel|rot_?vel|rate")),
+    ("acc", re.compile(r"^(a|acc)[_ .]|acc|lin_?acc")),
+    ("pos", re.compile(r"^(p|pos|position)[_ .]")),  # a bare x, y, z says nothing of the kind
+    ("quat", re.compile(r"^(q|quat|orientation)[_ .]|^q[wxyz]$")),
+    ("other", re.compile(r"temp|^mag(?!nitude)|baro|press|^seq$|header\.seq|count")),  # only names that say so
 ]
 _DEG_RATE = re.compile(r"deg|dps|°")
 _G_UNIT = re.compile(r"^\[?\s*m?g\s*\]?$")
@@ -29,6 +29,7 @@ _TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s"}
 
 def _split(name: str) -> tuple[str, str]:
     """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1')."""
+    name = name.strip().strip("\"'")
     m = re.match(r"^\s*#?\s*([^\[(]*?)\s*(?:[\[(]([^\])]*)[\])])?\s*$", name)
     return (m.group(1).lower(), (m.group(2) or "").strip().lower()) if m else (name.lower(), "")
 
@@ -76,11 +77,13 @@ def imu_header_problem(names: list[str]) -> str | None:
         problems.append(
             wrong + ". gyrodenoise reads t, w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2] by position: "
             "reorder the columns (gyrodenoise.data.imu_csv.read_imu_csv(path, columns=...) reads any order, and "
-            "asl_text writes the ASL layout)"
+            "asl_text writes the ASL layout), or, if the data are in that order already, correct the header line"
         )
     units = {classify(n)[0]: (n, _split(n)[1]) for n in reversed(names[1:7])}  # the first column of each kind
     if "gyro" in units and _DEG_RATE.search(units["gyro"][1]):
-        problems.append(f"'{units['gyro'][0]}' is in deg/s; gyrodenoise reads rad/s: convert the gyro columns")
+        problems.append(
+            f"'{units['gyro'][0]}' is in deg/s; gyrodenoise reads rad/s: multiply the gyro by pi/180 (0.0174533)"
+        )
     if "acc" in units and _G_UNIT.match(units["acc"][1]):
         problems.append(f"'{units['acc'][0]}' is in g; gyrodenoise reads m/s^2: multiply the accelerometer by 9.80665")
     return "; ".join(problems) + "." if problems else None
@@ -97,7 +100,7 @@ def groundtruth_header_problem(names: list[str]) -> str | None:
         hint = (
             "the quaternion is stored x, y, z, w: move its w column before x"
             if quats == ["x", "y", "z", "w"]
-            else "reorder the columns"
+            else "reorder the columns, or, if the data are in that order already, correct the header line"
         )
         problems.append(wrong + f". gyrodenoise reads t, p_x, p_y, p_z [m], q_w, q_x, q_y, q_z by position: {hint}")
     return "; ".join(problems) + "." if problems else None

@@ -114,15 +114,19 @@ def read_csv_table(
     stamps: list[int] = []
     rows: list[list[str]] = []
     line_numbers: list[int] = []
-    header: tuple[int, str] | None = None
+    comments: list[tuple[int, list[str]]] = []  # the comment lines before the data, split at commas
     for lineno, line in text_lines(path, expected):
         s = line.strip()
         if not s or s.startswith("#"):
-            header = (lineno, s) if s else header
+            if s and not rows:
+                comments.append((lineno, [f.strip() for f in s.lstrip("#").split(",")]))
             continue
-        if header is not None and check_header is not None and not rows:
-            check_header(path, header[0], [f.strip() for f in header[1].lstrip("#").split(",")])
         fields = [f.strip() for f in s.split(",")]
+        if not rows and check_header is not None:
+            # the header: the last comment line with as many fields as the data (not a note below it)
+            header = next((c for c in reversed(comments) if len(c[1]) == len(fields)), None)
+            if header is not None:
+                check_header(path, *header)
         if len(fields) < min_cols:
             raise DataFormatError(
                 f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least "
@@ -131,8 +135,10 @@ def read_csv_table(
         try:
             stamps.append(int(fields[0]))
         except ValueError:
+            named = not rows and any(c.isalpha() for c in s)  # a header line without its '#'
             raise DataFormatError(
                 f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number of nanoseconds."
+                + (" A header line must start with '#'." if named else "")
             ) from None
         rows.append(fields[1:min_cols])
         line_numbers.append(lineno)
