@@ -227,6 +227,7 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
 
     monkeypatch.setattr(workflow, "null_distribution", fake_null)
     monkeypatch.setattr(workflow, "select_effects", lambda *a, **k: "selection")
+    monkeypatch.setattr(workflow, "apply_transfer_check", lambda sel, holdout: None)
     cache: dict = {}
     fit = _contexts("a")
     workflow.decide(fit, _contexts("gh"), null_draws=5, null_cache=cache)
