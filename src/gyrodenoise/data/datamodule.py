@@ -27,7 +27,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
+from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, root_one_level_off, sequences_in
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -190,11 +190,11 @@ class ImuDataModule(L.LightningDataModule):
                 + root_level_hint(Path(self.root), missing[0]).replace("as the root", "as dataset.root").rstrip()
             )
         if missing:
-            inside = [d for d in (Path(self.root) / self.name, *Path(self.root).glob("*")) if (d / missing[0]).is_dir()]
-            if inside:  # a root one level too high (the folder that holds euroc/, not euroc/ itself)
+            below = root_one_level_off(Path(self.root), missing[0])
+            if below is not None:  # a root one level too high (the folder that holds euroc/, not euroc/ itself)
                 raise FileNotFoundError(
-                    f"{self.root}: sequence folder(s) not found: {', '.join(missing)}, but {inside[0]} holds "
-                    f"{missing[0]}: set dataset.root={inside[0]}."
+                    f"{self.root}: sequence folder(s) not found: {', '.join(missing)}, but {below} holds "
+                    f"{missing[0]}: set dataset.root={below}."
                 )
             only_test = set(missing) <= set(self.test_names)
             here = sequences_in(self.root)

@@ -151,11 +151,20 @@ def sequence_folder(root: str | Path, name: str) -> Path:
     return mav0
 
 
-def root_level_hint(root: Path, name: str) -> str:
-    """A root one level too deep (a sequence folder itself) or too shallow (a folder of datasets)."""
+def root_one_level_off(root: Path, name: str) -> Path | None:
+    """The root to give when `root` is one level off: its parent when it is a sequence folder itself (it holds
+    mav0), the folder below it that holds `name`/mav0 when it is a folder of datasets; None otherwise."""
     if (root / "mav0").is_dir():
-        return f"{root} is itself a sequence folder (it holds mav0): give its parent, {root.parent}, as the root. "
+        return root.parent
     below = sorted(p.parent.parent for p in root.glob(f"*/{name}/mav0") if p.is_dir())
-    if below:
-        return f"{name} is one level further down: give {below[0]} as the root. "
-    return ""
+    return below[0] if below else None
+
+
+def root_level_hint(root: Path, name: str) -> str:
+    """A sentence naming the root to give when `root` is one level off (`root_one_level_off`), or ''."""
+    fix = root_one_level_off(root, name)
+    if fix is None:
+        return ""
+    if (root / "mav0").is_dir():
+        return f"{root} is itself a sequence folder (it holds mav0): give its parent, {fix}, as the root. "
+    return f"{name} is one level further down: give {fix} as the root. "
