@@ -103,7 +103,8 @@ def read_csv_table(
 
     Returns (t_ns int64, values float64 with the `min_cols - 1` columns after the time, line numbers).
     Columns beyond `min_cols` are ignored (optional extras such as velocity and biases).
-    `check_header(path, line, names)` sees the comment line just before the first data line, split at commas.
+    `check_header(path, line, names)` sees the header: of the comment lines before the first data line, the last
+    with as many comma-separated fields as that data line (a note below the header is not it).
     """
     path = Path(path)
     if not path.is_file():

@@ -2,8 +2,8 @@
 by the disagreement.
 
 The regression's standard errors assume the residual's fitted noise model. On independent test data
-(`benchmarks/discrepancy_se_calibration.py`) they were right for smooth replayed flights but up to ~2 times too
-small for fast motion with a noisy sensor: the estimate then moves with the motion by more than the noise says.
+(`benchmarks/discrepancy_se_calibration.py`) they were 1.0-1.5 times too small on replayed flights and up to ~2
+times on fast motion with a noisy sensor: the estimate moves with the motion by more than the noise says.
 The held-out sequences see the same sensor under other motion, so refitting the selected model there gives a
 second estimate of each constant. Their difference against the two covariances gives a chi-square, and the Birge
 ratio R = sqrt(chi2 / dof); where R > 1 the standard errors are multiplied by R (never shrunk).
