@@ -66,7 +66,8 @@ def test_a_truth_about_other_axes_warns(seq):
 
     q = Rotation.from_matrix(seq.rot).as_quat()  # scalar last: a file of x, y, z, w read as w, x, y, z
     swapped = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
-    with pytest.warns(consistency.DataConsistencyWarning, match=r"turns about axes \d+ deg away .* quaternion order"):
+    said = r"(turns about axes \d+ deg away|mirror image) .* quaternion order"
+    with pytest.warns(consistency.DataConsistencyWarning, match=said):
         m = consistency.check(dataclasses.replace(seq, rot=swapped))
     assert m.axes_angle_deg > 30 and 0.5 < m.rate_ratio < 2  # the magnitude checks alone pass it
     tilted = (Rotation.from_matrix(seq.rot) * Rotation.from_euler("x", 20, degrees=True)).as_matrix()
@@ -141,3 +142,20 @@ def test_a_large_gyro_about_other_axes_is_not_called_deg_s(seq):
     assert "accelerometer" in said and "deg away" in said
     with pytest.raises(DataFormatError, match=r"looks like deg/s.*pi/180"):
         consistency.check(dataclasses.replace(seq, gyro=np.degrees(seq.gyro)))
+
+
+def test_a_flipped_or_swapped_gyro_axis_is_a_mirror(seq):
+    """A flipped axis is a reflection no rotation undoes; with little motion about that axis the best rotation
+    is only a few degrees off (TUM-VI room 1, y flipped: 7.8 deg), so the handedness is what tells."""
+    quiet_y = dataclasses.replace(seq, gyro=seq.gyro * [1.0, 0.15, 1.0], rot=seq.rot)  # little motion about y
+    for gyro in (seq.gyro * [1, -1, 1], seq.gyro[:, [1, 0, 2]], -seq.gyro):
+        with pytest.warns(consistency.DataConsistencyWarning, match="mirror image .* flipped in sign") as caught:
+            m = consistency.check(dataclasses.replace(seq, gyro=gyro))
+        assert m.mirrored and not any("deg away" in str(w.message) for w in caught)  # one message, not two
+    assert not consistency.measure(seq).mirrored and not consistency.measure(quiet_y).mirrored
+
+
+def test_a_gyro_far_smaller_than_the_truths_rate_warns(seq):
+    """A gyro 1000 times too small rarely exceeds the moving threshold; it follows the truth, so it is a scale."""
+    with pytest.warns(consistency.DataConsistencyWarning, match=r"the gyro is 0\.00(1|099\d*) times the rate"):
+        consistency.check(dataclasses.replace(seq, gyro=seq.gyro * 1e-3))

@@ -7,7 +7,9 @@ the cross-correlation of the two rate magnitudes away from zero lag). On EuRoC's
 rooms 1, 3, 5 the gyro/truth rate ratio (both over 50 ms) is 0.98-1.06 and the best lag 0.
 The rate vectors must also point the same way: the rotation that best maps the truth's body rate onto the
 gyro is 0.05-3.1 deg on those 14 recordings, and ~117 deg for a truth whose quaternion is stored x, y, z, w
-but read w, x, y, z (whose rate magnitudes, the checks above, stay plausible).
+but read w, x, y, z (whose rate magnitudes, the checks above, stay plausible). A gyro axis flipped in sign
+(or two swapped) is a mirror no rotation undoes: the best orthogonal map between the two is a reflection, on all
+14 recordings with any one axis flipped, and on none as they are.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from scipy.spatial.transform import Rotation
 from gyrodenoise.data.checks import GAP_FACTOR  # the corrector's gap: a step > 3 x the median period
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.paths import portable_path
 
 DEG_PER_RAD = 180.0 / np.pi
 RATIO_RANGE = (0.5, 2.0)  # gyro / truth rate magnitude outside it: a scale or unit problem
@@ -33,6 +36,9 @@ SEARCH_S = 60.0  # lags searched either way
 MOVING_RAD_S = 0.2  # samples whose truth rate exceeds it compare the magnitudes
 RATE_WINDOW_S = 0.05  # truth and gyro rates compared over this span
 SINGLE_AXIS_RATIO = 0.05  # the truth's rates span one axis when their 2nd singular value is below this x the 1st
+# the handedness of the gyro-truth map is read only when the motion spans all three axes: the 3rd singular value of
+# the cross-covariance at least this x the 1st (EuRoC and TUM-VI: 0.10-0.40; planar motion leaves it to noise)
+MIRROR_MIN_RATIO = 0.05
 
 
 class DataConsistencyWarning(UserWarning):
@@ -49,6 +55,10 @@ class Consistency:
     corr_at_zero: float
     # the rotation that best maps the truth's body rate onto the gyro (nan: too little motion)
     axes_angle_deg: float = np.nan
+    # the best linear map of the truth's rate onto the gyro is a mirror, not a rotation: a flipped axis, or a
+    # left-handed frame (a rotation cannot undo it, so one flipped axis with little motion about it can look
+    # only a few degrees off: TUM-VI room 1 with its y axis flipped, 7.8 deg)
+    mirrored: bool = False
 
 
 def measure(seq: Sequence) -> Consistency:
@@ -65,10 +75,6 @@ def measure(seq: Sequence) -> Consistency:
     truth_rate, gyro_rate = np.linalg.norm(truth_vec, axis=1), np.linalg.norm(gyro_vec, axis=1)
     bad_step = np.concatenate([[0], np.cumsum(dt > GAP_FACTOR * period)])
     ok = seq.gt_mask[k:] & seq.gt_mask[:-k] & (bad_step[k:] == bad_step[:-k])
-    # both moving: a static recording's noisy truth (0.2 deg per sample) exceeds the threshold over 50 ms alone
-    moving = ok & (truth_rate > MOVING_RAD_S) & (gyro_rate > MOVING_RAD_S)
-    ratio = float(np.median(gyro_rate[moving]) / np.median(truth_rate[moving])) if moving.sum() > 100 else np.nan
-    axes_deg = axes_angle_deg(gyro_vec[moving], truth_vec[moving]) if moving.sum() > 100 else np.nan
     a = np.where(ok, gyro_rate - gyro_rate[ok].mean(), 0.0) if ok.any() else np.zeros_like(gyro_rate)
     b = np.where(ok, truth_rate - truth_rate[ok].mean(), 0.0) if ok.any() else np.zeros_like(truth_rate)
     norm = float(np.linalg.norm(a) * np.linalg.norm(b)) or 1.0
@@ -76,14 +82,25 @@ def measure(seq: Sequence) -> Consistency:
     lags = np.arange(-len(b) + 1, len(a))
     window = np.abs(lags) * period <= SEARCH_S
     best = int(np.argmax(np.where(window, c, -np.inf)))
+    corr0 = float(c[len(b) - 1])
+    # both moving: a static recording's noisy truth (0.2 deg per sample) exceeds the threshold over 50 ms alone
+    moving = ok & (truth_rate > MOVING_RAD_S) & (gyro_rate > MOVING_RAD_S)
+    if moving.sum() <= 100 and corr0 >= MIN_LAG_CORR:
+        # the gyro follows the truth but rarely exceeds the threshold: far smaller than the truth's rate (a gyro
+        # in a unit 1000 times too large, or divided twice) is a scale to report, not too little motion
+        moving = ok & (truth_rate > MOVING_RAD_S)
+    enough = moving.sum() > 100
+    ratio = float(np.median(gyro_rate[moving]) / np.median(truth_rate[moving])) if enough else np.nan
+    axes_deg = axes_angle_deg(gyro_vec[moving], truth_vec[moving]) if enough else np.nan
     return Consistency(
         gaps=int((dt > GAP_FACTOR * period).sum()),
         longest_step_s=float(dt.max()),
         rate_ratio=ratio,
         best_lag_s=float(lags[best] * period),
         corr_at_best=float(c[best]),
-        corr_at_zero=float(c[len(b) - 1]),
+        corr_at_zero=corr0,
         axes_angle_deg=axes_deg,
+        mirrored=enough and is_mirror(gyro_vec[moving], truth_vec[moving]),
     )
 
 
@@ -99,12 +116,20 @@ def axes_angle_deg(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(u[:, 0] @ vt[0], -1.0, 1.0))))
 
 
+def is_mirror(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> bool:
+    """Is the orthogonal map that best takes the truth's rate vectors onto the gyro's a reflection (determinant
+    -1)? Judged only for motion about all three axes (MIRROR_MIN_RATIO); otherwise False."""
+    u, sv, vt = np.linalg.svd(gyro_vec.T @ truth_vec)
+    return bool(sv[2] >= MIRROR_MIN_RATIO * sv[0] and np.linalg.det(u @ vt) < 0)
+
+
 def check(seq: Sequence) -> Consistency:
     """Raise for a gyro in deg/s; warn (DataConsistencyWarning) for IMU gaps, a gyro/truth scale far from 1
     and a truth off the IMU's clock. Returns the measures."""
     m = measure(seq)
-    where = f"{seq.name} ({seq.meta.get('imu_file', 'IMU')}, truth {seq.meta.get('gt_file', '?')})"
-    same_axes = not m.axes_angle_deg > AXES_MAX_DEG  # nan (too little motion) counts as the same
+    files = [portable_path(f) if f else "?" for f in (seq.meta.get("imu_file"), seq.meta.get("gt_file"))]
+    where = f"{seq.name} ({files[0]}, truth {files[1]})"  # portable: the message is kept in reports
+    same_axes = not m.axes_angle_deg > AXES_MAX_DEG and not m.mirrored  # nan (too little motion) counts as the same
     if np.isfinite(m.rate_ratio) and 0.6 * DEG_PER_RAD <= m.rate_ratio <= 1.4 * DEG_PER_RAD and same_axes:
         raise DataFormatError(
             f"{where}: the gyro is {m.rate_ratio:.1f} times the rate of the ground truth's orientation, about the "
@@ -134,14 +159,23 @@ def check(seq: Sequence) -> Consistency:
             DataConsistencyWarning,
             stacklevel=2,
         )
-    if m.axes_angle_deg > AXES_MAX_DEG:
+    if m.mirrored or m.axes_angle_deg > AXES_MAX_DEG:
+        if m.mirrored:  # a reflection: no rotation undoes it, whatever angle the best rotation reaches
+            what = (
+                "the gyro's axes are a mirror image of the ground truth's body axes (no rotation maps one onto the "
+                "other): a gyro axis is flipped in sign (or all three are), or two axes are swapped; or"
+            )
+        else:
+            what = (
+                f"the gyro turns about axes {m.axes_angle_deg:.0f} deg away from the ground truth's body axes (the "
+                f"rotation that best maps the truth's body rate onto the gyro; under {AXES_MAX_DEG:g} deg expected):"
+            )
         warnings.warn(
-            f"{where}: the gyro turns about axes {m.axes_angle_deg:.0f} deg away from the ground truth's body axes "
-            f"(the rotation that best maps the truth's body rate onto the gyro; under {AXES_MAX_DEG:g} deg expected): "
-            "the truth's quaternion order may be wrong (the ASL files hold w, x, y, z; x, y, z, w read so gives "
-            "~100 deg or more), it may be the pose of another body than the IMU, or world-in-body instead of "
-            "body-in-world; or a gyro axis is flipped or permuted, or the gyro columns are the accelerometer's. "
-            "Scores against it mean nothing: fix the file or rotate the truth into the IMU frame.",
+            f"{where}: {what} the truth's quaternion order may be wrong (the ASL files hold w, x, y, z; x, y, z, w "
+            "read so gives ~100 deg or more), it may be the pose of another body than the IMU, or world-in-body "
+            f"instead of body-in-world; or{'' if m.mirrored else ' a gyro axis is flipped or permuted, or'} the gyro "
+            "columns are the accelerometer's. Scores against it mean nothing: fix the file or rotate the truth into "
+            "the IMU frame.",
             DataConsistencyWarning,
             stacklevel=2,
         )
