@@ -218,6 +218,14 @@ def test_wrong_time_unit(tmp_path, model_file, capsys):
     assert run([f, "-m", model_file, "-o", tmp_path, "--time-unit", "us"], capsys)[0] == 0
 
 
+def test_stamps_in_bursts_are_not_called_a_time_unit(tmp_path, model_file, capsys):
+    """A driver that stamps each FIFO read (10 samples 1 µs apart every 50 ms): not a unit to change."""
+    k = np.arange(len(synth()[0]))
+    f = bad_file(tmp_path, t_ns=T0 + (k // 10) * 50_000_000 + (k % 10) * 1_000)
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path], str(f), "in bursts", "its own time")
+    assert "--time-unit" not in err
+
+
 def test_rate_differs_from_model_warns_then_resamples(tmp_path, model_file, capsys):
     t_ns, gyro, acc = synth(n=1500, rate=100.0)
     f = write_asl(tmp_path / "r100.csv", t_ns, gyro, acc)

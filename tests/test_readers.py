@@ -146,6 +146,14 @@ def test_real_euroc_and_tumvi_sequences(euroc_root, tumvi_root):
         ('#"t","a_x","a_y","a_z","w_x","w_y","w_z"\n', r"column 2 is '\"a_x\"' where gyro x"),  # quoted names
         ("#t,a_x,a_y,a_z,w_x,w_y,w_z\n# end of header\n", r"imu.csv:1: column 2 is 'a_x'"),  # a note below it
         ("#timestamp [us],w_x,w_y,w_z,a_x,a_y,a_z\n", r"timestamps in µs.*integer nanoseconds"),
+        # units written into the names, and headers split by tabs or semicolons
+        (
+            "#time_us,gyro_x_dps,gyro_y_dps,gyro_z_dps,acc_x,acc_y,acc_z\n",
+            r"in µs \('time_us'\).*'gyro_x_dps' is in deg/s",
+        ),
+        ("#t\tgyro_x\tgyro_y\tgyro_z\tacc_x_g\tacc_y_g\tacc_z_g\n", r"'acc_x_g' is in g;.* by 9\.80665"),
+        ("#t;a_x;a_y;a_z;w_x;w_y;w_z\n", r"column 2 is 'a_x' where gyro x"),
+        ("#t,w_x,w_y,w_z,a_x [mg],a_y [mg],a_z [mg]\n", r"is in mg;.* by 0\.00980665"),
     ],
 )
 def test_an_imu_header_that_contradicts_the_column_order_or_units_is_refused(tmp_path, header, said):
@@ -164,6 +172,8 @@ def test_imu_headers_that_agree_or_say_nothing_are_read(tmp_path):
         "#t,AngularVelocity_1,AngularVelocity_2,AngularVelocity_3,Acceleration_1,Acceleration_2,Acceleration_3\n",
         "#t,p_rate,q_rate,r_rate,ax,ay,az\n",
         "#t,rotationRate.x,rotationRate.y,rotationRate.z,userAcceleration.x,userAcceleration.y,userAcceleration.z\n",
+        "#timestamp_ns,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,acc_x_mps2,acc_y_mps2,acc_z_mps2\n",
+        "#t\tw_RS_S_x\tw_RS_S_y\tw_RS_S_z\ta_RS_S_x\ta_RS_S_y\ta_RS_S_z\n",
         IMU_HEADER + "# columns: timestamp, gyro x y z, accel x y z\n",  # a note below the header is not the header
     ]
     for header in [*agree, "#c1,c2,c3,c4,c5,c6,c7\n", "", "# a comment\n"]:
@@ -176,10 +186,21 @@ def test_a_truth_header_with_the_quaternion_w_last_is_refused(tmp_path):
         read_groundtruth(write(tmp_path / "gt.csv", header, gt_rows()))
 
 
-@pytest.mark.parametrize(("dt", "unit"), [(5_000, "µs"), (5, "ms")])
+@pytest.mark.parametrize(("dt", "unit"), [(5_000, "µs"), (5, "ms"), (20_000, "µs")])  # 200 Hz, 200 Hz, 50 Hz
 def test_imu_stamps_that_are_not_ns_are_refused(tmp_path, dt, unit):
-    with pytest.raises(DataFormatError, match=f"rate of 200000*0 Hz.*look like {unit}"):
+    with pytest.raises(DataFormatError, match=f"rate of {10**9 // dt} Hz.*look like {unit}"):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(dt=dt)))
+
+
+def test_imu_stamps_in_bursts_are_not_called_another_unit(tmp_path):
+    """A driver that stamps each FIFO read: 10 samples 1 µs apart every 50 ms (200 Hz on average)."""
+    t = [1_000_000_000 + (k // 10) * 50_000_000 + (k % 10) * 1_000 for k in range(200)]
+    rows = [f"{s},0.01,0.02,0.03,0.1,0.2,9.8" for s in t]
+    with pytest.raises(
+        DataFormatError, match=r"in bursts: the median step is 1000 ns .* 2\d\d\.?\d* Hz on average"
+    ) as e:
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+    assert "µs" not in str(e.value)
 
 
 def test_a_header_without_its_hash_is_named(tmp_path):

@@ -27,11 +27,21 @@ _SHORT_KIND = {"g": "gyro", "w": "gyro", "a": "acc", "p": "pos", "q": "quat"}
 _TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s"}
 
 
+# a unit written into the name ('gyro_x_dps', 'acc_x_g', 'time_us'); bare 's' and 'm' are not taken (w_RS_S)
+_UNIT_SUFFIX = re.compile(
+    r"^(.+?)[_ ]((?:deg|rad)_?(?:per_?)?s(?:ec)?|dps|rps|mps2|m_?s_?2|m_?per_?s_?2|m?g|[nuµm]s)$", re.IGNORECASE
+)
+
+
 def _split(name: str) -> tuple[str, str]:
-    """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1')."""
+    """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1'); 'gyro_x_dps' -> ('gyro_x', 'dps')."""
     name = name.strip().strip("\"'")
     m = re.match(r"^\s*#?\s*([^\[(]*?)\s*(?:[\[(]([^\])]*)[\])])?\s*$", name)
-    return (m.group(1).lower(), (m.group(2) or "").strip().lower()) if m else (name.lower(), "")
+    if not m:
+        return name.lower(), ""
+    base, unit = m.group(1).lower(), (m.group(2) or "").strip().lower()
+    suffix = None if unit else _UNIT_SUFFIX.match(base)
+    return (suffix.group(1), suffix.group(2)) if suffix else (base, unit)
 
 
 def classify(name: str) -> tuple[str | None, str | None]:
@@ -85,7 +95,10 @@ def imu_header_problem(names: list[str]) -> str | None:
             f"'{units['gyro'][0]}' is in deg/s; gyrodenoise reads rad/s: multiply the gyro by pi/180 (0.0174533)"
         )
     if "acc" in units and _G_UNIT.match(units["acc"][1]):
-        problems.append(f"'{units['acc'][0]}' is in g; gyrodenoise reads m/s^2: multiply the accelerometer by 9.80665")
+        unit, factor = ("mg", "0.00980665") if "mg" in units["acc"][1] else ("g", "9.80665")
+        problems.append(
+            f"'{units['acc'][0]}' is in {unit}; gyrodenoise reads m/s^2: multiply the accelerometer by {factor}"
+        )
     return "; ".join(problems) + "." if problems else None
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording
-from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ, DataFormatError, burst_advice, burst_rate_hz
 
 GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well below at the 99th percentile
 # beyond these no MEMS IMU measures (gyro full scales stop at ~4000 deg/s, accelerometers at a few hundred g):
@@ -23,7 +23,6 @@ GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well 
 GYRO_ABS_MAX = 100.0  # rad/s (5730 deg/s)
 ACC_ABS_MAX = 5000.0  # m/s^2 (~510 g)
 SATURATED_RUNS = 2  # an axis at its largest magnitude in this many separate runs looks clipped
-RATE_RANGE_HZ = (5.0, 20_000.0)  # outside this, the time unit is wrong
 GAP_FACTOR = 3.0  # a step longer than this x the median period is a gap
 RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
 G_TOL_REST, G_TOL_MOVING = 0.10, 0.30  # relative |acc| - g tolerance with / without a rest period
@@ -88,10 +87,13 @@ def check_time_unit(rec: ImuRecording, report: CheckReport) -> None:
     period_ns = float(np.median(np.diff(rec.t_ns)))
     rate = 1e9 / period_ns
     report.rate_hz = rate
-    lo, hi = RATE_RANGE_HZ
+    lo, hi = IMU_RATE_RANGE_HZ
     if lo <= rate <= hi:
         return
     given = TIME_UNITS[rec.units["time"]]
+    burst = burst_rate_hz(rec.t_ns)
+    if burst is not None and lo <= burst <= hi:  # not a unit: the stamps of reads, not of samples
+        raise SanityCheckError(f"{rec.path}: {rec.describe('t')}: {burst_advice(period_ns, burst)}.")
     fits = [u for u, ns in TIME_UNITS.items() if lo <= 1e9 / (period_ns / given * ns) <= hi]
     hint = f"pass --time-unit {fits[0]}" if fits else "check --time-unit and the time column (--columns)"
     raise SanityCheckError(

@@ -6,6 +6,7 @@ and what to do. Nothing is dropped silently.
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -120,7 +121,8 @@ def read_csv_table(
         s = line.strip()
         if not s or s.startswith("#"):
             if s and not rows:
-                comments.append((lineno, [f.strip() for f in s.lstrip("#").split(",")]))
+                text = s.lstrip("#")  # a header written with tabs or semicolons is still the header
+                comments.append((lineno, [f.strip() for f in re.split("," if "," in text else r"[;\t]", text)]))
             continue
         fields = [f.strip() for f in s.split(",")]
         if not rows and check_header is not None:
@@ -200,18 +202,41 @@ def _header_check(problem: Callable[[list[str]], str | None]) -> Callable[[Path,
     return check
 
 
-MAX_IMU_RATE_HZ = 50_000.0  # above it the stamps are not ns (µs stamps at 200 Hz read as 200 kHz)
+# an IMU sampling outside this has its stamps in another unit (µs stamps at 200 Hz read as ns: 200 kHz); shared
+# by the ASL reader and the corrector's checks (`checks.check_time_unit`)
+IMU_RATE_RANGE_HZ = (5.0, 20_000.0)
+BURST_FACTOR = 3.0  # a mean step this many times the median: stamps in bursts
+
+
+def burst_rate_hz(t_ns: np.ndarray) -> float | None:
+    """The mean sample rate (Hz) when the stamps come in bursts (the mean step over BURST_FACTOR x the median: a
+    driver that stamps each FIFO read, not each sample, leaves a few steps of ~0 and one long one); else None."""
+    d = np.diff(t_ns)
+    mean = float(t_ns[-1] - t_ns[0]) / len(d) if len(d) else 0.0
+    return 1e9 / mean if mean > BURST_FACTOR * float(np.median(d)) else None
+
+
+def burst_advice(median_step_ns: float, mean_rate_hz: float) -> str:
+    return (
+        f"the stamps come in bursts: the median step is {median_step_ns:g} ns but the samples arrive at "
+        f"{mean_rate_hz:.4g} Hz on average, as when a driver stamps each FIFO read rather than each sample. "
+        "Give each sample its own time (e.g. spread each burst's samples evenly over the time since the one before)"
+    )
 
 
 def _check_imu_period(path: Path, t_ns: np.ndarray) -> None:
     if len(t_ns) < 2:
         return
     step = float(np.median(np.diff(t_ns)))
-    if step < 1e9 / MAX_IMU_RATE_HZ:
-        guess = next((u for u, f in (("µs", 1e3), ("ms", 1e6)) if 1e9 / MAX_IMU_RATE_HZ <= step * f <= 1e9), None)
+    lo, hi = IMU_RATE_RANGE_HZ
+    if step < 1e9 / hi:
+        burst = burst_rate_hz(t_ns)
+        if burst is not None and lo <= burst <= hi:
+            raise DataFormatError(f"{path}: {burst_advice(step, burst)}.")
+        guess = next((u for u, f in (("µs", 1e3), ("ms", 1e6)) if lo <= 1e9 / (step * f) <= hi), None)
         raise DataFormatError(
             f"{path}: the median step between IMU timestamps is {step:g}, which in ns is a rate of {1e9 / step:.0f} "
-            "Hz; the ASL format's stamps are integer nanoseconds"
+            f"Hz (an IMU samples at {lo:g} Hz - {hi / 1000:g} kHz); the ASL format's stamps are integer nanoseconds"
             + (f" and these look like {guess}: convert them (and the ground truth's) to ns." if guess else ".")
         )
 
