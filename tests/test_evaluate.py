@@ -263,7 +263,8 @@ def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):
     monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "out"
     run_evaluate_asl(root, model, model, out)
-    assert "turns about axes" in (out / "table.md").read_text()
+    table = (out / "table.md").read_text()
+    assert "turns about axes" in table or "mirror image" in table  # w last read as w first: often a reflection
     results = json.loads((out / "results.json").read_text())
     assert any("quaternion order" in w for w in results["warnings"])
     assert results["wall_s"] > 0  # the run's own wall time, for the reports that quote it
