@@ -126,6 +126,21 @@ def test_cache_rebuilds_when_a_file_changes(tmp_path):
     assert len(list(cache.glob("*.npz"))) == 2 and c.pos[0, 0] == 5
 
 
+def test_a_cached_sequence_names_the_files_it_was_loaded_from(tmp_path):
+    """The cache is keyed by content: the same files under another root hit it, and must be named by that root."""
+    import shutil
+
+    mav0 = tmp_path / "a" / "seq" / "mav0"
+    write(mav0 / "imu0" / "data.csv", IMU_HEADER, imu_rows())
+    write(mav0 / "state_groundtruth_estimate0" / "data.csv", GT_HEADER, gt_rows())
+    load_sequence(tmp_path / "a", "seq", cache_dir=tmp_path / "cache")
+    shutil.move(tmp_path / "a", tmp_path / "b")
+    b = load_sequence(tmp_path / "b", "seq", cache_dir=tmp_path / "cache")
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 1  # a hit
+    assert b.meta["imu_file"] == str(tmp_path / "b" / "seq" / "mav0" / "imu0" / "data.csv")
+    assert b.meta["gt_file"].startswith(str(tmp_path / "b"))
+
+
 def test_real_euroc_and_tumvi_sequences(euroc_root, tumvi_root):
     seq = load_sequence(euroc_root, "V1_01_easy", "state_groundtruth_estimate0/data_recomputed_openvins.csv")
     assert abs(seq.rate_hz - 200.0) < 0.1 and seq.gt_mask.all()

@@ -76,7 +76,9 @@ def load_sequence(
         if cache_path.is_file():
             try:  # only the reading: an error of the sequence itself is not a damaged file
                 with np.load(cache_path, allow_pickle=False) as z:
-                    meta = json.loads(str(z["meta"]))
+                    # the files this call read, not those of the run that filled the cache (same content,
+                    # perhaps another root: reports and data-check messages name them)
+                    meta = {**json.loads(str(z["meta"])), "imu_file": str(imu_path), "gt_file": str(gt_path)}
                     seq = Sequence(name=name, t0_ns=int(z["t0_ns"]), meta=meta, **{k: z[k] for k in _ARRAYS})
             except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # damaged on disk: rebuild
                 warnings.warn(f"{cache_path}: unreadable cache file ({e}); rebuilt from {mav0}", stacklevel=2)
