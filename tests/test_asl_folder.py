@@ -191,3 +191,23 @@ def test_fit_calibrated_alone(asl_root, tmp_path):
     fit(compose_config("fit_calibrated", [*overrides, "model.g_sensitivity=true"]))
     model_g, _ = load_model(tmp_path / "model.pt")
     assert model_g.G is not None and model.G is None
+
+
+def test_augmentation_noise_follows_the_data_rate_not_a_wrong_nominal_one(asl_root):
+    """The per-sample std of a noise density depends on the rate: a sensor.rate_hz of 400 for 200-Hz data warns
+    and uses the data's rate; one within 5 % of it is kept (so runs on EuRoC's 200.0026 Hz reproduce)."""
+    import math
+
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    def gyro_std(rate_hz: float) -> float:
+        sensor = {"rate_hz": rate_hz, "gyro_noise_density": 1e-4, "acc_noise_density": 1e-3}
+        dm = ImuDataModule(name="my_imu", root=str(asl_root), train_seqs=["walk_1"], test_seqs=[], window=256,
+                           sensor=sensor, augment={"noise_scale": 0.5})  # fmt: skip
+        dm.setup("fit")
+        dm.train_dataloader()
+        return dm.augment.gyro_noise_std
+
+    with pytest.warns(UserWarning, match=r"sensor.rate_hz=400, but the training data sample at 200\.0 Hz"):
+        assert gyro_std(400.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(200.0), rel=1e-6)
+    assert gyro_std(205.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(205.0))  # within 5 %: the nominal rate

@@ -15,6 +15,7 @@ so that both protocols are measured on the same run.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -56,6 +57,9 @@ def sequence_item(seq: Sequence, step: int, block: int) -> dict:
         "t": torch.from_numpy(s.t),
         "name": s.name,
     }
+
+
+NOMINAL_RATE_TOL = 0.05  # sensor.rate_hz this close to the measured rate is the same rate
 
 
 class RandomCrops(Dataset):
@@ -148,7 +152,9 @@ class ImuDataModule(L.LightningDataModule):
         if any(j & (j - 1) for j in increments) or self.block % self.step:
             raise ValueError(f"increments must be powers of two, got {list(increments)}")
         self.sensor = dict(sensor or {})
-        self.augment = self._augment_config(dict(augment or {}))
+        self._augment_spec = dict(augment or {})
+        # checked now (a wrong key fails before any data is read); rebuilt at the data's measured rate for training
+        self.augment = self._augment_config(self.sensor.get("rate_hz", 200.0))
         self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
         self.train_part: list[Sequence] = []
         self.val_part: list[Sequence] = []
@@ -156,13 +162,14 @@ class ImuDataModule(L.LightningDataModule):
         self.part_origin: dict[str, tuple[str, float]] = {}  # validation part name -> (sequence, start in s)
         self.test_part: list[Sequence] = []
 
-    def _augment_config(self, aug: dict) -> AugmentConfig:
-        """Noise std defaults to `noise_scale` (0.5, the paper) x the sensor's per-sample noise."""
+    def _augment_config(self, rate_hz: float) -> AugmentConfig:
+        """Noise std defaults to `noise_scale` (0.5, the paper) x the sensor's per-sample noise at `rate_hz`."""
+        aug = dict(self._augment_spec)
         scale = aug.pop("noise_scale", 0.5)
         for kind in ("gyro", "acc"):
             if aug.get(f"{kind}_noise_std") is None:
                 density = self.sensor.get(f"{kind}_noise_density", 0.0)
-                aug[f"{kind}_noise_std"] = noise_std_from_density(density, self.sensor.get("rate_hz", 200.0), scale)
+                aug[f"{kind}_noise_std"] = noise_std_from_density(density, rate_hz, scale)
         return AugmentConfig(**aug)
 
     def check_sequences(
@@ -273,6 +280,17 @@ class ImuDataModule(L.LightningDataModule):
         return float(np.median([s.rate_hz for s in seqs]))
 
     def train_dataloader(self) -> DataLoader:
+        # the per-sample noise of a density depends on the rate: a nominal sensor.rate_hz far from the data's is not
+        # used (within 5 % it is kept, so that runs reproduce: EuRoC measures 200.0026 Hz, TUM-VI 199.36)
+        nominal, measured = self.sensor.get("rate_hz"), self.rate_hz
+        if nominal is None or abs(measured / nominal - 1.0) > NOMINAL_RATE_TOL:
+            if nominal is not None:
+                warnings.warn(
+                    f"dataset.sensor.rate_hz={nominal:g}, but the training data sample at {measured:.1f} Hz: the "
+                    f"augmentation noise uses {measured:.1f} Hz. Set dataset.sensor.rate_hz to your IMU's rate.",
+                    stacklevel=2,
+                )
+            self.augment = self._augment_config(measured)
         ds = RandomCrops(self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment)
         return DataLoader(ds, batch_size=len(self.train_part), shuffle=False, num_workers=0)
 
