@@ -4,6 +4,7 @@ not import the detector (`discrepancy`) that builds on it."""
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -78,3 +79,15 @@ def test_simulator_does_not_import_the_detector():
     code = "import sys, gyrodenoise.sim; print(any(m.startswith('gyrodenoise.discrepancy') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+def test_importing_the_package_leaves_the_matplotlib_backend_alone():
+    """A notebook's inline backend or a user's MPLBACKEND is theirs: the plotting modules build Figure objects
+    outside pyplot instead of selecting Agg at import."""
+    code = (
+        "import matplotlib, gyrodenoise.evaluate, gyrodenoise.discrepancy.report, gyrodenoise.ablation_report; "
+        "print(matplotlib.get_backend())"
+    )
+    env = {**os.environ, "MPLBACKEND": "svg"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.strip() == "svg", out

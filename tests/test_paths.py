@@ -24,3 +24,25 @@ def test_recorded_command_is_quoted_where_a_shell_needs_it():
     cmd = invoked_command("train", argv)
     assert cmd == "python -m gyrodenoise.train 'dataset.train_seqs=[a,b]' 'dataset.root=my data' seed=1 -o out/dir"
     assert shlex.split(cmd)[3:] == argv[1:]  # a shell gives the program the same arguments back
+
+
+def test_json_outputs_are_strict_json(tmp_path):
+    """NaN and inf (a Spearman of constant data, a ratio over zero) are written as null: JSON has no NaN token,
+    and jq or a browser refuse a file with one."""
+    import json
+
+    import numpy as np
+    import pytest
+    import torch
+
+    from gyrodenoise.atomic import write_json
+
+    path = write_json(
+        tmp_path / "r.json",
+        {"a": float("nan"), "b": np.float32(np.inf), "c": np.arange(2), "d": torch.tensor(1.5), "e": (1, "x")},
+    )
+    text = path.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(c)) == {
+        "a": None, "b": None, "c": [0, 1], "d": 1.5, "e": [1, "x"],
+    }  # fmt: skip

@@ -114,10 +114,7 @@ def mean_curve(setting: Setting) -> tuple[list[int], list[float]]:
 
 
 def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> bytes:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gyrodenoise.plots import subplots
 
     labels = [
         ", ".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
@@ -126,7 +123,7 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     rules = sorted({str(r.summary.get("selection", "best_val")) for s in settings for r in s.runs})
     kept = {"last": "final weights", "best_val": "best validation checkpoint"}
     kept_by = " / ".join(kept.get(rule, rule) for rule in rules)
-    fig, axes = plt.subplots(1, 3, figsize=(max(11.0, 1.2 * len(settings) + 7), 4.2))
+    fig, axes = subplots(1, 3, figsize=(max(11.0, 1.2 * len(settings) + 7), 4.2))
     for ax, split in zip(axes[:2], ("val", "test"), strict=True):
         for i, s in enumerate(settings):
             ys = [r.metric(split) for r in s.runs]
@@ -138,7 +135,9 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
         ax.set_xticks(range(len(settings)))
         ax.set_xticklabels(["\n".join(lb.split(", ")) for lb in labels], fontsize=7)
         if max(len(lb) for lb in labels) > 12 * len(keys) or len(settings) > 5:  # long labels: slant them
-            plt.setp(ax.get_xticklabels(), rotation=30, ha="right", rotation_mode="anchor")
+            ax.tick_params(axis="x", labelrotation=30)
+            for label in ax.get_xticklabels():
+                label.set(ha="right", rotation_mode="anchor")
         ax.grid(axis="y", alpha=0.3)
     ax = axes[2]
     for i, (s, label) in enumerate(zip(settings, labels, strict=True)):
@@ -158,7 +157,6 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
-    plt.close(fig)
     return buf.getvalue()
 
 

@@ -361,15 +361,12 @@ def csv_text(a: Analysis) -> str:
 def plot_png(a: Analysis) -> bytes:
     """One panel per non-reference arm: each seed a line from the reference's AOE to the arm's, test on
     the left and validation on the right of the panel; the mean of the pairs in black."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gyrodenoise.plots import subplots
 
     arms = a.arms[1:] or a.arms  # a reference alone still gets its points drawn
     ncol = min(4, len(arms))
     nrow = math.ceil(len(arms) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 3.3 * nrow + 0.6), sharey=True, squeeze=False)
+    fig, axes = subplots(nrow, ncol, figsize=(3.4 * ncol, 3.3 * nrow + 0.6), sharey=True, squeeze=False)
     seeds = seeds_of(a)
     colors = {s: f"C{i % 10}" for i, s in enumerate(seeds)}
     ref = a.reference
@@ -410,7 +407,6 @@ def plot_png(a: Analysis) -> bytes:
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
     return buf.getvalue()
 
 
@@ -514,21 +510,6 @@ of seeds it is narrower than the t-interval, so the verdict uses the t-interval)
 worse), *contradicted* when an arm is resolved against it, else *not resolved at this sample size*
 (rules and the expected outcome of each arm: `CLAIMS` in `src/gyrodenoise/ablation_stats.py`). The
 headline is the test AOE; the validation AOE is judged the same way."""
-
-
-def collect_paired(
-    dirs: Sequence[Path],
-    out: Path,
-    reference: dict[str, str],
-    keys: Sequence[str] | None = None,
-    claim_name: str | None = None,
-    title: str | None = None,
-) -> Analysis:
-    """Analyse the runs under `dirs` and write PREFIX.md, PREFIX.csv and PREFIX.png atomically."""
-    runs, _ = find_runs(dirs)
-    analysis = analyse(runs, reference, keys, claim_name, title)
-    write_outputs(analysis, out, sources=dirs)
-    return analysis
 
 
 def write_outputs(a: Analysis, out: Path, sources: Sequence[Path] = ()) -> None:

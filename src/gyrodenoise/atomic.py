@@ -6,6 +6,7 @@ An interrupted run therefore never leaves a half-written file that looks whole.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
@@ -47,5 +48,20 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
     return Path(path)
 
 
+def jsonable(x: object) -> object:
+    """`x` with numpy and torch numbers as Python numbers and NaN / inf as None (null): JSON has no NaN, and
+    tools other than Python's json (jq, JavaScript) refuse the `NaN` token."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [jsonable(v) for v in x]
+    if hasattr(x, "tolist") and not isinstance(x, str):  # numpy arrays and scalars, torch tensors
+        return jsonable(x.tolist())
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    return x
+
+
 def write_json(path: str | Path, data: dict) -> Path:
-    return write_text(path, json.dumps(data, indent=2, default=float) + "\n")
+    """`data` as strict JSON (NaN / inf written as null), atomically."""
+    return write_text(path, json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")

@@ -1,21 +1,29 @@
-"""Figures shared by TensorBoard logging and the evaluation report (matplotlib, Agg backend)."""
+"""Figures shared by TensorBoard logging and the evaluation report (matplotlib).
+
+Figures are built as `matplotlib.figure.Figure` objects, outside pyplot: importing the package chooses no backend
+(a notebook or an `MPLBACKEND` keeps its own) and no figure is left open in pyplot's registry."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import matplotlib.ticker
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from gyrodenoise.atomic import atomic_path  # noqa: E402
-from gyrodenoise.so3 import rpy_of  # noqa: E402
-from gyrodenoise.uncertainty import CalibrationResult  # noqa: E402
+from gyrodenoise.atomic import atomic_path
+from gyrodenoise.so3 import rpy_of
+from gyrodenoise.uncertainty import CalibrationResult
 
 AXES = ("roll", "pitch", "yaw")
+
+
+def subplots(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (6.4, 4.8), **kwargs) -> tuple[Figure, Any]:
+    """`pyplot.subplots` without pyplot: a Figure and its axes (`Figure.subplots` keywords: sharex, squeeze, ...)."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
 def _shade_gaps(axs, t: np.ndarray, gt_mask: np.ndarray | None) -> None:
@@ -34,10 +42,10 @@ def orientation_figure(
     estimates: dict[str, np.ndarray],
     title: str = "",
     gt_mask: np.ndarray | None = None,
-):
+) -> Figure:
     """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6); `gt_mask` False: no ground
     truth there (shaded)."""
-    fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    fig, axs = subplots(3, 1, figsize=(9, 7), sharex=True)
     _shade_gaps(axs, t, gt_mask)
     rpy_gt = rpy_of(R_gt)
     gt = np.unwrap(rpy_gt, axis=0)
@@ -64,10 +72,10 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 def error_figure(
     t: np.ndarray, errors: dict[str, tuple[np.ndarray, np.ndarray]], title: str = "", gt_mask: np.ndarray | None = None
-):
+) -> Figure:
     """3D and yaw orientation error (deg) over time for each method (Fig. 7); `gt_mask` as orientation_figure:
     no error is drawn where it is False (against interpolated ground truth it would not be an error)."""
-    fig, axs = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    fig, axs = subplots(2, 1, figsize=(9, 5.5), sharex=True)
     _shade_gaps(axs, t, gt_mask)
     for name, (e3d, eyaw) in errors.items():
         if gt_mask is not None:
@@ -86,10 +94,10 @@ def error_figure(
     return fig
 
 
-def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = "", spread: np.ndarray | None = None):
+def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = "", spread: np.ndarray | None = None) -> Figure:
     """Gyro correction w_hat - w_imu per axis (deg/s) over time (Fig. 8); with `spread` (N, 3) rad/s,
     an ensemble's per-sample std, a +-2 sigma band around each axis."""
-    fig, ax = plt.subplots(figsize=(9, 3.5))
+    fig, ax = subplots(figsize=(9, 3.5))
     for k, lab in enumerate("xyz"):
         (line,) = ax.plot(t, np.degrees(w_tilde[:, k]), lw=0.8, label=f"$\\tilde\\omega_{lab}$")
         if spread is not None:
@@ -106,10 +114,10 @@ def correction_figure(t: np.ndarray, w_tilde: np.ndarray, title: str = "", sprea
     return fig
 
 
-def calibration_figure(result: CalibrationResult, title: str = ""):
+def calibration_figure(result: CalibrationResult, title: str = "") -> Figure:
     """Predicted vs actual increment error per window (log-log scatter) with the reliability bins
     (RMS actual vs RMS predicted) and the line of a calibrated spread."""
-    fig, ax = plt.subplots(figsize=(5.5, 5))
+    fig, ax = subplots(figsize=(5.5, 5))
     pred, act = np.degrees(result.predicted), np.degrees(result.actual)
     ax.scatter(pred, act, s=4, alpha=0.3, color="0.4", label=f"{len(pred)} windows of {result.window_s:g} s")
     rows = result.table
@@ -139,14 +147,14 @@ def calibration_figure(result: CalibrationResult, title: str = ""):
     return fig
 
 
-def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], title: str = ""):
+def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], title: str = "") -> Figure:
     """Box plots of ROE (3D and yaw) per travelled distance and method (Fig. 5); boxes: quartiles, whiskers:
     1.5 x the interquartile range, outliers not drawn (the figure says so)."""
     dists = sorted(roe)
     methods = list(next(iter(roe.values())).keys()) if roe else []
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axs = subplots(1, 2, figsize=(11, 4))
     width = 0.8 / max(len(methods), 1)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for a, ax in enumerate(axs):
         for m, name in enumerate(methods):
             data = [np.degrees(roe[d][name][a]) for d in dists]
@@ -175,10 +183,7 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
     return fig
 
 
-def save(fig, path, dpi: int = 110) -> None:
-    """Write the figure atomically (format from the file suffix) and close it."""
-    try:
-        with atomic_path(path, Path(path).suffix) as tmp:
-            fig.savefig(tmp, dpi=dpi)
-    finally:
-        plt.close(fig)
+def save(fig: Figure, path: str | Path, dpi: int = 110) -> None:
+    """Write the figure atomically (format from the file suffix)."""
+    with atomic_path(path, Path(path).suffix) as tmp:
+        fig.savefig(tmp, dpi=dpi)

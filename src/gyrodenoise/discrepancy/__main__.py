@@ -18,13 +18,14 @@ import time
 import warnings
 from pathlib import Path
 
+from gyrodenoise.atomic import write_json
 from gyrodenoise.data.consistency import DataConsistencyWarning
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
-from gyrodenoise.discrepancy.report import write_json, write_report
+from gyrodenoise.discrepancy.report import write_report
 from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule

@@ -2,40 +2,18 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from gyrodenoise.atomic import write_text  # noqa: E402
-from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG  # noqa: E402
-from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO, TRUTH_FREE  # noqa: E402
-from gyrodenoise.discrepancy.workflow import NO_EFFECT  # noqa: E402
-from gyrodenoise.plots import save as save_figure  # noqa: E402
+from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG
+from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO, TRUTH_FREE
+from gyrodenoise.discrepancy.workflow import NO_EFFECT
+from gyrodenoise.plots import save as save_figure
+from gyrodenoise.plots import subplots
 
 AXES = "xyz"
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.floating | float):
-        return None if not np.isfinite(x) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
-
-
-def write_json(path: Path, data: dict) -> None:
-    write_text(path, json.dumps(_jsonable(data), indent=2) + "\n")
 
 
 def _fmt(v) -> str:
@@ -626,7 +604,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     f_max = max(bands) if bands else None
     al = arrays["allan"]
     held_out = ", ".join(report.get("holdout_sequences", []))
-    fig, axs = plt.subplots(1, 3, figsize=(13, 4.2), sharey=True)
+    fig, axs = subplots(1, 3, figsize=(13, 4.2), sharey=True)
     for i, ax in enumerate(axs):
         ax.loglog(al["tau_s"], al["measured"][:, i], "k-", label="measured")
         ax.loglog(al["tau_s"], al["sim_before"][:, i], "C0--", label="simulated, base model")
@@ -645,7 +623,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     files.append("allan.png")
 
     sp = arrays["spectrum"]
-    fig, axs = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    fig, axs = subplots(1, 3, figsize=(13, 3.8), sharey=True)
     for i, ax in enumerate(axs):
         ax.semilogy(sp["f_hz"], sp["measured"][:, i], "k-", lw=0.8, label="measured - base prediction")
         ax.semilogy(sp["f_hz"], sp["sim_before"][:, i], "C0--", lw=0.8, label="simulated, base model")
@@ -661,7 +639,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     files.append("spectrum.png")
 
     rs = arrays["residual_series"]
-    fig, axs = plt.subplots(3, 1, figsize=(12, 6), sharex=True)
+    fig, axs = subplots(3, 1, figsize=(12, 6), sharex=True)
     step = max(len(rs["t"]) // 4000, 1)
     for i, ax in enumerate(axs):
         ax.plot(rs["t"][::step], rs["before"][::step, i], "C0", lw=0.5, label="base model")
@@ -675,7 +653,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
 
     dr = arrays["drift"]
     if dr:
-        fig, axs = plt.subplots(1, len(dr), figsize=(4.3 * len(dr), 3.6))
+        fig, axs = subplots(1, len(dr), figsize=(4.3 * len(dr), 3.6))
         axs = np.atleast_1d(axs)
         for ax, (w, d) in zip(axs, dr.items(), strict=True):
             ax.boxplot(
@@ -697,7 +675,7 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ("psd_gap_log10", "spectral gap (log10)"),
     ]
     metrics = [(k, lab) for k, lab in metrics if k in gb and k in ga]
-    fig, axs = plt.subplots(1, len(metrics), figsize=(3.7 * len(metrics), 3.2))
+    fig, axs = subplots(1, len(metrics), figsize=(3.7 * len(metrics), 3.2))
     for ax, (k, lab) in zip(axs, metrics, strict=True):
         ax.bar(["base", "final"], [gb[k], ga[k]], color=["C0", "C3"])
         ax.set_title(lab, fontsize=9)
