@@ -56,6 +56,9 @@ def test_seeded_runs_are_reproducible(root, tmp_path):
     assert safety["beats_calibrated"] in (True, False) and safety["calibrated_test_aoe_deg"] > 0
     meta = torch.load(tmp_path / "a" / "model.pt", weights_only=True)["meta"]
     assert meta["beats_calibrated"] == safety["beats_calibrated"] and (tmp_path / "a" / "calibrated.pt").is_file()
+    cal_meta = torch.load(tmp_path / "a" / "calibrated.pt", weights_only=True)["meta"]
+    for fact in ("rate_hz", "train_seqs", "sensor", "dataset"):  # what correct's and evaluate's checks read
+        assert cal_meta[fact] == meta[fact], fact
     table = format_test_table(a["test"])
     assert "| c |" in table and "| **average** |" in table and "nan" not in table
     with_cal = format_test_table(a["test"], safety["calibrated_test_aoe_deg_per_sequence"])

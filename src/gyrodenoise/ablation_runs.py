@@ -73,8 +73,9 @@ class Run:
         ]
 
     def metric(self, split: str) -> float:
-        """'val' / 'test': AOE (deg) of the best checkpoint; 'val_last': the last validation AOE of the
-        fit (overfitting shows as val_last > val); 'best_epoch': the epoch of the best validation."""
+        """'val' / 'test': AOE (deg) of the weights the run kept (its `select` rule; final weights by default);
+        'val_last': the last validation AOE of the fit (overfitting shows as val_last > val); 'best_epoch': the
+        epoch of the best validation."""
         if split in ("val_last", "best_epoch"):
             curve = self.curve()
             if not curve:

@@ -1,11 +1,13 @@
-"""Hydra entry point: train a correction model, keep the best checkpoint on validation, test it.
+"""Hydra entry point: train a correction model, keep its final weights (or, with `select=best_val`, the best
+checkpoint on validation), test it.
 
     python -m gyrodenoise.train dataset=euroc model.act=gelu
     python -m gyrodenoise.train dataset=euroc model=calibrated
     python -m gyrodenoise.train ckpt_path=outputs/.../checkpoints/last.ckpt   # resume
 
-Outputs (in the run folder): checkpoints/, tensorboard/, csv/, model.pt (the best model in the
-shipped-model format) and summary.json (wall time, best validation and test metrics).
+Outputs (in the run folder): checkpoints/, tensorboard/, csv/, model.pt (the kept weights in the
+shipped-model format), calibrated.pt (the baseline fitted on the same data) and summary.json (wall time,
+validation and test metrics of the kept weights).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
+from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
@@ -89,16 +92,16 @@ def wants_calibrated_baseline(cfg: DictConfig) -> bool:
     return bool(cfg.get("calibrated_baseline")) and cfg.model.name != "calibrated"
 
 
-def calibrated_baseline(cfg: DictConfig, dm, module: DenoiserModule, out_dir: Path) -> dict:
+def calibrated_baseline(cfg: DictConfig, dm: ImuDataModule, module: DenoiserModule, out_dir: Path) -> dict:
     """The safety net: the 12-parameter calibrated baseline fitted on the same training data with the
     same loss (seconds), scored on the same validation ("val" group: the held-out flight under
     cross-validation) and test sequences; whether the trained model beats it on validation."""
     start = time.time()
     cal = fit_calibrated(dm.train_part, loss=OmegaConf.to_container(cfg.loss, resolve=True))
     cal_path = out_dir / "calibrated.pt"
-    save_model(
-        cal, {"name": "calibrated"}, cal_path, meta={"dataset": cfg.dataset.name, "fit": "baseline.fit_calibrated"}
-    )
+    # the run's data facts, as fit_calibrated records them: evaluate's training-overlap warning, correct's sensor
+    # and rate checks read them
+    save_model(cal, {"name": "calibrated"}, cal_path, meta={**dm.model_meta(), "fit": "baseline.fit_calibrated"})
     val_seqs = [seq for seq, group in zip(dm.val_part, dm.val_groups, strict=True) if group == "val"]
     out = safety_meta(module.model, cal, val_seqs, calibrated_path=cal_path.name)
     if cfg.get("test") and dm.test_part:
