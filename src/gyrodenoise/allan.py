@@ -28,11 +28,6 @@ def allan_variance(x: np.ndarray, rate_hz: float, taus: np.ndarray) -> np.ndarra
     return out
 
 
-def allan_deviation(x: np.ndarray, rate_hz: float, taus: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    taus = allan_taus(len(x), rate_hz) if taus is None else np.asarray(taus)
-    return taus, np.sqrt(allan_variance(x, rate_hz, taus))
-
-
 def pooled_allan(residuals: list[np.ndarray], rate_hz: float, taus: np.ndarray) -> np.ndarray:
     """Allan deviation pooled over sequences (variances averaged with the sequence lengths)."""
     avs, ws = [], []

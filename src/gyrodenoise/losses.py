@@ -44,7 +44,7 @@ class IncrementLoss(torch.nn.Module):
                 m = m.unflatten(1, (-1, 2)).all(-1)
             yield j, so3.log(gt @ est.transpose(-1, -2)), m
 
-    def forward(self, w_hat, dt, dR, mask) -> torch.Tensor:
+    def forward(self, w_hat: torch.Tensor, dt: torch.Tensor, dR: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """Sum over increment lengths of weight x the Huber mean over the components of available increments.
 
         Masked means, not boolean indexing or a branch on the mask: both would wait for the device

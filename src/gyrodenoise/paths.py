@@ -60,7 +60,7 @@ def invoked_command(module: str, argv: Sequence[str] | None = None) -> str:
     return " ".join([prog, *words])
 
 
-def portable_tree(obj):
+def portable_tree(obj: object) -> object:
     """`obj` (nested dicts / lists, e.g. a resolved config) with every absolute path string made portable."""
     if isinstance(obj, dict):
         return {k: portable_tree(v) for k, v in obj.items()}

@@ -9,6 +9,7 @@ wrong correction without any error. `correct` checks a whole file for these (`gy
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -51,7 +52,7 @@ class StreamClock:
             return 1e9 / self.rate_hz
         return self._steps_sum / self._steps_n if self._steps_n else None
 
-    def check(self, t_ns, n: int) -> np.ndarray | int:
+    def check(self, t_ns: int | np.ndarray | Sequence[int], n: int) -> np.ndarray | int:
         """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
         period = self.period_ns
         if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:

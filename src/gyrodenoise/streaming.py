@@ -24,7 +24,7 @@ standard deviation (K - 1 denominator) times its `spread_scale`, as `EnsembleCor
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +37,9 @@ from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.stream_clock import StreamClock
+
+ArrayLike = np.ndarray | torch.Tensor | Sequence[float]  # one sample (6,) or a chunk (N, 6)
+StampLike = int | np.ndarray | Sequence[int] | None  # int64 ns: one stamp, or one per sample of a chunk
 
 BACKENDS = ("numpy", "torch")
 
@@ -265,16 +268,16 @@ class StreamingCorrector:
             self.clock.commit(t)
         return out, std
 
-    def push_with_spread(self, sample, t_ns=None) -> tuple[np.ndarray, np.ndarray | None]:
+    def push_with_spread(self, sample: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
         return self._run(sample, t_ns, chunk=False)
 
-    def push_chunk_with_spread(self, chunk, t_ns=None) -> tuple[np.ndarray, np.ndarray | None]:
+    def push_chunk_with_spread(self, chunk: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
         return self._run(chunk, t_ns, chunk=True)
 
     # ------------------------------------------------------------------ per sample
-    def push(self, sample, t_ns=None) -> np.ndarray:
+    def push(self, sample: ArrayLike, t_ns: StampLike = None) -> np.ndarray:
         """One raw IMU sample (6,) -> corrected gyro (3,) rad/s, float64 (an ensemble: the members' mean).
 
         t_ns (optional, int nanoseconds): the sample's timestamp; a stamp out of order or after a gap is refused
@@ -326,7 +329,7 @@ class StreamingCorrector:
         return out.double().numpy()
 
     # ------------------------------------------------------------------ chunks
-    def push_chunk(self, chunk, t_ns=None) -> np.ndarray:
+    def push_chunk(self, chunk: ArrayLike, t_ns: StampLike = None) -> np.ndarray:
         """(N, 6) raw IMU samples -> (N, 3) corrected gyro, float64; continues the same state.
 
         Each layer runs as a valid convolution over [its past inputs, the chunk], vectorised over

@@ -10,7 +10,6 @@ truth (Vicon-like mocap at 100 Hz, 0.2 deg). A scenario writes a fit flight and 
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -231,7 +230,3 @@ def run_world_case(
             out["gap_before"] = gb["residual_rms_in_band_rad_s"]
             out["gap_after"] = ga["residual_rms_in_band_rad_s"]
     return out
-
-
-def truth_of(root: str | Path, flight: str = FIT_FLIGHT) -> dict:
-    return json.loads((Path(root) / flight / "truth.json").read_text())

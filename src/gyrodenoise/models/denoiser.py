@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -37,7 +38,7 @@ class GyroCorrection(nn.Module):
         self.register_buffer("mean", torch.zeros(6))
         self.register_buffer("std", torch.ones(6))
 
-    def set_normalization(self, mean, std) -> None:
+    def set_normalization(self, mean: np.ndarray | torch.Tensor, std: np.ndarray | torch.Tensor) -> None:
         self.mean.copy_(torch.as_tensor(mean, dtype=torch.float32))
         self.std.copy_(torch.as_tensor(std, dtype=torch.float32))
 
@@ -122,7 +123,7 @@ class CalibratedImu(GyroCorrection):
 
 
 @torch.no_grad()
-def predict_gyro(model: nn.Module, imu) -> torch.Tensor:
+def predict_gyro(model: nn.Module, imu: np.ndarray | torch.Tensor) -> torch.Tensor:
     """Corrected gyro (N, 3) float64 for one whole sequence (N, 6), in eval mode (an ensemble: the mean)."""
     was_training = model.training
     model.eval()

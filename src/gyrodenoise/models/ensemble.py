@@ -85,7 +85,7 @@ def model_device(model: nn.Module) -> torch.device:
 
 
 @torch.no_grad()
-def predict_with_spread(model: CorrectionModel, imu) -> tuple[np.ndarray, np.ndarray | None]:
+def predict_with_spread(model: CorrectionModel, imu: np.ndarray | torch.Tensor) -> tuple[np.ndarray, np.ndarray | None]:
     """Corrected gyro (N, 3) float64 of one whole sequence (N, 6) in eval mode, and the ensemble's
     per-sample std (N, 3) float64 (None for a single model, which has no spread)."""
     was_training = model.training

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import Effect, WhiteNoise
@@ -158,7 +157,3 @@ def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1) -> Path
         if tmp.exists():
             shutil.rmtree(tmp)
     return folder
-
-
-def true_rotations(sim: SimulatedImu) -> np.ndarray:
-    return Rotation.from_quat(sim.gt_quat_xyzw).as_matrix()
