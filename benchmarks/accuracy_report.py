@@ -26,8 +26,8 @@ from scipy.stats import spearmanr  # noqa: E402
 
 from gyrodenoise.ablation_stats import PairedDiff  # noqa: E402
 from gyrodenoise.atomic import write_json, write_text  # noqa: E402
-from gyrodenoise.evaluate import markdown_table  # noqa: E402
 from gyrodenoise.plots import save  # noqa: E402
+from gyrodenoise.tables import markdown_table  # noqa: E402
 
 OUT = Path("reports/accuracy")
 

@@ -30,8 +30,8 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.metrics import aoe
+from gyrodenoise.tables import markdown_table
 
 K_P = (0.01, 0.03, 0.1, 0.3, 1.0)
 K_I = (1e-4, 1e-3, 1e-2)

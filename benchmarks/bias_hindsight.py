@@ -30,9 +30,9 @@ from scipy.optimize import minimize
 
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 
 
 def aoe_with_offset(seq, gyro: np.ndarray, offset_deg_s: np.ndarray) -> float:

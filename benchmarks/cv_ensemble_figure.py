@@ -29,11 +29,11 @@ import numpy as np
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro
+from gyrodenoise.tables import markdown_table
 
 RUN_NAME = re.compile(r"(?P<recipe>[a-z0-9]+)_f(?P<fold>\d+)_s(?P<seed>\d+)$")
 SUMMARY_TOLERANCE_DEG = 0.05  # float32 network, float64 integration: members reproduce their logged figure

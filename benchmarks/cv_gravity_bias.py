@@ -29,9 +29,9 @@ from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.bias_tracker import track_bias
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 
 K_P = (0.03, 0.1, 0.3, 1.0)
 K_I = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2)

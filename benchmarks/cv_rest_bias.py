@@ -29,7 +29,7 @@ from cv_slow_part import causal_mean
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
+from gyrodenoise.tables import markdown_table
 
 CANDIDATES = ("ensemble+rest", "calibrated+rest")
 

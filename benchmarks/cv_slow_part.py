@@ -21,7 +21,7 @@ import numpy as np
 from cv_ensemble_figure import ROUND3_ROOTS, aoe_deg, find_runs, fold_ensemble_and_calibrated, round_decision
 
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
+from gyrodenoise.tables import markdown_table
 
 WINDOWS_S: tuple[float | None, ...] = (2.0, 10.0, 30.0, 100.0, None)  # None: the whole past
 

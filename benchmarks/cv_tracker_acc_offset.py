@@ -26,9 +26,9 @@ from cv_gravity_bias import GRID, grid_aoe, nested_choice, run_info, save, test_
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.bias_tracker import accelerometer_offset
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 
 SEEDS = (100, 400, 500)
 ROOTS = [Path("runs/cv7/reports/accuracy_runs/euroc_cv7"), Path("runs/cv8/reports/accuracy_runs/euroc_cv8")]

@@ -23,9 +23,9 @@ from cv_ensemble_figure import find_runs, fold_run_paths, held_out_flight, logge
 from cv_gravity_bias import plain_and_tracked, run_info, save, test_flights, test_section
 
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 
 GAINS = {"network": (0.1, 0.003), "calibrated": (0.03, 0.01)}  # round 7's all-fold choices, fixed in the rule
 NEW_SEEDS = (400, 500)

@@ -20,9 +20,9 @@ import hydra
 from gyrodenoise import plots
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.ensemble import predict_with_spread
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 from gyrodenoise.uncertainty import calibration, pooled
 
 

@@ -28,10 +28,10 @@ import numpy as np
 from gyrodenoise import plots
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.so3 import integrate_gyro, relative_rotvec
+from gyrodenoise.tables import markdown_table
 
 GRAVITY = 9.81  # m/s^2: only its direction matters here (the median is taken of the same vector)
 

@@ -26,7 +26,7 @@ from cv_ensemble_figure import RUN_NAME
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
+from gyrodenoise.tables import markdown_table
 
 ROOTS = [Path(f"runs/cv{r}/reports/accuracy_runs/euroc_cv{r}") for r in (2, 3, 4)]
 DECIDING_RECIPE = "ref"

@@ -24,13 +24,13 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.config import compose_config
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.metrics import aoe
 from gyrodenoise.models.ensemble import predict_with_spread
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.provenance import machine_description
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT, spread_ratio
+from gyrodenoise.tables import markdown_table
 
 TURN = Rotation.from_euler("x", 90, degrees=True).as_matrix()  # body of the turned IMU -> original body
 # (imu (N, 6), rot (N, 3, 3), dt (N,)) -> the same with the variant applied; rot None: the truth no longer applies

@@ -25,9 +25,9 @@ from cv_gravity_bias import GRID, apply_nested_gains, grid_aoe
 
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.provenance import machine_description
+from gyrodenoise.tables import markdown_table
 
 SOURCES = ("calibrated", "raw IMU")
 FOLDS = 3

@@ -26,10 +26,10 @@ from cv_ensemble_figure import SUMMARY_TOLERANCE_DEG, aoe_deg, find_runs, fold_r
 from gyrodenoise import plots
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.models.denoiser import predict_gyro
 from gyrodenoise.models.ensemble import EnsembleCorrection, predict_with_spread
 from gyrodenoise.pretrained import load_model
+from gyrodenoise.tables import markdown_table
 from gyrodenoise.uncertainty import calibration, pooled
 
 SEEDS = (100, 400, 500)  # member seeds minus the fold: round 7's run and round 8's two

@@ -34,6 +34,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from gyrodenoise import tables
 from gyrodenoise.ablation_runs import (  # noqa: F401  (re-exported: the public API of this module)
     IGNORED_KEYS,
     METRICS,
@@ -69,14 +70,14 @@ COLUMNS = [  # (split, header, csv name, digits)
 
 def markdown_table(settings: Sequence[Setting], keys: Sequence[str]) -> str:
     head = [*keys, "seeds", *(c[1] for c in COLUMNS), "val / test per seed", "train s/run"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    rows = []
     for s in settings:
         n = s.stats("val")[2]
         cells = [_pm(*s.stats(split)[:2], digits) for split, _, _, digits in COLUMNS]
         runs = sorted(s.runs, key=lambda r: str(r.seed))
         per_seed = ", ".join(f"{r.metric('val'):.2f} / {r.metric('test'):.2f}" for r in runs)
-        lines.append("| " + " | ".join([*s.values, str(n), *cells, per_seed, f"{s.wall_s():.0f}"]) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([*s.values, str(n), *cells, per_seed, f"{s.wall_s():.0f}"])
+    return tables.markdown_table(head, rows)
 
 
 def csv_text(settings: Sequence[Setting], keys: Sequence[str]) -> str:

@@ -40,6 +40,7 @@ from gyrodenoise.ablation_runs import (
 )
 from gyrodenoise.ablation_stats import CLAIMS, Claim, PairedDiff, check, claim_verdict, paired_diff
 from gyrodenoise.atomic import write_bytes, write_text
+from gyrodenoise.tables import markdown_table
 
 SPLITS = ("test", "val", "val_tail")
 REFERENCE_DIR = "reference"  # reports/ablation_runs/reference: the paper's setting, shared by every claim
@@ -252,7 +253,7 @@ def arm_table(a: Analysis) -> str:
     ]
     head += ["expected (paper) → test / val"] if has_claim else []
     head += ["train s/run"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    rows = []
     for arm in a.arms:
         cells = [f"**{arm.label}** (reference)" if arm.is_reference else arm.label, _n_cell(arm)]
         cells += [_pm(*arm.stats(s)[:2]) for s in ("test", "val")]
@@ -262,20 +263,18 @@ def arm_table(a: Analysis) -> str:
         if has_claim:
             cells.append(f"{arm.expected} → {arm.check('test')} / {arm.check('val')}" if arm.expected else "")
         cells.append(f"{arm.wall_s():.0f}" if math.isfinite(arm.wall_s()) else "-")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append(cells)
+    return markdown_table(head, rows)
 
 
 def tail_table(a: Analysis) -> str:
     head = ["arm", "n", "val_tail AOE (deg)", "Δ val_tail vs reference [95% t-CI] (bootstrap)", "verdict"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    rows = []
     for arm in a.arms:
         d = arm.diffs.get("val_tail")
         tail = ["reference", ""] if arm.is_reference else [diff_cell(d), d.describe() if d else "-"]
-        lines.append(
-            "| " + " | ".join([arm.label, _n_cell(arm, "val_tail"), _pm(*arm.stats("val_tail")[:2]), *tail]) + " |"
-        )
-    return "\n".join(lines) + "\n"
+        rows.append([arm.label, _n_cell(arm, "val_tail"), _pm(*arm.stats("val_tail")[:2]), *tail])
+    return markdown_table(head, rows)
 
 
 def seeds_of(a: Analysis) -> list[str]:
@@ -286,14 +285,14 @@ def seed_table(a: Analysis) -> str:
     """Test / val AOE of every arm and seed (the numbers behind the pairs)."""
     seeds = seeds_of(a)
     head = ["arm", *(f"seed {s}" for s in seeds)]
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    rows = []
     for arm in a.arms:
         cells = []
         for s in seeds:
             t, v = (arm.per_seed.get(x, {}).get(s, math.nan) for x in ("test", "val"))
             cells.append("-" if not math.isfinite(t) else f"{t:.2f} / {v:.2f}" + ("*" if s in arm.duplicates else ""))
-        lines.append("| " + " | ".join([arm.label, *cells]) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([arm.label, *cells])
+    return markdown_table(head, rows)
 
 
 def csv_text(a: Analysis) -> str:

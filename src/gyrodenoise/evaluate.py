@@ -24,8 +24,6 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 from __future__ import annotations
 
 import contextlib
-import csv
-import io
 import math
 import time
 import warnings
@@ -57,6 +55,7 @@ from gyrodenoise.pretrained import (
 from gyrodenoise.provenance import machine_description
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import spread_ratio, spread_warning
+from gyrodenoise.tables import csv_text, markdown_table
 from gyrodenoise.trajectory_files import tum_text
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
@@ -136,20 +135,6 @@ def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]
     avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in METHODS]
     rows.append([f"average of {len(averaged)}", *[cell(a) for a in avg]])
     return rows
-
-
-def markdown_table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
-
-
-def csv_text(header: list[str], rows: list[list[str]]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(header)
-    w.writerows(rows)
-    return buf.getvalue()
 
 
 @contextlib.contextmanager

@@ -33,13 +33,13 @@ from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.data.datamodule import ImuDataModule
-from gyrodenoise.evaluate import markdown_table
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.paths import invoked_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
+from gyrodenoise.tables import markdown_table
 
 
 def flat_hparams(cfg: DictConfig) -> dict:
