@@ -34,28 +34,17 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from gyrodenoise import ablation_report as rep
 from gyrodenoise import tables
-from gyrodenoise.ablation_runs import (  # noqa: F401  (re-exported: the public API of this module)
-    IGNORED_KEYS,
-    METRICS,
-    MISSING,
-    SEED_KEY,
-    Run,
+from gyrodenoise.ablation_runs import (
     Setting,
-    _fmt_value,
-    _norm,
-    _parse_override,
-    _pm,
-    _read_overrides,
-    _with_ext,
     ablated_keys,
-    canonical,
     find_runs,
     group,
-    load_run,
-    load_summary_file,
     parse_where,
+    plus_minus,
     same_value,
+    with_ext,
 )
 from gyrodenoise.atomic import write_bytes, write_text
 from gyrodenoise.paths import portable_path
@@ -73,7 +62,7 @@ def markdown_table(settings: Sequence[Setting], keys: Sequence[str]) -> str:
     rows = []
     for s in settings:
         n = s.stats("val")[2]
-        cells = [_pm(*s.stats(split)[:2], digits) for split, _, _, digits in COLUMNS]
+        cells = [plus_minus(*s.stats(split)[:2], digits) for split, _, _, digits in COLUMNS]
         runs = sorted(s.runs, key=lambda r: str(r.seed))
         per_seed = ", ".join(f"{r.metric('val'):.2f} / {r.metric('test'):.2f}" for r in runs)
         rows.append([*s.values, str(n), *cells, per_seed, f"{s.wall_s():.0f}"])
@@ -183,9 +172,9 @@ def collect(
     md += [markdown_table(settings, keys)]
     if unfinished:
         md += [f"Unfinished runs left out: {len(unfinished)}", ""]
-    write_text(_with_ext(out, ".md"), "\n".join(md))
-    write_text(_with_ext(out, ".csv"), csv_text(settings, keys))
-    write_bytes(_with_ext(out, ".png"), plot_png(settings, keys, title))
+    write_text(with_ext(out, ".md"), "\n".join(md))
+    write_text(with_ext(out, ".csv"), csv_text(settings, keys))
+    write_bytes(with_ext(out, ".png"), plot_png(settings, keys, title))
     return settings
 
 
@@ -210,7 +199,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--tables", type=Path, default=None, help="--report: folder of the per-claim tables")
     p.add_argument("--appendix", type=Path, default=None, help="--report: text kept verbatim at the end")
     a = p.parse_args(argv)
-    from gyrodenoise import ablation_report as rep  # imports this module: here, not at the top
 
     try:
         if a.report:
@@ -224,7 +212,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(_with_ext(a.out, ".md").read_text())
+    print(with_ext(a.out, ".md").read_text())
     print(f"wrote {a.out}.md, .csv, .png ({len(settings)} settings)")
     return 0
 

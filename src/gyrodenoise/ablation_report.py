@@ -30,13 +30,15 @@ from gyrodenoise.ablation_runs import (
     MISSING,
     SEED_KEY,
     Run,
-    _pm,
-    _with_ext,
     ablated_keys,
     find_runs,
     group,
+    mean_sd_n,
+    mean_wall_s,
     parse_where,
+    plus_minus,
     same_value,
+    with_ext,
 )
 from gyrodenoise.ablation_stats import CLAIMS, Claim, PairedDiff, check, claim_verdict, paired_diff
 from gyrodenoise.atomic import write_bytes, write_text
@@ -61,14 +63,10 @@ class Arm:
     expected: str | None = None
 
     def stats(self, split: str) -> tuple[float, float, int]:
-        xs = [v for v in self.per_seed.get(split, {}).values() if math.isfinite(v)]
-        if not xs:
-            return math.nan, math.nan, 0
-        return statistics.fmean(xs), (statistics.stdev(xs) if len(xs) > 1 else math.nan), len(xs)
+        return mean_sd_n(self.per_seed.get(split, {}).values())  # over seeds (a seed's runs are averaged first)
 
     def wall_s(self) -> float:
-        ts = [float(r.summary["train_wall_time_s"]) for r in self.runs if r.summary.get("train_wall_time_s")]
-        return statistics.fmean(ts) if ts else math.nan
+        return mean_wall_s(self.runs)
 
     def check(self, split: str) -> str:
         return check(self.expected, self.diffs.get(split)) if self.expected else ""
@@ -256,7 +254,7 @@ def arm_table(a: Analysis) -> str:
     rows = []
     for arm in a.arms:
         cells = [f"**{arm.label}** (reference)" if arm.is_reference else arm.label, _n_cell(arm)]
-        cells += [_pm(*arm.stats(s)[:2]) for s in ("test", "val")]
+        cells += [plus_minus(*arm.stats(s)[:2]) for s in ("test", "val")]
         for s in ("test", "val"):
             d = arm.diffs.get(s)
             cells += ["reference", ""] if arm.is_reference else [diff_cell(d), d.describe() if d else "-"]
@@ -273,7 +271,7 @@ def tail_table(a: Analysis) -> str:
     for arm in a.arms:
         d = arm.diffs.get("val_tail")
         tail = ["reference", ""] if arm.is_reference else [diff_cell(d), d.describe() if d else "-"]
-        rows.append([arm.label, _n_cell(arm, "val_tail"), _pm(*arm.stats("val_tail")[:2]), *tail])
+        rows.append([arm.label, _n_cell(arm, "val_tail"), plus_minus(*arm.stats("val_tail")[:2]), *tail])
     return markdown_table(head, rows)
 
 
@@ -512,12 +510,12 @@ headline is the test AOE; the validation AOE is judged the same way."""
 
 
 def write_outputs(a: Analysis, out: Path, sources: Sequence[Path] = ()) -> None:
-    png = _with_ext(out, ".png")
+    png = with_ext(out, ".png")
     md = [*claim_section(a, png.name, level=1)]
     if sources:
         md.insert(2, f"Runs: {', '.join(f'`{s}`' for s in sources)}\n")
-    write_text(_with_ext(out, ".md"), "\n".join(md))
-    write_text(_with_ext(out, ".csv"), csv_text(a))
+    write_text(with_ext(out, ".md"), "\n".join(md))
+    write_text(with_ext(out, ".csv"), csv_text(a))
     write_bytes(png, plot_png(a))
     for w in a.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -638,7 +636,7 @@ def paired_cli(a: argparse.Namespace, keys: list[str] | None) -> int:
         runs += [r for r in find_runs([extra])[0] if all(same_value(r.value(k), v) for k, v in where)]
         analysis = analyse(runs, reference, keys, claim, a.title)
     write_outputs(analysis, a.out, sources=dirs)
-    print(_with_ext(a.out, ".md").read_text())
+    print(with_ext(a.out, ".md").read_text())
     print(f"wrote {a.out}.md, .csv, .png ({len(analysis.arms)} arms, reference {analysis.reference.label})")
     return 0
 

@@ -92,16 +92,24 @@ class Setting:
     runs: list[Run] = field(default_factory=list)
 
     def stats(self, split: str) -> tuple[float, float, int]:
-        xs = [r.metric(split) for r in self.runs]
-        xs = [x for x in xs if math.isfinite(x)]
-        if not xs:
-            return math.nan, math.nan, 0
-        sd = statistics.stdev(xs) if len(xs) > 1 else math.nan
-        return statistics.fmean(xs), sd, len(xs)
+        return mean_sd_n([r.metric(split) for r in self.runs])
 
     def wall_s(self) -> float:
-        ts = [float(r.summary.get("train_wall_time_s", math.nan)) for r in self.runs]
-        return statistics.fmean(ts) if ts else math.nan
+        return mean_wall_s(self.runs)
+
+
+def mean_sd_n(values: Iterable[float]) -> tuple[float, float, int]:
+    """(mean, sample sd, n) of the finite values; nan where undefined (sd needs two)."""
+    xs = [x for x in values if math.isfinite(x)]
+    if not xs:
+        return math.nan, math.nan, 0
+    return statistics.fmean(xs), (statistics.stdev(xs) if len(xs) > 1 else math.nan), len(xs)
+
+
+def mean_wall_s(runs: Iterable[Run]) -> float:
+    """Mean training wall time (s) of the runs that recorded one; nan if none did."""
+    ts = [float(r.summary["train_wall_time_s"]) for r in runs if r.summary.get("train_wall_time_s")]
+    return statistics.fmean(ts) if ts else math.nan
 
 
 def _fmt_value(v: object) -> str:
@@ -265,11 +273,11 @@ def group(runs: Sequence[Run], keys: Sequence[str], defaults: dict[str, str] | N
     return list(settings.values())
 
 
-def _pm(mean: float, sd: float, digits: int = 2) -> str:
+def plus_minus(mean: float, sd: float, digits: int = 2) -> str:
     if not math.isfinite(mean):
         return "-"
     return f"{mean:.{digits}f}" if not math.isfinite(sd) else f"{mean:.{digits}f} ± {sd:.{digits}f}"
 
 
-def _with_ext(prefix: Path, ext: str) -> Path:
+def with_ext(prefix: Path, ext: str) -> Path:
     return prefix.parent / (prefix.name + ext)
