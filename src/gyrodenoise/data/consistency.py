@@ -14,7 +14,9 @@ but read w, x, y, z (whose rate magnitudes, the checks above, stay plausible). A
 
 from __future__ import annotations
 
+import contextlib
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +63,24 @@ class Consistency:
     mirrored: bool = False
 
 
+@contextlib.contextmanager
+def noting_data_warnings() -> Iterator[list[str]]:
+    """Collect the DataConsistencyWarning messages raised inside (each once) into the list it yields once the block
+    ends, so that a command's outputs (evaluate's table and results.json, the discrepancy report) carry them, not
+    only the console. Every one is recorded, even one already shown earlier in the process (a notebook's rerun).
+    Other warnings pass as usual."""
+    found: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataConsistencyWarning)
+        yield found
+    for w in caught:
+        if issubclass(w.category, DataConsistencyWarning):
+            found.append(str(w.message))
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    found[:] = dict.fromkeys(found)
+
+
 def measure(seq: Sequence) -> Consistency:
     dt = np.diff(seq.t)
     period = float(np.median(dt))
@@ -91,7 +111,7 @@ def measure(seq: Sequence) -> Consistency:
         moving = ok & (truth_rate > MOVING_RAD_S)
     enough = moving.sum() > 100
     ratio = float(np.median(gyro_rate[moving]) / np.median(truth_rate[moving])) if enough else np.nan
-    axes_deg = axes_angle_deg(gyro_vec[moving], truth_vec[moving]) if enough else np.nan
+    axes_deg, mirrored = compare_axes(gyro_vec[moving], truth_vec[moving]) if enough else (np.nan, False)
     return Consistency(
         gaps=int((dt > GAP_FACTOR * period).sum()),
         longest_step_s=float(dt.max()),
@@ -100,27 +120,24 @@ def measure(seq: Sequence) -> Consistency:
         corr_at_best=float(c[best]),
         corr_at_zero=corr0,
         axes_angle_deg=axes_deg,
-        mirrored=enough and is_mirror(gyro_vec[moving], truth_vec[moving]),
+        mirrored=mirrored,
     )
 
 
-def axes_angle_deg(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> float:
-    """Angle (deg) of the rotation that best maps the truth's rate vectors onto the gyro's. Motion about one
-    axis (a turntable, a pendulum) fixes only that axis: any turn about it fits equally, so the angle is then
-    the one between the two rate axes. Whether it is one axis is read from the gyro-truth cross-covariance,
-    where the noise of each side averages out (the truth's own spread would count its noise as motion)."""
+def compare_axes(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> tuple[float, bool]:
+    """(angle in deg of the rotation that best maps the truth's rate vectors onto the gyro's, whether the best
+    orthogonal map is a mirror), from one SVD of the gyro-truth cross-covariance, where the noise of each side
+    averages out (the truth's own spread would count its noise as motion).
+
+    Motion about one axis (a turntable, a pendulum) fixes only that axis: any turn about it fits equally, so the
+    angle is then the one between the two rate axes. A mirror (determinant -1) is judged only for motion about
+    all three axes (MIRROR_MIN_RATIO); otherwise it is False."""
     u, sv, vt = np.linalg.svd(gyro_vec.T @ truth_vec)
+    mirrored = bool(sv[2] >= MIRROR_MIN_RATIO * sv[0] and np.linalg.det(u @ vt) < 0)
     if sv[1] > SINGLE_AXIS_RATIO * sv[0]:
         fit, _ = Rotation.align_vectors(gyro_vec, truth_vec)
-        return float(np.degrees(fit.magnitude()))
-    return float(np.degrees(np.arccos(np.clip(u[:, 0] @ vt[0], -1.0, 1.0))))
-
-
-def is_mirror(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> bool:
-    """Is the orthogonal map that best takes the truth's rate vectors onto the gyro's a reflection (determinant
-    -1)? Judged only for motion about all three axes (MIRROR_MIN_RATIO); otherwise False."""
-    u, sv, vt = np.linalg.svd(gyro_vec.T @ truth_vec)
-    return bool(sv[2] >= MIRROR_MIN_RATIO * sv[0] and np.linalg.det(u @ vt) < 0)
+        return float(np.degrees(fit.magnitude())), mirrored
+    return float(np.degrees(np.arccos(np.clip(u[:, 0] @ vt[0], -1.0, 1.0)))), mirrored
 
 
 def check(seq: Sequence) -> Consistency:
