@@ -23,11 +23,10 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import hydra
@@ -38,7 +37,7 @@ from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.consistency import DataConsistencyWarning
+from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
@@ -135,23 +134,6 @@ def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]
     avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in METHODS]
     rows.append([f"average of {len(averaged)}", *[cell(a) for a in avg]])
     return rows
-
-
-@contextlib.contextmanager
-def noting_data_warnings() -> Iterator[list[str]]:
-    """Collect the data checks' warnings (`DataConsistencyWarning`: IMU gaps, a truth on another clock, of another
-    scale or about other axes) raised inside, into the list it yields once the block ends, so that the table and
-    results.json carry them, not only the console (they are printed with the command's other warnings, after its
-    table). Other warnings pass as usual."""
-    found: list[str] = []
-    with warnings.catch_warnings(record=True) as caught:
-        yield found
-    for w in caught:
-        if issubclass(w.category, DataConsistencyWarning):
-            found.append(str(w.message))
-        else:
-            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-    found[:] = dict.fromkeys(found)
 
 
 def evaluate(cfg: DictConfig) -> dict:

@@ -15,11 +15,10 @@ import os
 import platform
 import sys
 import time
-import warnings
 from pathlib import Path
 
 from gyrodenoise.atomic import write_json
-from gyrodenoise.data.consistency import DataConsistencyWarning
+from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
@@ -225,15 +224,11 @@ def main(argv: list[str] | None = None) -> int:
     def load(names: list[str]) -> list:
         out = []
         for n in names:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", DataConsistencyWarning)
+            with noting_data_warnings() as found:
                 fcs, left = load_fit_contexts(args.root, n, args.gt_files.get(n), args.knot_spacing)
-            for w in caught:
-                if issubclass(w.category, DataConsistencyWarning):
-                    data_warnings.append(str(w.message))
-                    print(f"warning: {w.message}", file=sys.stderr)
-                else:
-                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            for w in found:
+                print(f"warning: {w}", file=sys.stderr)
+            data_warnings.extend(found)
             out += fcs
             left_out.extend(left)
         return out
