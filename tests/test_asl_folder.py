@@ -160,7 +160,8 @@ def test_missing_sequences_fail_before_training(asl_root):
     assert "test=false" not in str(err.value)
     # a root one level too high (the folder that holds the dataset's folder): the folder to give is named
     too_high = ImuDataModule(name="my_imu", root=str(asl_root.parent), train_seqs=["walk_1"], test_seqs=[], window=256)
-    with pytest.raises(FileNotFoundError, match=rf"holds walk_1: set dataset.root={asl_root}\.$"):
+    one_down = rf"walk_1 is one level further down: give {asl_root} as dataset.root\.$"
+    with pytest.raises(FileNotFoundError, match=one_down):
         too_high.check_sequences(test=False)
 
 

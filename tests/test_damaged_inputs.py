@@ -76,6 +76,10 @@ def test_a_truncated_checkpoint_to_resume_from_is_refused(root, tmp_path):
     bad.write_bytes(b"PK\x03\x04" + b"\0" * 100)
     with pytest.raises(ConfigError, match="not a readable Lightning checkpoint"):
         train(config(root, tmp_path / "run", f"ckpt_path={bad}"))
+    # the message states the run's own cadence of last.ckpt, not a fixed one
+    every_7 = config(root, tmp_path / "run", f"ckpt_path={bad}", "callbacks.last_checkpoint.every_n_epochs=7")
+    with pytest.raises(ConfigError, match=r"last.ckpt \(written every 7 epochs\)"):
+        train(every_7)
 
 
 class InterruptAtEpoch(L.Callback):
@@ -92,13 +96,15 @@ class InterruptAtEpoch(L.Callback):
 def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
     handler = signal.getsignal(signal.SIGINT)
     cb = "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtEpoch"
+    every_2 = "callbacks.last_checkpoint.every_n_epochs=2"
     try:
         with pytest.raises(SystemExit):
-            train(config(root, tmp_path / "run", cb, "trainer.max_epochs=4"))
+            train(config(root, tmp_path / "run", cb, every_2, "trainer.max_epochs=4"))
     finally:
         signal.signal(signal.SIGINT, handler)  # Lightning ignores further Ctrl-C while it shuts down
     err = capsys.readouterr().err
     assert "interrupted at epoch 1: no model.pt written; resume with ckpt_path=" in err
+    assert "(checkpoints are written every 2 epochs)" in err
     assert not (tmp_path / "run" / "model.pt").exists()
 
 

@@ -161,9 +161,14 @@ class StreamingCorrector:
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
             self.spread_scale = model.spread_scale
             self.receptive_field = max(m.receptive_field for m in self.members)
-            self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)
-            self.reset()
-            return
+        else:
+            self._read_weights(model, dtype)
+            self._prepare()
+        self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)  # a memoryless model is blind to gaps
+        self.reset()
+
+    def _read_weights(self, model: CorrectionModel, dtype: str) -> None:
+        """One member's input normalisation, C_hat and layers (batch norm folded), in float64."""
         self.np_dtype = np.dtype(dtype)
         self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
         model = copy.deepcopy(model).cpu()  # read the weights without moving the caller's model
@@ -183,9 +188,6 @@ class StreamingCorrector:
         else:
             raise TypeError(f"no streaming implementation for {type(model).__name__}")
         self.receptive_field = 1 + sum(ly.span - 1 for ly in self.layers)
-        self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)  # a memoryless model is blind to gaps
-        self._prepare()
-        self.reset()
 
     @classmethod
     def load(cls, model: str, backend: str = "numpy", dtype: str = "float32") -> StreamingCorrector:

@@ -160,13 +160,19 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, valida
     return val, test
 
 
-def _say_how_to_resume(trainer: L.Trainer) -> None:
+def _last_ckpt_cadence(cfg: DictConfig) -> str:
+    """How often this run's config writes checkpoints/last.ckpt, for the messages that point to it."""
+    n = OmegaConf.select(cfg, "callbacks.last_checkpoint.every_n_epochs", default=None)
+    return f"written every {n} epochs" if n else "written only if callbacks.last_checkpoint is configured"
+
+
+def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
     cb = trainer.checkpoint_callback
     last = Path(cb.dirpath) / "last.ckpt" if cb is not None and cb.dirpath else None
     where = f"ckpt_path={last}" if last is not None and last.is_file() else "ckpt_path=<a run's checkpoints/last.ckpt>"
     print(
         f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where} (checkpoints are "
-        "written every 50 epochs)",
+        f"{_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
     )
 
@@ -178,7 +184,7 @@ def train(cfg: DictConfig) -> dict:
     if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # before any data is read
         raise ConfigError(
             f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
-            "a run's checkpoints/last.ckpt (written every 50 epochs), or leave ckpt_path out to start afresh"
+            f"a run's checkpoints/last.ckpt ({_last_ckpt_cadence(cfg)}), or leave ckpt_path out to start afresh"
         )
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
@@ -214,7 +220,7 @@ def train(cfg: DictConfig) -> dict:
         trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
     except SystemExit:  # Ctrl-C: Lightning shuts down and exits; say what was kept and how to go on
         if trainer.interrupted:
-            _say_how_to_resume(trainer)
+            _say_how_to_resume(trainer, cfg)
         raise
     wall_s = time.time() - start
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)

@@ -28,7 +28,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, root_one_level_off, sequences_in
+from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -191,18 +191,9 @@ class ImuDataModule(L.LightningDataModule):
                 f"to that folder, or GYRODENOISE_DATA to the folder that holds '{self.name}/' (the shipped dataset "
                 "configs read $GYRODENOISE_DATA/<dataset>)."
             )
-        if missing and (Path(self.root) / "mav0").is_dir():  # a root one level too deep (a sequence folder)
-            raise FileNotFoundError(
-                f"{self.root}: sequence folder(s) not found: {', '.join(missing)}. "
-                + root_level_hint(Path(self.root), missing[0]).replace("as the root", "as dataset.root").rstrip()
-            )
+        if missing and (hint := root_level_hint(Path(self.root), missing[0], "dataset.root")):  # root one level off
+            raise FileNotFoundError(f"{self.root}: sequence folder(s) not found: {', '.join(missing)}. {hint.rstrip()}")
         if missing:
-            below = root_one_level_off(Path(self.root), missing[0])
-            if below is not None:  # a root one level too high (the folder that holds euroc/, not euroc/ itself)
-                raise FileNotFoundError(
-                    f"{self.root}: sequence folder(s) not found: {', '.join(missing)}, but {below} holds "
-                    f"{missing[0]}: set dataset.root={below}."
-                )
             only_test = set(missing) <= set(self.test_names)
             here = sequences_in(self.root)
             typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := misspelt(n, here)))

@@ -160,11 +160,11 @@ def root_one_level_off(root: Path, name: str) -> Path | None:
     return below[0] if below else None
 
 
-def root_level_hint(root: Path, name: str) -> str:
-    """A sentence naming the root to give when `root` is one level off (`root_one_level_off`), or ''."""
+def root_level_hint(root: Path, name: str, setting: str = "the root") -> str:
+    """A sentence naming the root to give (as `setting`) when `root` is one level off (`root_one_level_off`), or ''."""
     fix = root_one_level_off(root, name)
     if fix is None:
         return ""
     if (root / "mav0").is_dir():
-        return f"{root} is itself a sequence folder (it holds mav0): give its parent, {fix}, as the root. "
-    return f"{name} is one level further down: give {fix} as the root. "
+        return f"{root} is itself a sequence folder (it holds mav0): give its parent, {fix}, as {setting}. "
+    return f"{name} is one level further down: give {fix} as {setting}. "
