@@ -195,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
             model, meta = load_model(args.model)
         except RuntimeError as e:  # a state dict that does not fit the model's config
             raise ValueError(f"model {args.model!r} cannot be loaded by this version of gyrodenoise: {e}") from None
+        if args.engine == "streaming":  # a model without a streaming form is refused before the data is read
+            StreamingCorrector(model)
         rec = read_imu_csv(path, args.columns, args.time_unit, args.gyro_unit, args.acc_unit, args.delimiter)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SanityWarning)  # printed below from the report

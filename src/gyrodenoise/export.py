@@ -56,6 +56,9 @@ class ExportWrapper(nn.Module):
         return self.model(imu)
 
 
+PARITY_TOL_RAD_S = 1e-4  # a graph that differs from the model by more is refused (float32 rounding: ~1e-6)
+
+
 def output_names(model: CorrectionModel) -> list[str]:
     return [OUTPUT_NAME, STD_NAME] if isinstance(model, EnsembleCorrection) else [OUTPUT_NAME]
 
@@ -238,6 +241,14 @@ def main(argv: list[str] | None = None) -> int:
                     f" (onnxruntime {how}vs PyTorch on the whole sequence: max |diff| {err:.2e} rad/s over "
                     f"{', '.join(output_names(model))})"
                 )
+                if not err <= PARITY_TOL_RAD_S:  # NaN included
+                    Path(args.onnx).unlink(missing_ok=True)
+                    raise ValueError(
+                        f"{args.onnx}: the exported graph does not reproduce the model (max |diff| {err:.2e} rad/s > "
+                        f"{PARITY_TOL_RAD_S:g}; float32 rounding gives ~1e-6), so it was removed. A model whose "
+                        "forward the exporter traces differently (data-dependent branches, a custom class), or a "
+                        "stateful export of a model it cannot step, gives this; --no-check keeps such a file"
+                    )
             print(msg)
     except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
         print(f"error: {e}", file=sys.stderr)

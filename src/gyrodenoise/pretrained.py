@@ -121,7 +121,10 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
         meta = {"checkpoint": portable_path(path), "epoch": blob.get("epoch"), **facts, **_run_meta(path)}
     else:
         raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
-    model = build_model(**cfg)
+    try:
+        model = build_model(**cfg)
+    except ValueError as e:  # a custom class not importable here, or a kind this version does not know
+        raise ModelFileError(f"{path}: this gyrodenoise cannot build the model it holds: {e}") from None
     model.load_state_dict(state)
     model.eval()
     # the name reports use: the shipped name, else the name the file records (ensembles), else its path

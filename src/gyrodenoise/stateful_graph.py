@@ -25,7 +25,7 @@ import copy
 import torch
 from torch import nn
 
-from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
 
@@ -93,8 +93,7 @@ class StatefulCorrection(nn.Module):
         self.is_ensemble = isinstance(model, EnsembleCorrection)
         members = list(model.members) if self.is_ensemble else [model]
         for k, m in enumerate(members):
-            if not isinstance(m, DilatedCNNDenoiser | CalibratedImu):
-                raise TypeError(f"member {k}: no stateful step for {type(m).__name__}")
+            check_stream_form(m, f"member {k}" if self.is_ensemble else "the model")
         self.steps = nn.ModuleList(_MemberStep(m) for m in members)
         self.spread_scale = float(getattr(model, "spread_scale", 1.0))
         self.state_size = sum(s.state_size for s in self.steps)

@@ -34,7 +34,7 @@ from scipy import special
 from torch import nn
 
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
-from gyrodenoise.models.denoiser import ACTIVATIONS, CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser, check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.stream_clock import StreamClock
 
@@ -171,6 +171,7 @@ class StreamingCorrector:
         """One member's input normalisation, C_hat and layers (batch norm folded), in float64."""
         self.np_dtype = np.dtype(dtype)
         self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
+        check_stream_form(model)
         model = copy.deepcopy(model).cpu()  # read the weights without moving the caller's model
         self.C_hat = model.C_hat.detach().double().numpy()
         self.mean = model.mean.detach().double().numpy()
@@ -178,15 +179,13 @@ class StreamingCorrector:
         if isinstance(model, DilatedCNNDenoiser):
             self.layers, self.head_w, self.head_b = _fold(model)
             self.constant = np.zeros(3)
-        elif isinstance(model, CalibratedImu):
+        else:  # CalibratedImu
             self.layers, self.head_w, self.head_b = [], np.zeros((3, 6)), np.zeros(3)
             self.constant = model.bias.detach().double().numpy()
             if model.G is not None:  # G a = (G diag(std_a)) h_a + G mean_a on the normalised input h
                 G = model.G.detach().double().numpy()
                 self.head_w[:, 3:] = G * self.std[3:]
                 self.constant = self.constant + G @ self.mean[3:]
-        else:
-            raise TypeError(f"no streaming implementation for {type(model).__name__}")
         self.receptive_field = 1 + sum(ly.span - 1 for ly in self.layers)
 
     @classmethod

@@ -35,6 +35,7 @@ from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.paths import invoked_command, portable_path, portable_tree
 from gyrodenoise.pretrained import save_model
@@ -85,6 +86,9 @@ def format_test_table(test: dict[str, float], calibrated: dict[str, float] | Non
             cal = calibrated.get(n, math.nan) if n else sum(calibrated.values()) / len(calibrated)
             rows[-1].append(f"{cal:.2f}")
     return markdown_table(header, rows)
+
+
+CAUSAL_TOL_RAD_S = 1e-6  # float32 rounding; a causal model's earlier outputs do not move at all
 
 
 def wants_calibrated_baseline(cfg: DictConfig) -> bool:
@@ -140,11 +144,23 @@ def build_module(cfg: DictConfig) -> DenoiserModule:
     (`select`, `optim.scheduler.name`, `model.act`, ...) ends the command before the fit, in one line."""
     if cfg.select not in ("last", "best_val"):
         raise ConfigError(f"select={cfg.select!r}: choose 'last' (final weights) or 'best_val'")
+    data_inc, loss_inc = cfg.dataset.get("increments"), cfg.get("loss", {}).get("increments")
+    if data_inc is not None and loss_inc is not None and list(data_inc) != list(loss_inc):
+        raise ConfigError(
+            f"dataset.increments={list(data_inc)} differs from loss.increments={list(loss_inc)}: set loss.increments "
+            "(the dataset follows it)"
+        )
     try:
         module = DenoiserModule.from_config(cfg)
         module.configure_optimizers()
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    rf, window = int(getattr(module.model, "receptive_field", 1)), cfg.dataset.get("window")
+    if window is not None and window < rf:
+        print(
+            f"warning: dataset.window={window} samples is shorter than the model's receptive field ({rf} samples): "
+            "every training output sees the padded start of its crop; give a window of several receptive fields"
+        )
     return module
 
 
@@ -243,6 +259,13 @@ def train(cfg: DictConfig) -> dict:
         )
     elif cfg.select == "last" and best_path and cfg.get("test_other_rule"):
         alternative = DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
+    leak = causality_leak(module.model) if cfg.model.name == "custom" else None
+    if leak is not None and leak > CAUSAL_TOL_RAD_S:
+        print(
+            f"warning: the model is not causal: its outputs change by up to {leak:.2e} rad/s when only later samples "
+            "change (models.build.causality_leak). Its figures are optimistic and it cannot run onboard; check "
+            "padding, centred convolutions and normalisations over time in its correction"
+        )
     steps = ["validation", *(["test"] if cfg.get("test") else [])]
     baseline = wants_calibrated_baseline(cfg)
     print(f"scoring on {' and '.join(steps)}{', then the calibrated baseline' if baseline else ''} (seconds)")
@@ -273,6 +296,8 @@ def train(cfg: DictConfig) -> dict:
         "val": val,
         "test": test,
     }
+    if leak is not None:
+        summary["causality_leak_rad_s"] = leak
     if safety:
         summary["calibrated_baseline"] = safety
     if test_other:
@@ -290,6 +315,7 @@ def train(cfg: DictConfig) -> dict:
             "train_wall_time_s": wall_s,
             "machine": summary["machine"],
             "command": summary["command"],
+            **({"causal": leak <= CAUSAL_TOL_RAD_S} if leak is not None else {}),
             **{k: safety[k] for k in ("beats_calibrated", "calibrated_val_aoe_deg", "calibrated_model") if k in safety},
         },
     )

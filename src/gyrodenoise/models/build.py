@@ -1,20 +1,35 @@
 """Models from plain config values: the one place that knows every model kind (single networks in
-denoiser.py, ensembles of them in ensemble.py), so that neither of those imports the other back."""
+denoiser.py, ensembles of them in ensemble.py, a user's own class), so that neither of those imports the other
+back."""
 
 from __future__ import annotations
 
+import importlib
+import inspect
+
+import torch
 from torch import nn
 
-from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
+
+KINDS = ("denoiser", "calibrated", "ensemble", "custom")
+CUSTOM_CONTRACT = (
+    "a custom model is a subclass of gyrodenoise.models.GyroCorrection whose correction(imu) maps raw IMU (B, N, 6) "
+    "to a causal gyro correction (B, N, 3) in rad/s (output n from samples <= n) and that sets "
+    "self.receptive_field, the number of past samples an output depends on (README, 'Your own network')"
+)
 
 
 def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
     """Build a model from plain config values (what checkpoints and shipped weights store).
 
     name="ensemble" takes `members`, a list of such configs, and optionally `spread_scale` (see
-    models/ensemble.py).
+    models/ensemble.py). name="custom" takes `_target_`, the import path of a user's GyroCorrection subclass, and
+    that class's own arguments.
     """
+    if "_target_" in kwargs and name != "custom":
+        raise ValueError(f"model._target_ is given with model.name={name!r}: a user's own class needs name: custom")
     if name == "ensemble":
         members = kwargs.pop("members", None)
         spread_scale = kwargs.pop("spread_scale", 1.0)
@@ -24,9 +39,67 @@ def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
             )
         return EnsembleCorrection([build_model(**dict(cfg)) for cfg in members], spread_scale)
     if name == "denoiser":
-        return DilatedCNNDenoiser(**kwargs)
+        return _construct(DilatedCNNDenoiser, "denoiser", kwargs)
     if name == "calibrated":
-        if set(kwargs) - {"g_sensitivity"}:
-            raise ValueError(f"the calibrated model takes only `g_sensitivity`, got {sorted(kwargs)}")
-        return CalibratedImu(**kwargs)
-    raise ValueError(f"model.name={name!r}; choose 'denoiser', 'calibrated' or 'ensemble'")
+        return _construct(CalibratedImu, "calibrated", kwargs)
+    if name == "custom":
+        return _custom(**kwargs)
+    raise ValueError(f"model.name={name!r}; choose one of {', '.join(repr(k) for k in KINDS)}")
+
+
+def _construct(cls: type, kind: str, kwargs: dict) -> nn.Module:
+    """cls(**kwargs), a key the class does not take named with the ones it does (not a TypeError traceback)."""
+    params = inspect.signature(cls.__init__).parameters
+    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    known = [p for p in params if p != "self" and params[p].kind is not inspect.Parameter.VAR_KEYWORD]
+    if not takes_any and (unknown := sorted(set(kwargs) - set(known))):
+        raise ValueError(
+            f"model.{unknown[0]} is not a parameter of the {kind} model ({cls.__module__}.{cls.__qualname__}); "
+            f"it takes {', '.join(known) or 'none'}"
+        )
+    return cls(**kwargs)
+
+
+def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
+    if not _target_ or "." not in str(_target_):
+        raise ValueError(
+            f"model.name=custom needs model._target_, the class's import path (e.g. mynets.MyNet); {CUSTOM_CONTRACT}"
+        )
+    module_name, _, cls_name = str(_target_).rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module_name), cls_name)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(
+            f"model._target_={_target_}: cannot import it ({e}). The module must be importable where the command runs "
+            "(installed, or its folder on PYTHONPATH), also later for evaluate, correct and export"
+        ) from None
+    if not (isinstance(cls, type) and issubclass(cls, GyroCorrection)):
+        raise ValueError(f"model._target_={_target_} is not a GyroCorrection subclass: {CUSTOM_CONTRACT}")
+    model = _construct(cls, "custom", kwargs)
+    rf = getattr(model, "receptive_field", None)
+    if isinstance(rf, bool) or not isinstance(rf, int) or rf < 1:
+        raise ValueError(
+            f"model._target_={_target_}: receptive_field={rf!r}; set it in __init__ to a positive int (for a recurrent "
+            f"network, a bound on its memory in samples): {CUSTOM_CONTRACT}"
+        )
+    return model
+
+
+@torch.no_grad()
+def causality_leak(model: nn.Module, n: int | None = None, seed: int = 0) -> float:
+    """Max |change| (rad/s) of the outputs up to the middle of a random input when only the samples after the middle
+    change: 0, to float rounding, for a causal model. A model that reads the future (a centred convolution, a norm
+    over time) scores its test optimistically and cannot run onboard; built-in models are causal by construction."""
+    rf = int(getattr(model, "receptive_field", 1))
+    n = n or max(4 * rf, 1000)
+    gen = torch.Generator().manual_seed(seed)
+    mean, std = model.mean.detach().cpu(), model.std.detach().cpu()
+    x = mean + std * torch.randn(1, n, 6, generator=gen)
+    y = x.clone()
+    y[:, n // 2 :] = mean + std * torch.randn(1, n - n // 2, 6, generator=gen)
+    was_training = model.training
+    model.eval()
+    device = next(model.buffers()).device
+    a, b = model(x.to(device)), model(y.to(device))
+    model.train(was_training)
+    return float((a[:, : n // 2] - b[:, : n // 2]).abs().max())

@@ -8,6 +8,7 @@ the weights (checkpoints, shipped models, exported graphs).
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 import torch
@@ -78,6 +79,14 @@ class DilatedCNNDenoiser(GyroCorrection):
             raise ValueError(f"channels {list(channels)} and dilations {list(dilations)} differ in length")
         if act not in ACTIVATIONS:
             raise ValueError(f"model.act={act!r}; choose one of {sorted(ACTIVATIONS)}")
+        for key, given in (("channels", channels), ("dilations", dilations), ("kernel_size", kernel_size)):
+            values = [given] if key == "kernel_size" else list(given)
+            if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1 for v in values):
+                raise ValueError(f"model.{key}={given!r}: give positive integers")
+        if not isinstance(batch_norm, bool):  # the string "false" from a command line would be true
+            raise ValueError(f"model.batch_norm={batch_norm!r}; give true or false")
+        if not 0 <= dropout < 1:
+            raise ValueError(f"model.dropout={dropout!r}; give a probability in [0, 1)")
         layers: list[nn.Module] = []
         c_in = 6
         for c, d in zip(channels, dilations, strict=True):
@@ -120,6 +129,18 @@ class CalibratedImu(GyroCorrection):
         if self.G is None:
             return self.bias.expand(*imu.shape[:-1], 3)
         return self.bias + imu[..., 3:] @ self.G.T
+
+
+def check_stream_form(model: nn.Module, what: str = "the model") -> None:
+    """Refuse a model the streaming corrector and the stateful export cannot reproduce: they rebuild exactly the
+    built-in denoiser's and calibrated model's arithmetic, so a subclass (whose `correction` may be another function)
+    or a user's own class would stream something else without an error."""
+    if type(model) not in (DilatedCNNDenoiser, CalibratedImu):
+        raise ValueError(
+            f"{what} ({type(model).__module__}.{type(model).__qualname__}) has no streaming form: the streaming "
+            "corrector and the stateful ONNX graph implement the built-in denoiser and calibrated models only. Use "
+            "the batch path (correct --engine batch; export without --stateful; predict_gyro on a window)"
+        )
 
 
 @torch.no_grad()

@@ -1,0 +1,137 @@
+"""A user's own network (model=custom): trained, saved, loaded and evaluated by the framework's tools, and refused
+clearly where a tool cannot reproduce it (streaming, stateful export) or where it breaks the contract."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import nn
+
+from gyrodenoise.config import compose_config
+from gyrodenoise.models import DilatedCNNDenoiser, GyroCorrection, build_model
+from gyrodenoise.models.build import causality_leak
+from gyrodenoise.pretrained import ModelFileError, load_model
+from gyrodenoise.streaming import StreamingCorrector
+from gyrodenoise.train import train
+
+
+class PastMean(GyroCorrection):
+    """Causal: a linear map of the mean IMU over the last `k` samples."""
+
+    def __init__(self, k: int = 8) -> None:
+        super().__init__()
+        self.k = k
+        self.lin = nn.Linear(6, 3)
+        self.receptive_field = k
+
+    def correction(self, imu: torch.Tensor) -> torch.Tensor:
+        x = (imu - self.mean) / self.std
+        x = nn.functional.pad(x.transpose(1, 2), (self.k - 1, 0), mode="replicate")
+        return 0.01 * self.lin(nn.functional.avg_pool1d(x, self.k, stride=1).transpose(1, 2))
+
+
+class CentredMean(PastMean):
+    """Not causal: the same mean over a window centred on the sample."""
+
+    def correction(self, imu: torch.Tensor) -> torch.Tensor:
+        x = (imu - self.mean) / self.std
+        x = nn.functional.pad(x.transpose(1, 2), (self.k // 2, self.k - 1 - self.k // 2), mode="replicate")
+        return 0.01 * self.lin(nn.functional.avg_pool1d(x, self.k, stride=1).transpose(1, 2))
+
+
+class NoReceptiveField(GyroCorrection):
+    def correction(self, imu: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(*imu.shape[:-1], 3)
+
+
+class Squashed(DilatedCNNDenoiser):
+    """A subclass of the built-in network whose correction is another function."""
+
+    def correction(self, imu: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(super().correction(imu))
+
+
+def custom_config(root, out, target: str, *extra: str):
+    return compose_config(
+        "train",
+        [
+            "dataset=euroc",
+            f"dataset.root={root}",
+            "dataset.train_seqs=[a,b]",
+            "dataset.test_seqs=[c]",
+            "dataset.train_duration_s=4",
+            "dataset.window=256",
+            "dataset.gt_files={}",
+            "dataset.eval_gt_variants={}",
+            "model=custom",
+            f"model._target_={target}",
+            "trainer.max_epochs=2",
+            "trainer.accelerator=cpu",
+            "optim.scheduler.T_0=2",
+            "logger=none",
+            f"paths.output_dir={out}",
+            *extra,
+        ],
+    )
+
+
+def test_a_custom_model_trains_loads_and_is_refused_by_streaming(tiny_asl_root, tmp_path):
+    summary = train(custom_config(tiny_asl_root, tmp_path / "run", f"{__name__}.PastMean", "+model.k=5"))
+    assert summary["causality_leak_rad_s"] == 0.0
+    model, meta = load_model(tmp_path / "run" / "model.pt")
+    assert isinstance(model, PastMean) and model.k == 5 and meta["causal"] is True
+    assert meta["model"]["_target_"] == f"{__name__}.PastMean"
+    with pytest.raises(ValueError, match="PastMean\\) has no streaming form"):
+        StreamingCorrector(model)
+
+
+def test_a_model_that_reads_the_future_is_named_so(tiny_asl_root, tmp_path, capsys):
+    summary = train(custom_config(tiny_asl_root, tmp_path / "run", f"{__name__}.CentredMean", "+model.k=9"))
+    assert summary["causality_leak_rad_s"] > 1e-6
+    assert "warning: the model is not causal" in capsys.readouterr().out
+    assert load_model(tmp_path / "run" / "model.pt")[1]["causal"] is False
+
+
+def test_causality_leak_is_zero_for_the_built_in_network():
+    torch.manual_seed(0)
+    net = build_model("denoiser", channels=[4, 8], dilations=[1, 2])
+    nn.init.normal_(net.net[-1].weight)
+    assert causality_leak(net) == 0.0
+
+
+def test_the_contract_is_checked_with_a_message_that_says_it():
+    with pytest.raises(ValueError, match="receptive_field=None; set it in __init__"):
+        build_model("custom", _target_=f"{__name__}.NoReceptiveField")
+    with pytest.raises(ValueError, match="not a GyroCorrection subclass"):
+        build_model("custom", _target_="torch.nn.Linear")
+    with pytest.raises(ValueError, match="cannot import it .*PYTHONPATH"):
+        build_model("custom", _target_="no_such_module_here.Net")
+    with pytest.raises(ValueError, match="model.kk is not a parameter of the custom model .*it takes k"):
+        build_model("custom", _target_=f"{__name__}.PastMean", kk=3)
+    with pytest.raises(ValueError, match="needs name: custom"):
+        build_model("denoiser", _target_=f"{__name__}.PastMean")
+
+
+def test_a_model_file_whose_class_cannot_be_imported_names_the_file(tmp_path):
+    from gyrodenoise.pretrained import save_model
+
+    path = save_model(PastMean(3), {"name": "custom", "_target_": f"{__name__}.PastMean", "k": 3}, tmp_path / "m.pt")
+    blob = torch.load(path, weights_only=True)
+    blob["model"]["_target_"] = "gone_module.PastMean"
+    torch.save(blob, path)
+    with pytest.raises(ModelFileError, match="m.pt: this gyrodenoise cannot build the model it holds: .*gone_module"):
+        load_model(path)
+
+
+def test_a_subclass_of_the_built_in_network_is_not_streamed_as_its_parent():
+    with pytest.raises(ValueError, match="Squashed\\) has no streaming form"):
+        StreamingCorrector(Squashed(channels=(4, 8), dilations=(1, 2)))
+
+
+def test_bad_shapes_and_flags_of_the_built_in_network_are_named():
+    with pytest.raises(ValueError, match=r"model.dilations=\[1, 0\]: give positive integers"):
+        build_model("denoiser", channels=[4, 8], dilations=[1, 0])
+    with pytest.raises(ValueError, match="model.batch_norm='no'; give true or false"):
+        build_model("denoiser", batch_norm="no")
+    with pytest.raises(ValueError, match="model.foo is not a parameter of the denoiser model"):
+        build_model("denoiser", foo=1)
