@@ -91,6 +91,19 @@ def test_cli(tiny, tmp_path, capsys):
     assert "gravity included" in props["gyrodenoise.accelerometer"] and props["gyrodenoise.exported_by"]
 
 
+def test_a_graph_that_does_not_reproduce_the_model_is_removed(tiny, tmp_path, capsys, monkeypatch):
+    pytest.importorskip("onnxscript")
+    pytest.importorskip("onnxruntime")
+    import gyrodenoise.export as export
+
+    model_file = save_model(tiny, {"name": "denoiser", **TINY}, tmp_path / "tiny.pt", {"rate_hz": 200.0})
+    monkeypatch.setattr(export, "onnx_parity", lambda model, path: 1e-2)  # as a graph traced wrong would score
+    assert main([str(model_file), "--onnx", str(tmp_path / "out.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert "does not reproduce the model (max |diff| 1.00e-02 rad/s > 0.0001" in err
+    assert not (tmp_path / "out.onnx").exists()
+
+
 def test_cli_error_is_one_line(tmp_path, capsys):
     # a model that is not there: `error: ...` naming it and status 2, not a traceback
     assert main([str(tmp_path / "missing.pt"), "--onnx", str(tmp_path / "out.onnx")]) == 2

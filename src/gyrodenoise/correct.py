@@ -136,7 +136,8 @@ def correct_recording(
     initial: str = "identity",
 ) -> Correction:
     rate = model_rate(meta)
-    rec, report, need_resample = run_checks(rec, rate, resample_to_model, drop_duplicates, force)
+    memory = int(getattr(model, "receptive_field", 1)) > 1  # a calibrated model corrects each sample alone
+    rec, report, need_resample = run_checks(rec, rate, resample_to_model, drop_duplicates, force, rate_matters=memory)
     if need_resample:
         rec = resample(rec, rate)
     gyro, std = correct_gyro(model, rec.imu, engine)

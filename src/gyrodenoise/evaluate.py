@@ -49,6 +49,7 @@ from gyrodenoise.pretrained import (
     load_model,
     not_better_warning,
     other_imu_warning,
+    other_rate_warning,
     training_overlap_warning,
 )
 from gyrodenoise.provenance import machine_description
@@ -181,6 +182,15 @@ def evaluate(cfg: DictConfig) -> dict:
     model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
     model_warnings += [
         w for w in (other_imu_warning(m, dm.name, dm.sensor) for m in (proposed_meta, calibrated_meta)) if w
+    ]
+    rates = {seq.name: seq.rate_hz for seq in sequences.values()}
+    model_warnings += [
+        w
+        for w in (
+            other_rate_warning(proposed, proposed_meta, rates),
+            other_rate_warning(calibrated, calibrated_meta, rates),
+        )
+        if w
     ]
     warned = [w for w in (proposed_warning, calibrated_warning, *model_warnings, *data_warnings) if w]
     for w in model_warnings:

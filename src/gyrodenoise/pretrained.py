@@ -18,6 +18,7 @@ from pathlib import Path
 import torch
 
 from gyrodenoise.atomic import atomic_path
+from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.models.build import build_model
 from gyrodenoise.models.ensemble import CorrectionModel
 from gyrodenoise.paths import portable_path
@@ -127,6 +128,7 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
         raise ModelFileError(f"{path}: this gyrodenoise cannot build the model it holds: {e}") from None
     model.load_state_dict(state)
     model.eval()
+    model.training_rate_hz = model_rate(meta)  # the streaming corrector checks stamps against it (None: unknown)
     # the name reports use: the shipped name, else the name the file records (ensembles), else its path
     name = Path(path).stem if is_shipped(path) else meta.get("name") or portable_path(path)
     return model, {"model": cfg, **meta, "path": str(path), "name": name}
@@ -209,11 +211,30 @@ def other_imu_warning(meta: dict, dataset: str, sensor: dict | None = None) -> s
     if not trained or trained == dataset:
         return None
     model_sensor, data_sensor = (meta.get("sensor") or {}).get("model"), (sensor or {}).get("model")
-    if model_sensor and model_sensor == data_sensor:
+    if model_sensor and model_sensor == data_sensor and model_sensor != "unknown":  # asl_folder's placeholder
         return None
     imu = f" ({model_sensor})" if model_sensor else ""
     name = meta.get("name", meta.get("path", "this model"))
     return (
         f"model {name} was trained on {trained}{imu}, not on {dataset}: it learned the errors of another IMU, so "
         f"its figures here say little about the method (train one on {dataset}, or pass weights.proposed=...)."
+    )
+
+
+def other_rate_warning(model: CorrectionModel, meta: dict, rates: dict[str, float]) -> str | None:
+    """The warning for scoring a model with memory on sequences sampled at another rate than it was trained at
+    (more than checks.RATE_TOL apart): its convolutions span a fixed number of samples. `rates`: name -> Hz. A
+    memoryless model (the calibrated one) does not depend on the rate; an unknown training rate cannot be checked."""
+    trained = model_rate(meta)
+    if not trained or int(getattr(model, "receptive_field", 1)) <= 1:
+        return None
+    off = {n: r for n, r in rates.items() if abs(r / trained - 1.0) > RATE_TOL}
+    if not off:
+        return None
+    name = meta.get("name", meta.get("path", "this model"))
+    listed = ", ".join(f"{n} {r:.4g} Hz" for n, r in off.items())
+    return (
+        f"model {name} was trained at {trained:.4g} Hz but {listed}: its convolutions span a fixed number of samples, "
+        "so it sees another time window and noise level there. Resample the data to the training rate, or train a "
+        "model at this rate."
     )

@@ -19,6 +19,9 @@ RATE_WINDOW = 400  # steps (2 s at 200 Hz) averaged before the rate is compared 
 # a step longer than this many periods is a gap: halfway between two and three periods, so that two missing samples
 # are refused whatever the IMU's rate (at 3.0 they fell either side with a rate 0.3% off); one missing sample passes
 STREAM_GAP_FACTOR = 2.5
+# a step shorter than this many periods is refused: a stream at twice the model's rate steps exactly half a period
+# (0.5 let it through on the boundary), while a jittery driver's early sample (up to 40 % early) still passes
+STREAM_FAST_FACTOR = 0.6
 UNITS_HINT = "t_ns must be integer nanoseconds (seconds: int(round(t_s * 1e9)))"
 
 
@@ -57,7 +60,7 @@ class StreamClock:
         period = self.period_ns
         if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
             step = int(t_ns) - self.last_ns  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
-            lo, hi = (1, np.inf) if period is None else (0.5 * period, self.gap_factor * period)
+            lo, hi = (1, np.inf) if period is None else (STREAM_FAST_FACTOR * period, self.gap_factor * period)
             if lo <= step <= hi:
                 return int(t_ns)
         t = np.atleast_1d(np.asarray(t_ns))
@@ -72,7 +75,7 @@ class StreamClock:
         offset = 0 if self.last_ns is None else 1  # steps[k] ends at sample k + 1 - offset of this call
 
         def where(k: int) -> str:
-            return f"sample {k + 1 - offset} of this call"
+            return "this sample" if n == 1 else f"sample {k + 1 - offset} of this call"
 
         if (steps <= 0).any():
             k = int(np.argmax(steps <= 0))
@@ -81,12 +84,14 @@ class StreamClock:
                 f"repeated or late samples before pushing (the state is unchanged); {UNITS_HINT}"
             )
         at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
-        if self.rate_hz and (steps < 0.5 * period).any():
-            k = int(np.argmax(steps < 0.5 * period))
+        if self.rate_hz and (steps < STREAM_FAST_FACTOR * period).any():
+            k = int(np.argmax(steps < STREAM_FAST_FACTOR * period))
+            looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if steps[k] > 1e9 / 20_000 else ""
             raise StreamTimeError(
-                f"{where(k)} comes {steps[k]} ns after the previous one, under half the model's period "
-                f"({period * 1e-6:.3f} ms{at}): {UNITS_HINT} (micro- or milliseconds look like this), or the stream "
-                "is faster than the model's rate: resample it (the state is unchanged)"
+                f"{where(k)} comes {steps[k] * 1e-6:.4g} ms after the previous one, under {STREAM_FAST_FACTOR:g} of "
+                f"the model's period ({period * 1e-6:.3f} ms{at}){looks}: the stream is faster than the model's rate "
+                f"(resample it), or its stamps are not ns ({UNITS_HINT}; micro- or milliseconds look like this). The "
+                "state is unchanged"
             )
         period = period or (float(np.median(steps)) if steps.size else None)
         if period is not None and (steps > self.gap_factor * period).any():

@@ -147,7 +147,8 @@ class StreamingCorrector:
 
     backend: "numpy" (fastest for single samples) or "torch". dtype: float32 (as the batch model
     runs) or float64. Outputs are float64 rad/s. rate_hz: the model's training rate, against which
-    the timestamps given to `push`/`push_chunk` (optional, int ns) are checked; `load` sets it.
+    the timestamps given to `push`/`push_chunk` (optional, int ns) are checked; by default the rate a model from
+    `gyrodenoise.pretrained.load_model` records (`load` sets it too).
     """
 
     def __init__(
@@ -164,6 +165,8 @@ class StreamingCorrector:
         else:
             self._read_weights(model, dtype)
             self._prepare()
+        if rate_hz is None:  # a model from load_model knows the rate its file records
+            rate_hz = getattr(model, "training_rate_hz", None)
         self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)  # a memoryless model is blind to gaps
         self.reset()
 

@@ -222,8 +222,13 @@ def check_acc_at_rest(rec: ImuRecording, report: CheckReport, force: bool = Fals
     )
 
 
-def check_rate(rec: ImuRecording, model_rate_hz: float | None, report: CheckReport, resample: bool) -> bool:
-    """True when the recording should be resampled to the model's rate."""
+def check_rate(
+    rec: ImuRecording, model_rate_hz: float | None, report: CheckReport, resample: bool, rate_matters: bool = True
+) -> bool:
+    """True when the recording should be resampled to the model's rate. rate_matters=False: a model without memory
+    (the calibrated one) corrects each sample alone, so another rate is no reason to warn or resample."""
+    if not rate_matters:
+        return bool(resample and model_rate_hz)
     if not model_rate_hz:
         report.warn(f"the model does not record its training rate; cannot compare with {report.rate_hz:.4g} Hz.")
         return False
@@ -248,8 +253,10 @@ def run_checks(
     resample: bool = False,
     drop_duplicates: bool = False,
     force: bool = False,
+    rate_matters: bool = True,
 ) -> tuple[ImuRecording, CheckReport, bool]:
-    """All checks in order. Returns (recording, possibly deduplicated; report; resample needed)."""
+    """All checks in order. Returns (recording, possibly deduplicated; report; resample needed). rate_matters:
+    see `check_rate`."""
     report = CheckReport()
     rec = check_time_order(rec, drop_duplicates, report)
     check_time_unit(rec, report)
@@ -266,7 +273,7 @@ def run_checks(
     if problems:
         raise SanityCheckError(f"{len(problems)} problems:\n" + "\n".join(f"- {p}" for p in problems))
     check_saturation(rec, report)
-    return rec, report, check_rate(rec, model_rate_hz, report, resample)
+    return rec, report, check_rate(rec, model_rate_hz, report, resample, rate_matters)
 
 
 def _fail_or_warn(report: CheckReport, force: bool, msg: str) -> None:

@@ -28,6 +28,7 @@ from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
+from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
 
 
@@ -157,6 +158,7 @@ class ImuDataModule(L.LightningDataModule):
         self.augment = self._augment_config(self.sensor.get("rate_hz", 200.0))
         self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
         self.train_part: list[Sequence] = []
+        self._rates_warned: set[str] = set()  # sequences whose rate was compared with the training data's
         self.val_part: list[Sequence] = []
         self.val_groups: list[str] = []  # metric group of each validation sequence
         self.part_origin: dict[str, tuple[str, float]] = {}  # validation part name -> (sequence, start in s)
@@ -257,6 +259,30 @@ class ImuDataModule(L.LightningDataModule):
                     self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
+        self._check_rates()
+
+    def _check_rates(self) -> None:
+        """One model, one rate: the network's convolutions and increments count samples. Training sequences more
+        than RATE_TOL apart stop the run; a validation or test sequence at another rate than the training data warns
+        (once), since its figures then measure the model off its rate."""
+        if not self.train_part:
+            return
+        rates = {s.name: s.rate_hz for s in self.train_part}
+        if max(rates.values()) / min(rates.values()) - 1.0 > RATE_TOL:
+            listed = ", ".join(f"{n} {r:.4g} Hz" for n, r in rates.items())
+            raise ConfigError(
+                f"the training sequences sample at different rates ({listed}): one model learns one rate, since its "
+                "convolutions and loss increments count samples. Resample them to one rate, or train a model per rate."
+            )
+        checked = self._rates_warned
+        for seq in [*self.val_part, *self.test_part]:
+            if seq.name not in checked and abs(seq.rate_hz / self.rate_hz - 1.0) > RATE_TOL:
+                warnings.warn(
+                    f"{seq.name} samples at {seq.rate_hz:.4g} Hz, the training data at {self.rate_hz:.4g} Hz: its "
+                    "figures measure the model off its rate (resample it, or train at its rate)",
+                    stacklevel=1,
+                )
+            checked.add(seq.name)
 
     def normalization(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-channel mean and std of the training IMU data (never validation or test)."""
@@ -279,7 +305,7 @@ class ImuDataModule(L.LightningDataModule):
                 warnings.warn(
                     f"dataset.sensor.rate_hz={nominal:g}, but the training data sample at {measured:.1f} Hz: the "
                     f"augmentation noise uses {measured:.1f} Hz. Set dataset.sensor.rate_hz to your IMU's rate.",
-                    stacklevel=2,
+                    stacklevel=1,  # this module, not Lightning's caller
                 )
             self.augment = self._augment_config(measured)
         ds = RandomCrops(self.train_part, self.window, self.step, self.block, self.crops_per_epoch, self.augment)

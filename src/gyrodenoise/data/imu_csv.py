@@ -253,13 +253,21 @@ def asl_text(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> str:
 
 
 def resample(rec: ImuRecording, rate_hz: float) -> ImuRecording:
-    """Linear interpolation of gyro and acc onto a uniform grid at `rate_hz` over the recording's span."""
+    """Gyro and acc on a uniform grid at `rate_hz` over the recording's span.
+
+    Downsampling averages each signal over the output period around each new stamp (the difference of its
+    cumulative integral): a box filter against aliasing that keeps the integrated angle, where point interpolation
+    kept all the noise above the new Nyquist (1 kHz white noise to 200 Hz: sqrt(5) times the noise of a filtered
+    decimation). Upsampling, or a rate within 5 %, interpolates linearly."""
     period_ns = 1e9 / rate_hz
     n = int((rec.t_ns[-1] - rec.t_ns[0]) // period_ns) + 1
     t_ns = rec.t_ns[0] + np.round(np.arange(n) * period_ns).astype(np.int64)
     t_old = (rec.t_ns - rec.t_ns[0]) * 1e-9  # float64 seconds relative to the start (sub-ns exact)
     t_new = (t_ns - rec.t_ns[0]) * 1e-9
-    interp = lambda x: np.stack([np.interp(t_new, t_old, x[:, k]) for k in range(3)], axis=1)  # noqa: E731
+    if len(t_old) > 1 and np.median(np.diff(t_old)) < 0.95 * period_ns * 1e-9:
+        interp = lambda x: _box_average(t_old, x, t_new, period_ns * 1e-9)  # noqa: E731
+    else:
+        interp = lambda x: np.stack([np.interp(t_new, t_old, x[:, k]) for k in range(3)], axis=1)  # noqa: E731
     return ImuRecording(
         t_ns=t_ns,
         gyro=interp(rec.gyro),
@@ -269,3 +277,20 @@ def resample(rec: ImuRecording, rate_hz: float) -> ImuRecording:
         columns=rec.columns,
         units=rec.units,
     )
+
+
+def _box_average(t_old: np.ndarray, x: np.ndarray, t_new: np.ndarray, period_s: float) -> np.ndarray:
+    """Mean of x (N, 3), linear between its stamps t_old (s), over [t - period/2, t + period/2] around each of t_new,
+    clipped to the recording's span."""
+    steps = np.diff(t_old)[:, None]
+    cum = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(0.5 * (x[1:] + x[:-1]) * steps, axis=0)])
+    lo = np.clip(t_new - period_s / 2, t_old[0], t_old[-1])
+    hi = np.clip(t_new + period_s / 2, t_old[0], t_old[-1])
+
+    def integral(tq: np.ndarray) -> np.ndarray:  # exact for x linear between stamps: a quadratic within each step
+        k = np.clip(np.searchsorted(t_old, tq, side="right") - 1, 0, len(t_old) - 2)
+        u = (tq - t_old[k])[:, None]
+        slope = (x[k + 1] - x[k]) / steps[k]
+        return cum[k] + x[k] * u + 0.5 * slope * u**2
+
+    return (integral(hi) - integral(lo)) / (hi - lo)[:, None]
