@@ -3,6 +3,8 @@ evaluation, correction and streaming, and resampling down filters instead of ali
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from _asl import write_asl_sequence
@@ -79,3 +81,15 @@ def test_a_calibrated_model_is_not_told_to_resample(tmp_path, capsys):
     f = write_asl(tmp_path / "r100.csv", t_ns, gyro, acc)
     code, _, err = run([f, "-m", cal, "-o", tmp_path / "a"], capsys)
     assert code == 0 and "--resample" not in err
+
+
+def test_increments_shorter_than_two_truth_periods_warn(tmp_path):
+    write_asl_sequence(tmp_path / "a", seconds=6.0, seed=1)  # IMU and truth at 200 Hz
+    common = {"name": "mine", "root": str(tmp_path), "train_seqs": ["a"], "test_seqs": [], "window": 256}
+    ok = ImuDataModule(**common, increments=(2, 4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 10 ms: two truth periods, no warning
+        ok.setup("fit")
+    short = ImuDataModule(**common, increments=(1, 2))
+    with pytest.warns(UserWarning, match="shortest loss increment, 1 samples, spans 5 ms .* Lengthen loss.increments"):
+        short.setup("fit")

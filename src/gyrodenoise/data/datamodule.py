@@ -159,6 +159,7 @@ class ImuDataModule(L.LightningDataModule):
         self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
         self.train_part: list[Sequence] = []
         self._rates_warned: set[str] = set()  # sequences whose rate was compared with the training data's
+        self._increment_checked = False  # the loss increments against the ground truth's period
         self.val_part: list[Sequence] = []
         self.val_groups: list[str] = []  # metric group of each validation sequence
         self.part_origin: dict[str, tuple[str, float]] = {}  # validation part name -> (sequence, start in s)
@@ -274,6 +275,15 @@ class ImuDataModule(L.LightningDataModule):
                 f"the training sequences sample at different rates ({listed}): one model learns one rate, since its "
                 "convolutions and loss increments count samples. Resample them to one rate, or train a model per rate."
             )
+        gt_period = max(float(s.meta.get("gt_period_s") or 0.0) for s in self.train_part)
+        if not self._increment_checked and self.step / self.rate_hz < 2 * gt_period:
+            warnings.warn(
+                f"the shortest loss increment, {self.step} samples, spans {1e3 * self.step / self.rate_hz:.3g} ms at "
+                f"{self.rate_hz:.4g} Hz, under two periods of the ground truth ({1e3 * gt_period:.3g} ms): the loss "
+                "then mostly fits the truth's noise and interpolation. Lengthen loss.increments (powers of two)",
+                stacklevel=1,
+            )
+        self._increment_checked = True
         checked = self._rates_warned
         for seq in [*self.val_part, *self.test_part]:
             if seq.name not in checked and abs(seq.rate_hz / self.rate_hz - 1.0) > RATE_TOL:
