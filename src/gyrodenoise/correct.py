@@ -173,7 +173,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--time-unit", choices=list(TIME_UNITS), default="ns")
     ap.add_argument("--gyro-unit", choices=list(GYRO_UNITS), default="rad/s")
     ap.add_argument("--acc-unit", choices=list(ACC_UNITS), default="m/s^2")
-    ap.add_argument("--resample", action="store_true", help="resample to the model's training rate when it differs")
+    ap.add_argument(
+        "--resample",
+        action="store_true",
+        help="resample to the model's training rate when it differs (down: averaged over each new period, "
+        "against aliasing; up: linear interpolation)",
+    )
     ap.add_argument("--drop-duplicates", action="store_true", help="keep the first sample of duplicated stamps")
     ap.add_argument("--force", action="store_true", help="unit checks warn instead of stopping")
     ap.add_argument("--engine", choices=ENGINES, default="batch", help="batch model or streaming corrector")
