@@ -274,3 +274,14 @@ def test_test_data_is_checked_before_the_fit(root, tmp_path, capsys):
     assert not (tmp_path / "badtest" / "checkpoints").exists()
     train(config(root, tmp_path / "overlap", "dataset.test_seqs=[a]", "calibrated_baseline=false"))
     assert "test sequence(s) a are also training sequences" in capsys.readouterr().out
+
+
+def test_an_unexpected_error_ends_up_in_the_run_log(tmp_path):
+    from gyrodenoise.job_log import console_to_job_log
+
+    log = tmp_path / "run" / "train.log"
+    with pytest.raises(RuntimeError, match="boom"), console_to_job_log(log):
+        print("epoch 1")
+        raise RuntimeError("boom")
+    text = log.read_text()
+    assert "epoch 1" in text and "Traceback" in text and "RuntimeError: boom" in text

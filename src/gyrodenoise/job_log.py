@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import sys
+import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -67,5 +68,8 @@ def console_to_job_log(path: Path | None = None) -> Iterator[Path | None]:
         sys.stdout, sys.stderr = _Tee(out, log), _Tee(err, log)
         try:
             yield path
+        except Exception:  # Hydra prints the traceback after this block: the log would end without it
+            log.write(traceback.format_exc())
+            raise
         finally:
             sys.stdout, sys.stderr = out, err
