@@ -93,3 +93,11 @@ def test_increments_shorter_than_two_truth_periods_warn(tmp_path):
     short = ImuDataModule(**common, increments=(1, 2))
     with pytest.warns(UserWarning, match="shortest loss increment, 1 samples, spans 5 ms .* Lengthen loss.increments"):
         short.setup("fit")
+
+
+def test_a_calibrated_model_streams_at_any_rate(tmp_path):
+    path = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "c.pt", meta={"rate_hz": 200.0})
+    sc = StreamingCorrector(load_model(path)[0])
+    imu = random_imu(3)
+    for k in range(3):  # 400 Hz: each sample is corrected alone, the rate does not matter
+        sc.push(imu[k], t_ns=k * 2_500_000)

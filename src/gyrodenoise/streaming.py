@@ -159,6 +159,8 @@ class StreamingCorrector:
         self.backend = backend
         self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
         if isinstance(model, EnsembleCorrection):
+            for k, m in enumerate(model.members):
+                check_stream_form(m, f"member {k}")
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
             self.spread_scale = model.spread_scale
             self.receptive_field = max(m.receptive_field for m in self.members)
@@ -167,7 +169,8 @@ class StreamingCorrector:
             self._prepare()
         if rate_hz is None:  # a model from load_model knows the rate its file records
             rate_hz = getattr(model, "training_rate_hz", None)
-        self.clock = StreamClock(rate_hz, gaps=self.receptive_field > 1)  # a memoryless model is blind to gaps
+        memory = self.receptive_field > 1  # a memoryless model (calibrated) is blind to gaps and to the rate
+        self.clock = StreamClock(rate_hz if memory else None, gaps=memory)
         self.reset()
 
     def _read_weights(self, model: CorrectionModel, dtype: str) -> None:

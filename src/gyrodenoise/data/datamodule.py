@@ -276,7 +276,7 @@ class ImuDataModule(L.LightningDataModule):
                 "convolutions and loss increments count samples. Resample them to one rate, or train a model per rate."
             )
         gt_period = max(float(s.meta.get("gt_period_s") or 0.0) for s in self.train_part)
-        if not self._increment_checked and self.step / self.rate_hz < 2 * gt_period:
+        if not self._increment_checked and self.step / self.rate_hz < 2 * gt_period * 0.99:  # 0.99: rates' digits
             warnings.warn(
                 f"the shortest loss increment, {self.step} samples, spans {1e3 * self.step / self.rate_hz:.3g} ms at "
                 f"{self.rate_hz:.4g} Hz, under two periods of the ground truth ({1e3 * gt_period:.3g} ms): the loss "

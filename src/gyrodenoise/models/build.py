@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import numbers
 
 import torch
 from torch import nn
@@ -52,19 +53,27 @@ def _construct(cls: type, kind: str, kwargs: dict) -> nn.Module:
     params = inspect.signature(cls.__init__).parameters
     takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
     known = [p for p in params if p != "self" and params[p].kind is not inspect.Parameter.VAR_KEYWORD]
+    where = f"the {kind} model ({cls.__module__}.{cls.__qualname__})"
     if not takes_any and (unknown := sorted(set(kwargs) - set(known))):
+        raise ValueError(f"model.{unknown[0]} is not a parameter of {where}; it takes {', '.join(known) or 'none'}")
+    required = [p for p in known if params[p].default is inspect.Parameter.empty and params[p].kind not in _VAR]
+    if missing := [p for p in required if p not in kwargs]:
         raise ValueError(
-            f"model.{unknown[0]} is not a parameter of the {kind} model ({cls.__module__}.{cls.__qualname__}); "
-            f"it takes {', '.join(known) or 'none'}"
+            f"{where} needs model.{missing[0]} (required: {', '.join(required)}): add +model.{missing[0]}=..."
         )
     return cls(**kwargs)
 
 
+_VAR = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+
+
 def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
-    if not _target_ or "." not in str(_target_):
+    if not _target_ or str(_target_) == "???":
         raise ValueError(
             f"model.name=custom needs model._target_, the class's import path (e.g. mynets.MyNet); {CUSTOM_CONTRACT}"
         )
+    if "." not in str(_target_):
+        raise ValueError(f"model._target_={_target_}: give the class with its module, e.g. mynets.{_target_}")
     module_name, _, cls_name = str(_target_).rpartition(".")
     try:
         cls = getattr(importlib.import_module(module_name), cls_name)
@@ -77,19 +86,22 @@ def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
         raise ValueError(f"model._target_={_target_} is not a GyroCorrection subclass: {CUSTOM_CONTRACT}")
     model = _construct(cls, "custom", kwargs)
     rf = getattr(model, "receptive_field", None)
-    if isinstance(rf, bool) or not isinstance(rf, int) or rf < 1:
+    if isinstance(rf, bool) or not isinstance(rf, numbers.Integral) or rf < 1:
         raise ValueError(
             f"model._target_={_target_}: receptive_field={rf!r}; set it in __init__ to a positive int (for a recurrent "
             f"network, a bound on its memory in samples): {CUSTOM_CONTRACT}"
         )
+    model.receptive_field = int(rf)
     return model
 
 
 @torch.no_grad()
 def causality_leak(model: nn.Module, n: int | None = None, seed: int = 0) -> float:
-    """Max |change| (rad/s) of the outputs up to the middle of a random input when only the samples after the middle
-    change: 0, to float rounding, for a causal model. A model that reads the future (a centred convolution, a norm
-    over time) scores its test optimistically and cannot run onboard; built-in models are causal by construction."""
+    """How much the outputs up to the middle of a random input change when only the samples after the middle change,
+    relative to the outputs' size: max |change| / max(1 rad/s, max |output|). 0, to float rounding (~1e-7 in
+    float32), for a causal model; NaN when the model outputs NaN. A model that reads the future (a centred
+    convolution, a norm over time) scores its test optimistically and cannot run onboard; built-in models are causal
+    by construction."""
     rf = int(getattr(model, "receptive_field", 1))
     n = n or max(4 * rf, 1000)
     gen = torch.Generator().manual_seed(seed)
@@ -100,6 +112,6 @@ def causality_leak(model: nn.Module, n: int | None = None, seed: int = 0) -> flo
     was_training = model.training
     model.eval()
     device = next(model.buffers()).device
-    a, b = model(x.to(device)), model(y.to(device))
+    a, b = model(x.to(device))[:, : n // 2], model(y.to(device))[:, : n // 2]
     model.train(was_training)
-    return float((a[:, : n // 2] - b[:, : n // 2]).abs().max())
+    return float((a - b).abs().max() / max(1.0, float(a.abs().max())))
