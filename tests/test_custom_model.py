@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from test_train import tiny_dataset
 from torch import nn
 
 from gyrodenoise.config import compose_config
@@ -62,14 +63,7 @@ def custom_config(root, out, target: str, *extra: str):
     return compose_config(
         "train",
         [
-            "dataset=euroc",
-            f"dataset.root={root}",
-            "dataset.train_seqs=[a,b]",
-            "dataset.test_seqs=[c]",
-            "dataset.train_duration_s=4",
-            "dataset.window=256",
-            "dataset.gt_files={}",
-            "dataset.eval_gt_variants={}",
+            *tiny_dataset(root),
             "model=custom",
             f"model._target_={target}",
             "trainer.max_epochs=2",

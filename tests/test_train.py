@@ -17,8 +17,9 @@ def root(tiny_asl_root) -> Path:
     return tiny_asl_root
 
 
-def config(root: Path, out: Path, *extra: str):
-    overrides = [
+def tiny_dataset(root: Path) -> list[str]:
+    """Overrides that train on the tiny synthetic sequences a, b and test on c."""
+    return [
         "dataset=euroc",
         f"dataset.root={root}",
         "dataset.train_seqs=[a,b]",
@@ -27,6 +28,12 @@ def config(root: Path, out: Path, *extra: str):
         "dataset.window=256",
         "dataset.gt_files={}",
         "dataset.eval_gt_variants={}",
+    ]
+
+
+def config(root: Path, out: Path, *extra: str):
+    overrides = [
+        *tiny_dataset(root),
         "model.channels=[4,8]",
         "model.dilations=[1,2]",
         "trainer.max_epochs=3",

@@ -48,6 +48,9 @@ def build_model(name: str = "denoiser", **kwargs) -> nn.Module:
     raise ValueError(f"model.name={name!r}; choose one of {', '.join(repr(k) for k in KINDS)}")
 
 
+_VAR = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+
+
 def _construct(cls: type, kind: str, kwargs: dict) -> nn.Module:
     """cls(**kwargs), a key the class does not take named with the ones it does (not a TypeError traceback)."""
     params = inspect.signature(cls.__init__).parameters
@@ -62,9 +65,6 @@ def _construct(cls: type, kind: str, kwargs: dict) -> nn.Module:
             f"{where} needs model.{missing[0]} (required: {', '.join(required)}): add +model.{missing[0]}=..."
         )
     return cls(**kwargs)
-
-
-_VAR = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
 
 
 def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
@@ -91,7 +91,8 @@ def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
             f"model._target_={_target_}: receptive_field={rf!r}; set it in __init__ to a positive int (for a recurrent "
             f"network, a bound on its memory in samples): {CUSTOM_CONTRACT}"
         )
-    model.receptive_field = int(rf)
+    if type(rf) is not int:  # a numpy integer: the exporters' metadata and slices want a plain int
+        model.receptive_field = int(rf)
     return model
 
 
