@@ -33,6 +33,7 @@ from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.data.checks import CheckReport, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
 from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import load_model, model_rate, not_better_warning
@@ -202,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
         except RuntimeError as e:  # a state dict that does not fit the model's config
             raise ValueError(f"model {args.model!r} cannot be loaded by this version of gyrodenoise: {e}") from None
         if args.engine == "streaming":  # a model without a streaming form is refused before the data is read
-            StreamingCorrector(model)
+            check_stream_form(model)
         rec = read_imu_csv(path, args.columns, args.time_unit, args.gyro_unit, args.acc_unit, args.delimiter)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SanityWarning)  # printed below from the report

@@ -25,7 +25,8 @@ import copy
 import torch
 from torch import nn
 
-from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser, check_stream_form
+from gyrodenoise.models.build import check_stream_form
+from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 
 
@@ -89,11 +90,10 @@ class StatefulCorrection(nn.Module):
 
     def __init__(self, model: CorrectionModel) -> None:
         super().__init__()
+        check_stream_form(model)
         model = copy.deepcopy(model).cpu().float().eval()
         self.is_ensemble = isinstance(model, EnsembleCorrection)
         members = list(model.members) if self.is_ensemble else [model]
-        for k, m in enumerate(members):
-            check_stream_form(m, f"member {k}" if self.is_ensemble else "the model")
         self.steps = nn.ModuleList(_MemberStep(m) for m in members)
         self.spread_scale = float(getattr(model, "spread_scale", 1.0))
         self.state_size = sum(s.state_size for s in self.steps)

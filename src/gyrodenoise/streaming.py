@@ -34,7 +34,8 @@ from scipy import special
 from torch import nn
 
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
-from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser, check_stream_form
+from gyrodenoise.models.build import check_stream_form
+from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.stream_clock import StreamClock
 
@@ -157,10 +158,9 @@ class StreamingCorrector:
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r}; choose one of {BACKENDS}")
         self.backend = backend
+        check_stream_form(model)
         self.members: list[StreamingCorrector] | None = None  # an ensemble: one streaming state per member
         if isinstance(model, EnsembleCorrection):
-            for k, m in enumerate(model.members):
-                check_stream_form(m, f"member {k}")
             self.members = [StreamingCorrector(m, backend, dtype) for m in model.members]
             self.spread_scale = model.spread_scale
             self.receptive_field = max(m.receptive_field for m in self.members)
@@ -177,7 +177,6 @@ class StreamingCorrector:
         """One member's input normalisation, C_hat and layers (batch norm folded), in float64."""
         self.np_dtype = np.dtype(dtype)
         self.t_dtype = {np.dtype("float32"): torch.float32, np.dtype("float64"): torch.float64}[self.np_dtype]
-        check_stream_form(model)
         model = copy.deepcopy(model).cpu()  # read the weights without moving the caller's model
         self.C_hat = model.C_hat.detach().double().numpy()
         self.mean = model.mean.detach().double().numpy()

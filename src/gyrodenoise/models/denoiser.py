@@ -131,18 +131,6 @@ class CalibratedImu(GyroCorrection):
         return self.bias + imu[..., 3:] @ self.G.T
 
 
-def check_stream_form(model: nn.Module, what: str = "the model") -> None:
-    """Refuse a model the streaming corrector and the stateful export cannot reproduce: they rebuild exactly the
-    built-in denoiser's and calibrated model's arithmetic, so a subclass (whose `correction` may be another function)
-    or a user's own class would stream something else without an error."""
-    if type(model) not in (DilatedCNNDenoiser, CalibratedImu):
-        raise ValueError(
-            f"{what} ({type(model).__module__}.{type(model).__qualname__}) has no streaming form: the streaming "
-            "corrector and the stateful ONNX graph implement the built-in denoiser and calibrated models only. Use "
-            "the batch path (correct --engine batch; export without --stateful; predict_gyro on a window)"
-        )
-
-
 @torch.no_grad()
 def predict_gyro(model: nn.Module, imu: np.ndarray | torch.Tensor) -> torch.Tensor:
     """Corrected gyro (N, 3) float64 for one whole sequence (N, 6), in eval mode (an ensemble: the mean)."""
