@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from gyrodenoise.data.checks import RATE_TOL, SanityWarning
+from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ
 
 RATE_WINDOW = 400  # steps (2 s at 200 Hz) averaged before the rate is compared with the model's
 # a step longer than this many periods is a gap: halfway between two and three periods, so that two missing samples
@@ -86,7 +87,8 @@ class StreamClock:
         at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
         if self.rate_hz and (steps < STREAM_FAST_FACTOR * period).any():
             k = int(np.argmax(steps < STREAM_FAST_FACTOR * period))
-            looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if steps[k] > 1e9 / 20_000 else ""
+            plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
+            looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
             raise StreamTimeError(
                 f"{where(k)} comes {steps[k] * 1e-6:.4g} ms after the previous one, under {STREAM_FAST_FACTOR:g} of "
                 f"the model's period ({period * 1e-6:.3f} ms{at}){looks}: the stream is faster than the model's rate "
