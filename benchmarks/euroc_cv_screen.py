@@ -1,0 +1,153 @@
+"""The rule of a one-seed-per-fold EuRoC screen applied to its runs: each arm against ref, 6 folds.
+
+    python benchmarks/euroc_cv_screen.py nobn        # benchmarks/queues/euroc_nobn_cv.txt
+    python benchmarks/euroc_cv_screen.py acc_input   # benchmarks/queues/euroc_acc_input_cv.txt
+
+Per arm and fold k: d_k = the arm's held-out-flight AOE (seed 100+k) minus the mean of ref's three CPU runs on that
+fold (rounds 2 and 3, seeds 100+k, 200+k, 300+k). An arm is a candidate for an ensemble round only if the 95%
+t-interval of its six d_k lies below 0. The fold models' test AOE is shown for information. Writes
+benchmarks/results/<screen>.{md,json}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gyrodenoise.ablation_stats import paired_diff
+from gyrodenoise.atomic import write_json, write_text
+
+RUNS = Path("reports/accuracy_runs")
+RESULTS = Path("benchmarks/results")
+FOLDS = range(6)
+
+
+@dataclass(frozen=True)
+class Screen:
+    name: str  # runs in RUNS/name, result in RESULTS/name.{md,json}, rule in benchmarks/queues/name.txt
+    title: str
+    arms: dict[str, str]  # run-name prefix -> what the arm is
+    decision: str  # the sentence the rule adds for an arm's interval
+
+
+SCREENS = {
+    "nobn": Screen(
+        "euroc_nobn_cv",
+        "EuRoC without batch norm at the 6-fold cross-validation protocol (a screen)",
+        {"nobn": "without batch norm"},
+        "",
+    ),
+    "acc_input": Screen(
+        "euroc_acc_input_cv",
+        "EuRoC: the network's accelerometer input at the 6-fold cross-validation protocol (a screen)",
+        {"diff": "the accelerometer's first difference", "none": "no accelerometer (gyro only)"},
+        "for `none`, an interval above 0 would resolve that the accelerometer input helps (the paper's design)",
+    ),
+}
+
+
+def read(path: Path) -> dict:
+    if not path.is_file():
+        raise SystemExit(f"{path}: run not there yet")
+    s = json.loads(path.read_text())
+    return {
+        "val": s["val"]["val/aoe_deg"],
+        "test": s["test"].get("test/aoe_deg"),
+        "held_out": s["config"]["dataset"]["train_seqs"][s["config"]["dataset"]["cv_fold"]],
+        "wall_s": s.get("queue", {}).get("process_wall_time_s"),
+        "machine": s["machine"],
+    }
+
+
+def interval(d) -> str:
+    return f"{d.mean:+.2f} deg, 95% t-interval [{d.t_ci[0]:+.2f}, {d.t_ci[1]:+.2f}]"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("screen", choices=sorted(SCREENS))
+    screen = SCREENS[parser.parse_args().screen]
+    ref = {
+        k: [read(RUNS / f"euroc_cv{2 if s < 300 else 3}" / f"ref_f{k}_s{s + k}.json") for s in (100, 200, 300)]
+        for k in FOLDS
+    }
+    arms = {a: {k: read(RUNS / screen.name / f"{a}_f{k}_s{100 + k}.json") for k in FOLDS} for a in screen.arms}
+    ref_val = {str(k): float(np.mean([r["val"] for r in ref[k]])) for k in FOLDS}
+    ref_test = {str(k): float(np.mean([r["test"] for r in ref[k]])) for k in FOLDS}
+    d_val = {a: paired_diff({str(k): runs[k]["val"] for k in FOLDS}, ref_val)[0] for a, runs in arms.items()}
+    d_test = {a: paired_diff({str(k): runs[k]["test"] for k in FOLDS}, ref_test)[0] for a, runs in arms.items()}
+    candidate = {a: d_val[a].t_ci[1] < 0 for a in arms}
+    held_out = arms[next(iter(arms))]
+    members = {k: " / ".join(f"{r['val']:.2f}" for r in ref[k]) for k in FOLDS}
+    arm_cols = [f"{a} (seed 100+k) | d" for a in arms]
+    rows = [
+        f"| {k} | {held_out[k]['held_out']} | {members[k]} | {ref_val[str(k)]:.2f} | "
+        + " | ".join(f"{runs[k]['val']:.2f} | {runs[k]['val'] - ref_val[str(k)]:+.2f}" for runs in arms.values())
+        + f" | {ref_test[str(k)]:.2f} | "
+        + " | ".join(f"{runs[k]['test']:.2f}" for runs in arms.values())
+        + " |"
+        for k in FOLDS
+    ]
+    n_cols = 4 + 2 * len(arms) + 1 + len(arms)
+    walls = [r["wall_s"] for runs in arms.values() for r in runs.values() if r["wall_s"]]
+    md = [
+        f"# {screen.title}",
+        "",
+        f"Rule and runs: `benchmarks/queues/{screen.name}.txt` (written before the runs). Figures:",
+        f"`python benchmarks/euroc_cv_screen.py {parser.parse_args().screen}`. Held-out flight AOE (deg, 3D), final "
+        "weights of 600-epoch runs",
+        "trained on the first 50 s of the other five flights; ref = rounds 2-3 of reports/accuracy.md (same protocol,",
+        "2-core VM, one thread per run).",
+    ]
+    if len(arms) > 1:
+        md += ["", "Arms: " + "; ".join(f"`{a}` = {what}" for a, what in screen.arms.items()) + "."]
+    md += [
+        "",
+        "| fold | held-out flight | ref runs (seeds 100+k / 200+k / 300+k) | ref mean | "
+        + " | ".join(arm_cols)
+        + " | ref test (mean) | "
+        + " | ".join(f"{a} test" for a in arms)
+        + " |",
+        "|" + "---|" * n_cols,
+        *rows,
+        "",
+    ]
+    for a, runs in arms.items():
+        val_mean = np.mean([r["val"] for r in runs.values()])
+        md += [
+            f"- held-out figure: ref {np.mean(list(ref_val.values())):.2f}, {a} {val_mean:.2f} deg; d = {a} - ref mean "
+            f"{interval(d_val[a])} (6 folds)",
+            f"- test (information): d {d_test[a].mean:+.2f} [{d_test[a].t_ci[0]:+.2f}, {d_test[a].t_ci[1]:+.2f}]",
+            f"- decision: {a} is a candidate for an ensemble round"
+            if candidate[a]
+            else f"- decision: {a} is not a candidate: ref stays and no round follows",
+        ]
+    if screen.decision:
+        md.append(f"- the rule also says: {screen.decision}")
+    md.append(
+        f"- machine: {held_out[0]['machine']}; process wall per run {min(walls):.0f}-{max(walls):.0f} s "
+        "(two runs at once, one thread each)"
+    )
+    out = RESULTS / screen.name
+    write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
+    summary = {
+        "ref": ref,
+        **arms,
+        **{
+            key: {"mean": d[a].mean, "t_ci": list(d[a].t_ci)}
+            for a in arms
+            for key, d in ((f"d_val_{a}", d_val), (f"d_test_{a}", d_test))
+        },
+        "candidate": candidate,
+    }
+    write_json(out.with_suffix(".json"), summary)
+    print("\n".join(md))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
