@@ -21,22 +21,24 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.data.checks import CheckReport, SanityWarning, run_checks
+from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.pretrained import load_model, model_rate, not_better_warning
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_rate, not_better_warning
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.streaming import StreamingCorrector
@@ -146,6 +148,78 @@ def correct_recording(
     dt = np.diff(t, prepend=t[0])
     R = integrate_gyro(initial_rotation(initial, rec), gyro, dt)
     return Correction(rec, gyro, std, R, report, rate if need_resample else None)
+
+
+# the command line's advice in correct_arrays' terms: its checks name the options of gyrodenoise-correct
+PYTHON_ADVICE = (
+    (r"--(time|gyro|acc)-unit ([A-Za-z/^0-9]+)", r"\1_unit='\2'"),
+    (r"--force", "force=True"),
+    (r"--resample", "resample_to_model=True"),
+    (r"--drop-duplicates", "drop_duplicates=True"),
+    (r"\b([Tt])he file is", r"\1he arrays are"),
+)
+
+
+def correct_arrays(
+    t: np.ndarray,
+    gyro: np.ndarray,
+    acc: np.ndarray,
+    model: str | Path | CorrectionModel = "euroc",
+    *,
+    time_unit: str = "s",
+    gyro_unit: str = "rad/s",
+    acc_unit: str = "m/s^2",
+    **kwargs,
+) -> Correction:
+    """Correct arrays of your own IMU samples, with the sanity checks of `gyrodenoise-correct`.
+
+    t: (N,) stamps in `time_unit` (ns, us, ms, s; integer ns stay exact); gyro, acc: (N, 3) in `gyro_unit` /
+    `acc_unit` (converted here to rad/s and m/s^2). model: a shipped name, a model file or a run folder, or a loaded
+    model (then without its metadata: no rate check, no quality warning). kwargs: those of `correct_recording`
+    (resample_to_model, drop_duplicates, force, engine, initial). Returns the `Correction`: corrected gyro (rad/s),
+    the ensemble's spread (or None), open-loop orientation R from `initial`, the checks' report. A failed check
+    raises SanityCheckError naming the row (counted from 1) and the argument to change.
+    """
+    t_in, gyro, acc = np.asarray(t), np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
+    for name, a in (("gyro", gyro), ("acc", acc)):
+        if a.ndim != 2 or a.shape[1] != 3:
+            hint = f" (it looks transposed: pass {name}.T)" if a.ndim == 2 and a.shape[0] == 3 else ""
+            raise ValueError(f"{name} has shape {a.shape}; expected (N, 3), one row per sample{hint}")
+    if t_in.shape != (len(gyro),) or len(acc) != len(gyro):
+        raise ValueError(f"t {t_in.shape}, gyro {gyro.shape}, acc {acc.shape}: give one stamp and one row per sample")
+    for what, unit, table in (
+        ("time_unit", time_unit, TIME_UNITS),
+        ("gyro_unit", gyro_unit, GYRO_UNITS),
+        ("acc_unit", acc_unit, ACC_UNITS),
+    ):
+        if unit not in table:
+            raise ValueError(f"{what}={unit!r}; choose one of {list(table)}")
+    if np.issubdtype(t_in.dtype, np.integer):  # int stamps stay exact (float64 ns of a 2014 epoch: 256-ns steps)
+        t_ns = t_in.astype(np.int64) * TIME_UNITS[time_unit]
+    else:
+        t_ns = np.round(t_in.astype(np.float64) * TIME_UNITS[time_unit]).astype(np.int64)
+    rec = ImuRecording(
+        t_ns=t_ns,
+        gyro=gyro * GYRO_UNITS[gyro_unit],
+        acc=acc * ACC_UNITS[acc_unit],
+        lines=np.arange(1, len(t_ns) + 1),
+        path=Path("<arrays>"),
+        columns={
+            "t": "t",
+            **{f"{k}{c}": f"{name}[:, {i}]" for k, name in (("w", "gyro"), ("a", "acc")) for i, c in enumerate("xyz")},
+        },  # fmt: skip
+        units={"time": time_unit, "gyro": gyro_unit, "acc": acc_unit},
+    )
+    loaded, meta = (model, {}) if isinstance(model, torch.nn.Module) else load_model(model)
+    if msg := not_better_warning(meta):
+        warnings.warn(msg, ModelQualityWarning, stacklevel=2)
+    try:
+        return correct_recording(rec, loaded, meta, **kwargs)
+    except SanityCheckError as e:
+        message = str(e)
+        for option, argument in PYTHON_ADVICE:
+            message = re.sub(option, argument, message)
+        raise SanityCheckError(message) from None
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -31,18 +31,19 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
+from gyrodenoise.config import with_output_dir
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
-from gyrodenoise.paths import invoked_command, portable_path
+from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import (
     ModelQualityWarning,
     is_shipped,
@@ -138,9 +139,16 @@ def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]
 
 
 def evaluate(cfg: DictConfig) -> dict:
+    """Table 1, the figures and the TUM trajectories of a composed evaluate config (`compose_config("evaluate",
+    [...])`; from Python it needs `out_dir=...`). Returns the summary written to `out_dir/results.json`; torch's
+    thread count is left as it was found."""
+    out = with_output_dir(cfg, "out_dir")  # from Python there is no Hydra run folder to default to
+    with torch_threads(cfg.get("threads")):
+        return _evaluate(cfg, out)
+
+
+def _evaluate(cfg: DictConfig, out: Path) -> dict:
     start = time.time()
-    set_torch_threads(cfg.get("threads"))
-    out = Path(cfg.out_dir)
     # results.json, written last, is the mark of a finished evaluation: an earlier one's must not outlive a rerun
     # stopped halfway beside the new tables
     (out / "results.json").unlink(missing_ok=True)
@@ -257,7 +265,8 @@ def evaluate(cfg: DictConfig) -> dict:
         plots.save(plots.roe_boxplot(roe_pooled, f"ROE on {dm.name} {split} sequences"), out / "figures" / "roe.png")
 
     summary = {
-        "command": invoked_command("evaluate"),
+        "command": recorded_command("evaluate"),
+        "config": portable_tree(OmegaConf.to_container(cfg, resolve=True)),
         "machine": machine_description(),
         "dataset": dm.name,
         "data_root": portable_path(dm.root),

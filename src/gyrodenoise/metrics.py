@@ -21,8 +21,22 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
+def _check_rotations(R_gt: np.ndarray, R_est: np.ndarray) -> None:
+    for name, R in (("R_gt", R_gt), ("R_est", R_est)):
+        shape = np.shape(R)
+        if len(shape) < 2 or shape[-2:] != (3, 3):
+            raise ValueError(
+                f"{name} has shape {shape}; expected (N, 3, 3) rotation matrices (body to world). From quaternions: "
+                "scipy.spatial.transform.Rotation.from_quat(q).as_matrix() for x, y, z, w order; for w, x, y, z (ASL "
+                "files) pass scalar_first=True (scipy >= 1.14) or np.roll(q, -1, axis=-1) first"
+            )
+    if np.shape(R_gt) != np.shape(R_est):
+        raise ValueError(f"R_gt {np.shape(R_gt)} and R_est {np.shape(R_est)}: one estimate per ground-truth sample")
+
+
 def orientation_errors(R_gt: np.ndarray, R_est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-sample 3D error angle (rad) and yaw error (rad, of R_est R_gt^T)."""
+    """Per-sample 3D error angle (rad) and yaw error (rad, of R_est R_gt^T); R_gt, R_est: (N, 3, 3) matrices."""
+    _check_rotations(R_gt, R_est)
     e3d = np.linalg.norm(relative_rotvec(R_gt, R_est), axis=-1)
     eyaw = _wrap(yaw_of(R_est @ np.swapaxes(R_gt, -1, -2)))
     return e3d, eyaw

@@ -60,6 +60,16 @@ def invoked_command(module: str, argv: Sequence[str] | None = None) -> str:
     return " ".join([prog, *words])
 
 
+def recorded_command(module: str) -> str:
+    """What a run records as its command: the command line (`invoked_command`), or, when `gyrodenoise.<module>`'s
+    function was called from Python (no Hydra run; sys.argv is then the caller's, a notebook kernel's say), the call."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if HydraConfig.initialized():
+        return invoked_command(module)
+    return f"gyrodenoise.{module}.{module}(cfg) called from Python (cfg: the config recorded with the run)"
+
+
 def portable_tree(obj: object) -> object:
     """`obj` (nested dicts / lists, e.g. a resolved config) with every absolute path string made portable."""
     if isinstance(obj, dict):

@@ -49,9 +49,12 @@ def save_model(model: CorrectionModel, model_cfg: dict, path: str | Path, meta: 
 
 
 def resolve(name_or_path: str | Path) -> Path:
+    """A model file, a training run's folder (its model.pt), or a shipped model's name -> the file."""
     p = Path(name_or_path)
     if p.is_file():
         return p
+    if p.is_dir() and (p / "model.pt").is_file():  # a training run's folder, as ModelFileError advises
+        return p / "model.pt"
     shipped = shipped_dir() / f"{name_or_path}.pt"
     if shipped.is_file():
         return shipped
@@ -96,7 +99,16 @@ class ModelFileError(ValueError):
 
 
 def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
-    """Returns (model in eval mode, metadata); metadata 'path' is the file, 'name' how reports name it."""
+    """A shipped model's name (`available_models()`), a model file (a run's model.pt or calibrated.pt, an ensemble,
+    a Lightning .ckpt) or a training run's folder -> (model in eval mode, metadata).
+
+    The model maps (B, N, 6) raw IMU (gyro rad/s, accelerometer m/s^2) to the corrected gyro (B, N, 3); it has
+    `receptive_field` (samples of history its output depends on) and `training_rate_hz` (None: unknown). The
+    metadata: 'path' (the file), 'name' (how reports name it), 'model' (its config); from training, when recorded:
+    'sensor' (model, rate_hz, noise densities), 'rate_hz', 'dataset', 'train_parts' (the data it saw),
+    'val_aoe_deg', 'test', 'beats_calibrated' (False: the 12-parameter calibrated model fitted on the same data did
+    better in validation; `evaluate` and `correct` warn), 'command', 'machine'.
+    """
     path = resolve(name_or_path)
     try:
         blob = torch.load(path, map_location=map_location, weights_only=True)

@@ -19,6 +19,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 _SMALL = 1e-6  # below this angle (rad) the Taylor branches are exact to float64 precision
+MAX_STEP_S = 1.0  # integrate_gyro: a median step above this is stamps or nanoseconds, not periods (IMUs: >= 5 Hz)
 
 
 def _linear_maps() -> dict[str, torch.Tensor]:
@@ -62,6 +63,14 @@ def _maps(like: torch.Tensor) -> dict[str, torch.Tensor]:
     return _MAPS_ON[key]
 
 
+def _torch_only(x: object, what: str, numpy_way: str) -> None:
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(
+            f"so3.{what} works on torch tensors (the loss's differentiable path), got {type(x).__name__}: pass "
+            f"torch.as_tensor(x), or for numpy use scipy: {numpy_way}"
+        )
+
+
 def hat(phi: torch.Tensor) -> torch.Tensor:
     """Skew-symmetric matrix of (..., 3) vectors: hat(a) @ b == cross(a, b)."""
     return (phi @ _maps(phi)["hat"]).unflatten(-1, (3, 3))
@@ -73,6 +82,7 @@ def exp(phi: torch.Tensor) -> torch.Tensor:
     R = I + a hat(phi) + b hat(phi)^2 with hat(phi)^2 = phi phi^T - theta^2 I, so
     R = (1 - b theta^2) I + a hat(phi) + b phi phi^T.
     """
+    _torch_only(phi, "exp", "Rotation.from_rotvec(phi).as_matrix()")
     theta2 = (phi * phi).sum(-1)[..., None, None]
     small = theta2 < _SMALL**2
     theta2_safe = torch.where(small, 1.0, theta2)
@@ -98,11 +108,13 @@ def _quat_wxyz(R: torch.Tensor) -> torch.Tensor:
 
 def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
     """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4), (x, y, z, w), w >= 0 (Shepperd)."""
+    _torch_only(R, "matrix_to_quat", "Rotation.from_matrix(R).as_quat()")
     return _quat_wxyz(R).roll(-1, dims=-1)
 
 
 def log(R: torch.Tensor) -> torch.Tensor:
     """Logarithm map (..., 3, 3) -> (..., 3) rotation vectors with norm in [0, pi]."""
+    _torch_only(R, "log", "Rotation.from_matrix(R).as_rotvec()")
     q = _quat_wxyz(R)
     w, v = q[..., 0], q[..., 1:]
     s2 = (v * v).sum(-1)
@@ -147,11 +159,26 @@ def integrate_gyro_torch(R0: torch.Tensor, gyro: torch.Tensor, dt: torch.Tensor)
 def integrate_gyro(R0: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> np.ndarray:
     """Open-loop attitude: R_0 = R0, R_n = R_{n-1} exp(gyro_n dt_n) for n >= 1.
 
-    gyro: (N, 3) rad/s, dt: (N,) s (dt[0] is unused). Returns (N, 3, 3) float64.
+    gyro: (N, 3) rad/s, dt: (N,) s (dt[0] is unused; `np.diff(t, prepend=t[0])` of stamps in s) or one period for
+    all samples. R0: (3, 3) body to world. Returns (N, 3, 3) float64.
     The cumulative product is a parallel prefix scan (log2 N batched matmuls) in float64.
     """
     gyro = np.asarray(gyro, dtype=np.float64)
     dt = np.asarray(dt, dtype=np.float64)
+    if gyro.ndim != 2 or gyro.shape[1] != 3:
+        hint = " (it looks transposed: pass gyro.T)" if gyro.ndim == 2 and gyro.shape[0] == 3 else ""
+        raise ValueError(f"gyro has shape {gyro.shape}; expected (N, 3) rad/s, one row per sample{hint}")
+    if dt.ndim == 0:  # one sample period for all
+        dt = np.full(len(gyro), float(dt))
+    if dt.shape != (len(gyro),):
+        raise ValueError(f"dt has shape {dt.shape}; expected ({len(gyro)},) like gyro, or one sample period (s)")
+    if len(dt) > 1 and not 0 <= (med := float(np.median(dt[1:]))) <= MAX_STEP_S:
+        raise ValueError(
+            f"dt: median step {med:.4g}; expected sample periods in seconds (0.005 at 200 Hz), e.g. "
+            "np.diff(t, prepend=t[0]) with t in s: were timestamps, or nanoseconds, given?"
+        )
+    if np.shape(R0) != (3, 3):
+        raise ValueError(f"R0 has shape {np.shape(R0)}; expected a (3, 3) rotation matrix (body to world)")
     steps = Rotation.from_rotvec(gyro[1:] * dt[1:, None]).as_matrix()
     prefix = np.concatenate([np.eye(3)[None], steps], axis=0)
     shift = 1

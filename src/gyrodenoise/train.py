@@ -24,20 +24,21 @@ import lightning.pytorch as L
 import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
-from lightning.pytorch.callbacks import LearningRateMonitor, WeightAveraging
+from lightning.pytorch.callbacks import LearningRateMonitor, ProgressBar, WeightAveraging
 from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
-from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, set_torch_threads, user_errors
+from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
+from gyrodenoise.config import with_output_dir
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import quiet_library_notices
-from gyrodenoise.paths import invoked_command, portable_path, portable_tree
+from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
 from gyrodenoise.tables import markdown_table
@@ -194,9 +195,18 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
 
 
 def train(cfg: DictConfig) -> dict:
-    if cfg.get("retain_freed_memory", True):
+    """Fit, select, score and save one run of a composed train config (`gyrodenoise.config.compose_config("train",
+    [...])`; from Python it needs `paths.output_dir=...`). Returns the summary written to `output_dir/summary.json`
+    (its `output_dir` holds `model.pt`). Called from Python it leaves torch's thread count as it found it and does
+    not apply `retain_freed_memory` (the caller's process would keep its peak memory until it exits)."""
+    out_dir = with_output_dir(cfg, "paths.output_dir")  # before any global setting changes
+    if cfg.get("retain_freed_memory", True) and HydraConfig.initialized():
         retain_freed_memory()
-    set_torch_threads(cfg.get("threads"))
+    with torch_threads(cfg.get("threads")):
+        return _train(cfg, out_dir)
+
+
+def _train(cfg: DictConfig, out_dir: Path) -> dict:
     if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # before any data is read
         raise ConfigError(
             f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
@@ -204,7 +214,6 @@ def train(cfg: DictConfig) -> dict:
         )
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
-    out_dir = Path(cfg.paths.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
     dm.check_sequences(test=bool(cfg.get("test")))
@@ -218,6 +227,8 @@ def train(cfg: DictConfig) -> dict:
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     if not loggers:  # Lightning refuses a learning-rate monitor without a logger
         callbacks = [c for c in callbacks if not isinstance(c, LearningRateMonitor)]
+    if cfg.trainer.get("enable_progress_bar") is False:  # Lightning refuses a progress-bar callback then
+        callbacks = [c for c in callbacks if not isinstance(c, ProgressBar)]
     quiet_library_notices()
     trainer: L.Trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
 
@@ -281,7 +292,8 @@ def train(cfg: DictConfig) -> dict:
     safety = calibrated_baseline(cfg, dm, module, out_dir) if baseline else {}
 
     summary = {
-        "command": invoked_command("train"),
+        "command": recorded_command("train"),
+        "output_dir": portable_path(out_dir),
         "overrides": list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else [],
         "config": portable_tree(OmegaConf.to_container(cfg, resolve=True)),
         "seed": cfg.get("seed"),

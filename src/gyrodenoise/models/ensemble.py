@@ -88,9 +88,22 @@ def model_device(model: nn.Module) -> torch.device:
 def predict_with_spread(model: CorrectionModel, imu: np.ndarray | torch.Tensor) -> tuple[np.ndarray, np.ndarray | None]:
     """Corrected gyro (N, 3) float64 of one whole sequence (N, 6) in eval mode, and the ensemble's
     per-sample std (N, 3) float64 (None for a single model, which has no spread)."""
+    arr = imu.detach().cpu().numpy() if isinstance(imu, torch.Tensor) else np.asarray(imu, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 6:
+        hint = " (it looks transposed: pass imu.T)" if arr.ndim == 2 and arr.shape[0] == 6 else ""
+        raise ValueError(
+            f"imu has shape {arr.shape}; expected (N, 6): one row per sample, gyro x, y, z [rad/s] then accelerometer "
+            f"x, y, z [m/s^2] (np.hstack([gyro, acc])){hint}"
+        )
+    if len(arr) == 0 or not np.isfinite(arr).all():
+        bad = int((~np.isfinite(arr)).any(1).sum()) if len(arr) else 0
+        raise ValueError(
+            f"imu: {'no samples' if not len(arr) else f'{bad} rows hold NaN/inf'}; the network's outputs depend on the"
+            " last ~2.5 s of samples, so one bad sample spoils hundreds of outputs: repair or drop them first"
+        )
     was_training = model.training
     model.eval()
-    x = torch.as_tensor(np.asarray(imu), dtype=torch.float32, device=model_device(model))[None]
+    x = torch.as_tensor(arr, dtype=torch.float32, device=model_device(model))[None]
     try:
         if isinstance(model, EnsembleCorrection):
             mean, std = model.forward_with_spread(x)
