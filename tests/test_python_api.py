@@ -11,6 +11,7 @@ import pytest
 import torch
 from hydra.errors import ConfigCompositionException
 from scipy.spatial.transform import Rotation
+from test_train import config, tiny_dataset
 
 import gyrodenoise as gd
 from gyrodenoise.data.checks import SanityCheckError
@@ -18,7 +19,6 @@ from gyrodenoise.models.ensemble import predict_with_spread
 from gyrodenoise.pretrained import resolve
 from gyrodenoise.so3 import exp
 from gyrodenoise.train import train
-from test_train import config, tiny_dataset
 
 
 def test_the_top_level_names_resolve_without_importing_torch_up_front():

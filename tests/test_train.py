@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from gyrodenoise.cli_errors import TrainingDiverged
 from gyrodenoise.config import compose_config
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.train import format_test_table, train
@@ -164,6 +165,32 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     assert [e.step for e in ev.Scalars("lr-Adam")] == [1, 3]
     assert {"val/orientation", "val/gyro_correction"} <= set(tags["images"]), tags["images"]
     assert "_hparams_/session_start_info" in ev.summary_metadata
+    # the hparams' metrics have tags of their own: the curves get no extra point at step 0
+    assert 0 not in [e.step for e in ev.Scalars("val/aoe_deg")]
+    assert [e.step for e in ev.Images("val/orientation")] == [e.step for e in ev.Scalars("val/aoe_deg")]
+    assert "val/aoe_deg/hand_05" in tags["scalars"]  # each validation sequence
+
+
+def test_diverged_run_stops_with_one_line_and_no_model(tmp_path):
+    """A NaN loss ends the fit at once with a message naming the epoch and what to change; no model.pt."""
+    overrides = [
+        "experiment=sim_quick",
+        "dataset.generation.duration_s=12",
+        "dataset.train_seqs=[drone_00]",
+        "dataset.val_seqs=[hand_05]",
+        "dataset.test_seqs=[drone_10]",
+        "dataset.window=256",
+        "model.channels=[4,8]",
+        "model.dilations=[1,2]",
+        "trainer.max_epochs=20",
+        "loss.weight=1e306",
+        "logger=csv",
+        f"paths.output_dir={tmp_path}",
+    ]
+    with pytest.raises(TrainingDiverged, match=r"at epoch \d+.*diverged.*optim\.lr") as e:
+        train(compose_config("train", overrides))
+    assert "no model.pt written" in str(e.value)
+    assert not (tmp_path / "model.pt").exists() and not (tmp_path / "summary.json").exists()
 
 
 def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):

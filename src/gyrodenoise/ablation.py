@@ -107,7 +107,10 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     from gyrodenoise.plots import subplots
 
     labels = [
-        ", ".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True))
+        # '$' escaped: matplotlib would read '${...}' (an interpolation in a value) as mathtext and fail
+        ", ".join(f"{k.split('.')[-1].split('/')[-1]}={v}" for k, v in zip(keys, s.values, strict=True)).replace(
+            "$", r"\$"
+        )
         for s in settings
     ]
     rules = sorted({str(r.summary.get("selection", "best_val")) for s in settings for r in s.runs})

@@ -50,7 +50,20 @@ class Run:
             if not isinstance(node, dict) or part not in node:
                 return MISSING
             node = node[part]
+        if isinstance(node, dict):  # a config group's content (logger, callbacks, trainer): name its choice
+            choice = self._group_choice(key)
+            if choice is not None:
+                return choice
         return _fmt_value(node)
+
+    def _group_choice(self, key: str) -> str | None:
+        """The config-group choice Hydra recorded for `key` (.hydra/hydra.yaml runtime.choices), or None."""
+        hydra_file = Path(self.path) / ".hydra" / "hydra.yaml"
+        if not hydra_file.is_file():
+            return None
+        choices = ((yaml.safe_load(hydra_file.read_text()) or {}).get("hydra") or {}).get("runtime", {}).get("choices")
+        value = (choices or {}).get(key)
+        return None if value is None else str(value)
 
     def curve(self) -> list[tuple[int, float]]:
         """(epoch, val AOE) of the validations during fitting, from the CSV log when there is one.

@@ -29,7 +29,11 @@ class ConfigError(ValueError):
     """A config value the command cannot run with (e.g. `select=best`), found before any work is done."""
 
 
-USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError, ModelFileError)
+class TrainingDiverged(RuntimeError):
+    """The loss or the validation AOE became NaN/inf during a fit: the weights are lost, continuing only burns time."""
+
+
+USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError, ModelFileError, TrainingDiverged)
 
 
 @contextmanager

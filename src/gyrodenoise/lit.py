@@ -17,8 +17,9 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise import plots
+from gyrodenoise.cli_errors import TrainingDiverged
 from gyrodenoise.losses import IncrementLoss
-from gyrodenoise.metrics import aoe_torch
+from gyrodenoise.metrics import aoe_torch, orientation_errors
 from gyrodenoise.models.build import build_model
 from gyrodenoise.so3 import integrate_gyro_torch
 
@@ -53,9 +54,22 @@ class DenoiserModule(L.LightningModule):
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
-        if self._logs_this_step():
+        logs = self._logs_this_step()
+        # a non-finite loss is checked every step on the CPU (no device sync to save) and on the logging steps
+        # elsewhere (the logged value is read back there anyway)
+        if (logs or loss.device.type == "cpu") and not torch.isfinite(loss):
+            self._diverged(f"train/loss is {float(loss.detach())}")
+        if logs:
             self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
         return loss
+
+    def _diverged(self, what: str) -> None:
+        lr = self.hparams.optim.get("lr")
+        raise TrainingDiverged(
+            f"{what} at epoch {self.current_epoch + 1} (step {self.global_step}): the run diverged and was stopped; "
+            f"no model.pt written. Lower optim.lr (now {lr}) or loss.weight, or check the data; the best validation "
+            "checkpoint so far, if any, is in checkpoints/"
+        )
 
     def _logs_this_step(self) -> bool:
         """Whether the loggers write this step (trainer.log_every_n_steps, and the last epoch for the progress
@@ -106,9 +120,15 @@ class DenoiserModule(L.LightningModule):
             aoe_deg = math.degrees(np.mean([o["aoe"] for o in g]))
             self.log(f"{group}/aoe_deg", aoe_deg, prog_bar=group == "val", sync_dist=True)
             self.log(f"{group}/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in g])), sync_dist=True)
+            for o in g:  # each validation sequence (under DDP each process logs its own share: no sync)
+                self.log(f"{group}/aoe_deg/{o['name']}", math.degrees(o["aoe"]))
+        if not self.trainer.sanity_checking and not all(math.isfinite(o["aoe"]) for o in outs):
+            bad = [o["name"] for o in outs if not math.isfinite(o["aoe"])]
+            self._diverged(f"validation AOE is NaN/inf on {', '.join(bad)}")
         if not self.trainer.sanity_checking:
             self._val_count += 1
-            if self._val_count % self.figure_every_n_val == 1 or self.figure_every_n_val == 1:
+            last = self.trainer.max_epochs is not None and self.current_epoch + 1 >= self.trainer.max_epochs
+            if self._val_count % self.figure_every_n_val == 1 or self.figure_every_n_val == 1 or last:
                 self._log_figures(outs[0], "val")
 
     def test_step(self, batch: dict, batch_idx: int) -> None:
@@ -126,16 +146,28 @@ class DenoiserModule(L.LightningModule):
         for logger in self.loggers:
             if isinstance(logger, TensorBoardLogger):
                 tb = logger.experiment
-                step = self.global_step
-                title = f"{o['name']} (epoch {self.current_epoch})"
+                # the step of the scalars logged by this validation (Lightning's logger step), not global_step,
+                # which is one ahead of it here: figures and curves of one validation share an x value
+                step = getattr(self.trainer.fit_loop.epoch_loop, "_batches_that_stepped", self.global_step)
+                of = f"/{self.trainer.max_epochs}" if self.trainer.max_epochs else ""
+                title = (
+                    f"{o['name']}: AOE {math.degrees(o['aoe']):.2f} deg, yaw {math.degrees(o['aoe_yaw']):.2f} deg "
+                    f"(epoch {self.current_epoch + 1}{of})"
+                )
                 b = o["batch"]
                 t, rot = b["t"][0].cpu().numpy(), b["rot"][0].cpu().numpy()
+                gt_mask = b["gt_mask"][0].cpu().numpy()
                 w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
+                # the raw IMU integrated the same way: the reference the correction has to beat
+                R_raw = self._integrate_and_score(b, b["imu"][0, :, :3])[0].cpu().numpy()
+                R_est = o["R_est"].cpu().numpy()
                 tb.add_figure(
                     f"{prefix}/orientation",
-                    plots.orientation_figure(t, rot, {"corrected": o["R_est"].cpu().numpy()}, title),
+                    plots.orientation_figure(t, rot, {"corrected": R_est}, title, gt_mask=gt_mask),
                     step,
                 )
+                errors = {"corrected": orientation_errors(rot, R_est), "raw IMU": orientation_errors(rot, R_raw)}
+                tb.add_figure(f"{prefix}/orientation_error", plots.error_figure(t, errors, title, gt_mask), step)
                 tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(t, w_tilde, title), step)
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:

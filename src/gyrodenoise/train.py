@@ -40,7 +40,7 @@ from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
-from gyrodenoise.provenance import machine_description
+from gyrodenoise.provenance import git_revision, machine_description
 from gyrodenoise.tables import markdown_table
 
 
@@ -119,6 +119,10 @@ def calibrated_baseline(cfg: DictConfig, dm: ImuDataModule, module: DenoiserModu
         False: "the model does NOT beat it on validation: prefer the calibrated model",
         None: "no validation data to compare them on",
     }[out["beats_calibrated"]]
+    if out.get("calibrated_val_aoe_deg") is not None and out.get("model_val_aoe_deg_whole") is not None:
+        verdict += (
+            f" (val AOE {out['model_val_aoe_deg_whole']:.2f} vs calibrated {out['calibrated_val_aoe_deg']:.2f} deg)"
+        )
     print(f"calibrated baseline (same data, same loss, {cal_path.name}): {verdict}")
     return out
 
@@ -192,6 +196,19 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
         f"{_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
     )
+
+
+def _code_version() -> dict:
+    """The package version and, run from a checkout of this repository (src/gyrodenoise), its commit and whether
+    src/ differs from it. An installed copy records the version only: a git repository around site-packages (a
+    .venv inside someone's project) is not this code's."""
+    import gyrodenoise
+
+    out: dict = {"package": gyrodenoise.__version__}
+    repo = Path(gyrodenoise.__file__).resolve().parents[2]
+    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
+        out["commit"], out["dirty"] = rev
+    return out
 
 
 def train(cfg: DictConfig) -> dict:
@@ -290,6 +307,14 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         lg.save()
 
     safety = calibrated_baseline(cfg, dm, module, out_dir) if baseline else {}
+    reference = {
+        f"baseline/calibrated_{k}": safety[f"calibrated_{k}"]
+        for k in ("val_aoe_deg", "test_aoe_deg")
+        if safety.get(f"calibrated_{k}") is not None
+    }
+    for lg in trainer.loggers if reference else []:  # the baseline beside the curves, at the run's last step
+        lg.log_metrics(reference, step=trainer.global_step)
+        lg.save()
 
     summary = {
         "command": recorded_command("train"),
@@ -302,9 +327,13 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "train_wall_time_s": wall_s,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
+        "code_version": _code_version(),
         "selection": cfg.select,
         "selected": selected,
         "best_checkpoint": portable_path(best_path) if best_path else "",
+        "best_val_aoe_deg": float(ckpt_cb.best_model_score)
+        if best_path and ckpt_cb.best_model_score is not None
+        else None,
         "val": val,
         "test": test,
     }
@@ -343,7 +372,9 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     print(f"outputs in {out_dir}")
     for lg in trainer.loggers:
         if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
-            metrics = {k: v for k, v in {**val, **test}.items() if k.count("/") == 1}
+            # under hparams/...: Lightning writes these metrics at step 0, which under their own names
+            # (val/aoe_deg, test/aoe_deg) would add a point at step 0 to the curves
+            metrics = {f"hparams/{k}": v for k, v in {**val, **test}.items() if k.count("/") == 1}
             lg.log_hyperparams(flat_hparams(cfg), metrics)
             lg.experiment.flush()  # on disk now, not when the writer's thread next flushes (a reader could miss it)
     return summary
