@@ -135,7 +135,7 @@ def member_file(folder, k: int, model=None, cfg=None, **meta):
     return save_model(m, cfg or {"name": "denoiser", **TINY}, folder / "model.pt", {**base, **meta})
 
 
-def test_build_cli_from_files_and_multirun(tmp_path):
+def test_build_cli_from_files_and_multirun(tmp_path, capsys):
     a = member_file(tmp_path / "a", 0, seed=0, fold=1)
     b = member_file(tmp_path / "b", 1, model=calibrated_model(1), cfg={"name": "calibrated"}, seed=1, fold=2)
     out = tmp_path / "euroc-ensemble.pt"
@@ -158,8 +158,10 @@ def test_build_cli_from_files_and_multirun(tmp_path):
         member_file(sweep / str(job), seed)
         (sweep / str(job) / ".hydra").mkdir()
         (sweep / str(job) / ".hydra" / "config.yaml").write_text(f"seed: {seed}\n")
-    (sweep / "3").mkdir()  # an unfinished run: no model.pt
-    assert ensemble_cli.main(["build", "--from-multirun", str(sweep)]) == 0
+    (sweep / "3" / ".hydra").mkdir(parents=True)  # a job that failed or was stopped: no model.pt
+    assert ensemble_cli.main(["build", "--from-multirun", str(sweep)]) == 2
+    assert "job(s) 3 have no model.pt" in capsys.readouterr().err and not (sweep / "ensemble.pt").exists()
+    assert ensemble_cli.main(["build", "--from-multirun", str(sweep), "--allow-missing"]) == 0
     ens, meta = load_model(sweep / "ensemble.pt")
     assert len(ens) == 3 and [r["seed"] for r in meta["members"]] == [10, 11, 12]
     # an ensemble file among the members contributes its members

@@ -248,7 +248,8 @@ def test_collect_filters_and_errors(tmp_path):
     assert [s.values for s in settings] == [("true",), ("false",)]
     mean, sd, n = settings[0].stats("val")
     assert n == 3 and mean == pytest.approx(1.1) and sd == pytest.approx(0.1)
-    assert "Unfinished runs left out: 1" in (tmp_path / "bn.md").read_text()
+    assert "Unfinished runs left out (no summary.json): " in (tmp_path / "bn.md").read_text()
+    assert "/m/crashed" in (tmp_path / "bn.md").read_text()  # named, not only counted
 
     assert ablation.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
     assert ablation.main([str(tmp_path / "m"), "--out", str(tmp_path / "x"), "--where", "model.act=tanh"]) == 2

@@ -174,7 +174,9 @@ def collect(
         md += [f"Filter: {', '.join(f'{k}={v}' for k, v in where)}", ""]
     md += [markdown_table(settings, keys)]
     if unfinished:
-        md += [f"Unfinished runs left out: {len(unfinished)}", ""]
+        left_out = ", ".join(portable_path(d) for d in unfinished)
+        md += [f"Unfinished runs left out (no summary.json): {left_out}", ""]
+        print(f"unfinished runs left out (no summary.json; rerun one in its folder to resume it): {left_out}")
     write_text(with_ext(out, ".md"), "\n".join(md))
     write_text(with_ext(out, ".csv"), csv_text(settings, keys))
     write_bytes(with_ext(out, ".png"), plot_png(settings, keys, title))

@@ -214,8 +214,9 @@ def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | P
     return save_model(model, cfg, out, meta)
 
 
-def multirun_members(sweep_dir: str | Path) -> list[Path]:
-    """`<sweep dir>/*/model.pt` in job order (Hydra's numbered subfolders)."""
+def multirun_members(sweep_dir: str | Path, allow_missing: bool = False) -> list[Path]:
+    """`<sweep dir>/*/model.pt` in job order (Hydra's numbered subfolders). A job folder without model.pt (a run
+    that failed, or was stopped and not resumed) is named in the error, unless `allow_missing`."""
     d = Path(sweep_dir)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a folder (give a Hydra multirun sweep folder)")
@@ -224,10 +225,17 @@ def multirun_members(sweep_dir: str | Path) -> list[Path]:
         raise FileNotFoundError(f"{d}: no */model.pt (have the runs of this multirun finished?)")
 
     def key(p: Path) -> tuple:
-        name = p.parent.name
-        return (0, int(name), "") if name.isdigit() else (1, 0, name)
+        return (0, int(p.name), "") if p.name.isdigit() else (1, 0, p.name)
 
-    return sorted(found, key=key)
+    jobs = [j for j in d.iterdir() if (j / ".hydra").is_dir()]
+    if (missing := sorted((j for j in jobs if not (j / "model.pt").is_file()), key=key)) and not allow_missing:
+        names = ", ".join(j.name for j in missing)
+        raise FileNotFoundError(
+            f"{d}: job(s) {names} have no model.pt (failed, or stopped before the end): finish one by rerunning it in "
+            f"its folder (hydra.run.dir={missing[0]}: it resumes from its checkpoint), or leave them out with "
+            "--allow-missing"
+        )
+    return [p / "model.pt" for p in sorted((f.parent for f in found), key=key)]
 
 
 def build_ensemble(
@@ -285,6 +293,9 @@ def main(argv: list[str] | None = None) -> int:
     b = sub.add_parser("build", help="build an ensemble file from member model files")
     b.add_argument("models", nargs="*", help="member model files (.pt / .ckpt) or shipped model names")
     b.add_argument("--from-multirun", type=Path, help="a Hydra multirun folder: its */model.pt are the members")
+    b.add_argument(
+        "--allow-missing", action="store_true", help="with --from-multirun: leave out jobs that have no model.pt"
+    )
     b.add_argument("--out", type=Path, help="output file (default with --from-multirun: DIR/ensemble.pt)")
     b.add_argument("--name", help="name recorded in the metadata (default: the output file's stem)")
     b.add_argument("--allow-mixed", action="store_true", help="allow members from different datasets / sensors")
@@ -333,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         paths: list[str | Path] = list(args.models)
         if args.from_multirun:
-            paths += multirun_members(args.from_multirun)
+            paths += multirun_members(args.from_multirun, args.allow_missing)
         out = args.out or (args.from_multirun / "ensemble.pt" if args.from_multirun else None)
         if out is None:
             ap.error("give --out FILE")

@@ -13,6 +13,7 @@ validation and test metrics of the kept weights).
 from __future__ import annotations
 
 import math
+import signal
 import sys
 import time
 import warnings
@@ -26,7 +27,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from lightning.pytorch.callbacks import LearningRateMonitor, ProgressBar, WeightAveraging
 from lightning.pytorch.loggers import TensorBoardLogger
-from omegaconf import DictConfig, OmegaConf
+from lightning.pytorch.utilities.exceptions import SIGTERMException
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
@@ -155,12 +157,18 @@ def build_module(cfg: DictConfig) -> DenoiserModule:
             f"dataset.increments={list(data_inc)} differs from loss.increments={list(loss_inc)}: set loss.increments "
             "(the dataset follows it)"
         )
+    window, block = cfg.dataset.get("window"), max(loss_inc or data_inc or [1])
+    if window is not None and window % block:
+        raise ConfigError(
+            f"dataset.window={window} is not a multiple of the longest loss increment ({block} samples): give e.g. "
+            f"dataset.window={window - window % block} or {window - window % block + block}"
+        )
     try:
         module = DenoiserModule.from_config(cfg)
         module.configure_optimizers()
     except ValueError as e:
         raise ConfigError(str(e)) from None
-    rf, window = int(getattr(module.model, "receptive_field", 1)), cfg.dataset.get("window")
+    rf = int(getattr(module.model, "receptive_field", 1))
     if window is not None and window < rf:
         print(
             f"warning: dataset.window={window} samples is shorter than the model's receptive field ({rf} samples): "
@@ -173,8 +181,16 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, valida
     """Validation (with `validate`) and, with cfg.test, test metrics of `module` by a trainer without callbacks or
     loggers. The run's own trainer would let a weight-averaging callback (callbacks=ema) swap its averaged
     weights in over the module scored, and would log this scoring as one more point of the validation curve."""
+    # default_root_dir: a folder that does not exist. Under SLURM, Lightning restores a trainer whose ckpt_path is
+    # None from <default_root_dir>/hpc_ckpt_*.ckpt (written by its SIGUSR1 auto-requeue): validate/test would
+    # load that checkpoint's weights into `module` instead of scoring the weights given
     plain: L.Trainer = hydra.utils.instantiate(
-        cfg.trainer, callbacks=[], logger=False, enable_checkpointing=False, enable_progress_bar=False
+        cfg.trainer,
+        callbacks=[],
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        default_root_dir=str(Path(cfg.paths.output_dir) / ".scoring-no-hpc-resume"),
     )
     val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0] if validate else {}  # {}: no val data
     test = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") else {}
@@ -192,8 +208,9 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
     last = Path(cb.dirpath) / "last.ckpt" if cb is not None and cb.dirpath else None
     where = f"ckpt_path={last}" if last is not None and last.is_file() else "ckpt_path=<a run's checkpoints/last.ckpt>"
     print(
-        f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where} (checkpoints are "
-        f"{_last_ckpt_cadence(cfg)})",
+        f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where} (written at the "
+        f"interruption; otherwise {_last_ckpt_cadence(cfg)}), or rerun the same command with "
+        f"hydra.run.dir={cfg.paths.output_dir}: a run folder holding an unfinished run resumes it (auto_resume)",
         file=sys.stderr,
     )
 
@@ -223,7 +240,24 @@ def train(cfg: DictConfig) -> dict:
         return _train(cfg, out_dir)
 
 
+def _resume_point(out_dir: Path) -> Path | None:
+    """The newest readable checkpoint of an unfinished run in `out_dir` (no model.pt): its checkpoints/last.ckpt
+    (also written when a run is interrupted) or a checkpoint of Lightning's SLURM auto-requeue (hpc_ckpt_N.ckpt)."""
+    if (out_dir / "model.pt").is_file():
+        return None
+    found = [out_dir / "checkpoints" / "last.ckpt", *out_dir.glob("hpc_ckpt_*.ckpt")]
+    found = [p for p in found if p.is_file() and zipfile.is_zipfile(p)]
+    return max(found, key=lambda p: p.stat().st_mtime, default=None)
+
+
 def _train(cfg: DictConfig, out_dir: Path) -> dict:
+    if cfg.get("ckpt_path") is None and cfg.get("auto_resume") and (resume := _resume_point(out_dir)):
+        # a requeued job (SLURM time limit, preemption: the launcher reruns it in the same folder) goes on from its
+        # own checkpoint instead of starting again; a finished run (model.pt) is not resumed
+        print(f"auto_resume: this run folder holds an unfinished run's {resume}: resuming from it (auto_resume=false "
+              "starts afresh)")  # fmt: skip
+        with open_dict(cfg):
+            cfg.ckpt_path = str(resume)
     if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # before any data is read
         raise ConfigError(
             f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
@@ -262,9 +296,11 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     start = time.time()
     try:
         trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
-    except SystemExit:  # Ctrl-C: Lightning shuts down and exits; say what was kept and how to go on
+    except SystemExit as e:  # Ctrl-C, SIGTERM (SLURM time limit, scancel): say what was kept and how to go on
         if trainer.interrupted:
             _say_how_to_resume(trainer, cfg)
+        if isinstance(e, SIGTERMException):  # Lightning raises it with no code: the process would exit 0
+            raise SystemExit(128 + signal.SIGTERM) from None
         raise
     wall_s = time.time() - start
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
@@ -327,6 +363,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "train_wall_time_s": wall_s,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
+        "torch_threads": torch.get_num_threads(),  # the figures reproduce to the digit at the same count
         "code_version": _code_version(),
         "selection": cfg.select,
         "selected": selected,

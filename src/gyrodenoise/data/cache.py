@@ -86,10 +86,17 @@ def load_sequence(
                 return seq.from_first_ground_truth()
     seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
     if cache_path is not None:
-        atomic_save_npz(
-            cache_path,
-            t0_ns=np.int64(seq.t0_ns),
-            meta=np.array(json.dumps(seq.meta)),
-            **{k: getattr(seq, k) for k in _ARRAYS},
-        )
+        try:
+            atomic_save_npz(
+                cache_path,
+                t0_ns=np.int64(seq.t0_ns),
+                meta=np.array(json.dumps(seq.meta)),
+                **{k: getattr(seq, k) for k in _ARRAYS},
+            )
+        except OSError as e:  # a full or read-only cache disk: the cache only saves time, the run goes on
+            warnings.warn(
+                f"{cache_path}: cannot write the cache ({e.strerror or e}); going on without it (GYRODENOISE_CACHE "
+                "sets its folder)",
+                stacklevel=2,
+            )
     return seq.from_first_ground_truth()

@@ -56,7 +56,8 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
         seed=int(rng.integers(1 << 30)),
         acc_noise_density=float(generation.get("acc_noise_density", 2.0e-3)),
     )
-    return write_asl(folder / name, sim)
+    # several jobs may generate the same data set at once (a job array on a fresh cache): the first copy stays
+    return write_asl(folder / name, sim, keep_existing=True)
 
 
 def ensure_generated(generation: Mapping, names: list[str], cache_dir: str | Path | None = None) -> Path:

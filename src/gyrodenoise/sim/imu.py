@@ -130,7 +130,11 @@ def _write_csv(path: Path, header: str, t_ns: np.ndarray, values: np.ndarray) ->
             fh.write(str(t) + "," + ",".join(repr(v) for v in row) + "\n")
 
 
-def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1) -> Path:
+def _complete(folder: Path) -> bool:
+    return all((folder / "mav0" / d / "data.csv").is_file() for d in ("imu0", "state_groundtruth_estimate0"))
+
+
+def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1, keep_existing: bool = False) -> Path:
     """<folder>/mav0/{imu0,state_groundtruth_estimate0}/data.csv + sim.json, written atomically.
 
     The folder is assembled under a temporary name beside it and renamed into place, so a reader
@@ -139,6 +143,9 @@ def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1) -> Path
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.tmp"))
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o777 & ~mask)  # mkdtemp makes 0700: others sharing the cache could not read the sequence
     try:
         imu_dir = tmp / "mav0" / "imu0"
         gt_dir = tmp / "mav0" / "state_groundtruth_estimate0"
@@ -150,9 +157,15 @@ def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1) -> Path
         gt_vals = np.concatenate([sim.gt_pos[::gt_stride], q[:, 3:], q[:, :3]], 1)
         _write_csv(gt_dir / "data.csv", GT_HEADER, sim.t_ns[::gt_stride], gt_vals)
         (tmp / "sim.json").write_text(json.dumps(sim.meta, indent=2))
+        if keep_existing and _complete(folder):  # another process wrote it meanwhile (same settings, same content)
+            return folder
         if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(tmp, folder)
+            shutil.rmtree(folder, ignore_errors=True)
+        try:
+            os.replace(tmp, folder)
+        except OSError:  # ENOTEMPTY/EEXIST: another process renamed its copy in first
+            if not (keep_existing and _complete(folder)):
+                raise
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
