@@ -29,6 +29,9 @@ def test_a_run_folder_resumes_from_its_newest_checkpoint_unless_finished(tmp_pat
     shutil.copy(last, hpc)
     os.utime(hpc, (time.time() + 10, time.time() + 10))
     assert _resume_point(tmp_path) == hpc
+    shutil.copy(last, tmp_path / "checkpoints" / "interrupted.ckpt")  # written at an interruption, newest
+    os.utime(tmp_path / "checkpoints" / "interrupted.ckpt", (time.time() + 20, time.time() + 20))
+    assert _resume_point(tmp_path) == tmp_path / "checkpoints" / "interrupted.ckpt"
     (tmp_path / "checkpoints" / "junk.ckpt").write_text("not a zip")
     (tmp_path / "model.pt").write_bytes(b"")  # finished: a rerun in its folder starts nothing from it
     assert _resume_point(tmp_path) is None
@@ -62,3 +65,27 @@ def test_slurm_jobs_take_their_thread_count_from_the_allocation(monkeypatch):
     assert compose_config("train", []).threads is None
     monkeypatch.setenv("SLURM_CPUS_PER_TASK", "3")
     assert compose_config("train", []).threads == 3
+
+
+def test_scoring_after_a_requeue_scores_the_weights_given_not_lightnings_hpc_checkpoint(
+    tiny_asl_root, tmp_path, monkeypatch
+):
+    """Under SLURM, a trainer without ckpt_path restores <default_root_dir>/hpc_ckpt_N.ckpt (auto-requeue): the
+    post-fit scoring must not, or a requeued run would save and score an older epoch's weights as its final ones."""
+    import hydra
+    import torch
+    from test_train import config
+
+    from gyrodenoise.train import _score_without_callbacks, train
+
+    train(config(tiny_asl_root, tmp_path / "old", "seed=1", "callbacks.last_checkpoint.every_n_epochs=1"))
+    out = tmp_path / "new"
+    out.mkdir()
+    shutil.copy(tmp_path / "old" / "checkpoints" / "last.ckpt", out / "hpc_ckpt_1.ckpt")
+    monkeypatch.setenv("SLURM_NTASKS", "1")
+    monkeypatch.setenv("SLURM_JOB_NAME", "train")
+    cfg = config(tiny_asl_root, out, "seed=2")
+    module = build_module(cfg)
+    before = {k: v.clone() for k, v in module.state_dict().items()}
+    _score_without_callbacks(cfg, hydra.utils.instantiate(cfg.dataset), module)
+    assert all(torch.equal(before[k], v) for k, v in module.state_dict().items())

@@ -204,13 +204,14 @@ def _last_ckpt_cadence(cfg: DictConfig) -> str:
 
 
 def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
-    cb = trainer.checkpoint_callback
-    last = Path(cb.dirpath) / "last.ckpt" if cb is not None and cb.dirpath else None
-    where = f"ckpt_path={last}" if last is not None and last.is_file() else "ckpt_path=<a run's checkpoints/last.ckpt>"
+    ckpts = Path(cfg.paths.output_dir) / "checkpoints"
+    saved = [p for p in (ckpts / "interrupted.ckpt", ckpts / "last.ckpt") if p.is_file()]
+    where = f"ckpt_path={saved[0]}" if saved else "ckpt_path=<a run's checkpoints/last.ckpt>"
     print(
-        f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where} (written at the "
-        f"interruption; otherwise {_last_ckpt_cadence(cfg)}), or rerun the same command with "
-        f"hydra.run.dir={cfg.paths.output_dir}: a run folder holding an unfinished run resumes it (auto_resume)",
+        f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where}"
+        + (" (written at the interruption)" if saved and saved[0].name == "interrupted.ckpt" else "")
+        + f", or rerun the same command with hydra.run.dir={cfg.paths.output_dir}: a run folder holding an unfinished "
+        f"run resumes from its newest checkpoint (auto_resume; last.ckpt is {_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
     )
 
@@ -241,11 +242,13 @@ def train(cfg: DictConfig) -> dict:
 
 
 def _resume_point(out_dir: Path) -> Path | None:
-    """The newest readable checkpoint of an unfinished run in `out_dir` (no model.pt): its checkpoints/last.ckpt
-    (also written when a run is interrupted) or a checkpoint of Lightning's SLURM auto-requeue (hpc_ckpt_N.ckpt)."""
+    """The newest readable checkpoint of an unfinished run in `out_dir` (no model.pt): checkpoints/last.ckpt (every
+    50 epochs), checkpoints/interrupted.ckpt (written when the run was stopped) or a checkpoint of Lightning's SLURM
+    auto-requeue (hpc_ckpt_N.ckpt)."""
     if (out_dir / "model.pt").is_file():
         return None
-    found = [out_dir / "checkpoints" / "last.ckpt", *out_dir.glob("hpc_ckpt_*.ckpt")]
+    ckpts = out_dir / "checkpoints"
+    found = [ckpts / "last.ckpt", ckpts / "interrupted.ckpt", *out_dir.glob("hpc_ckpt_*.ckpt")]
     found = [p for p in found if p.is_file() and zipfile.is_zipfile(p)]
     return max(found, key=lambda p: p.stat().st_mtime, default=None)
 
