@@ -50,9 +50,11 @@ def fit(bar: EpochProgressBar, epochs: int) -> None:
 def test_plain_lines_every_n_epochs(capsys):
     fit(EpochProgressBar(print_every_n_epochs=2, plain=True), epochs=5)
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("epoch ")]
-    assert [ln.split(" | ")[0] for ln in lines] == ["epoch 2/5", "epoch 4/5", "epoch 5/5"]  # and the last one
+    # every 2 epochs, after the validation (epoch 3) and the last one
+    assert [ln.split(" | ")[0] for ln in lines] == ["epoch 2/5", "epoch 3/5", "epoch 4/5", "epoch 5/5"]
     # the latest validation, with its epoch when it is older than the line
-    assert "val/aoe_deg" not in lines[0] and lines[1].endswith("| val/aoe_deg 3.5 (epoch 3)")
+    assert "val/aoe_deg" not in lines[0] and lines[1].endswith("| val/aoe_deg 3.5")
+    assert lines[2].endswith("| val/aoe_deg 3.5 (epoch 3)")
     assert " elapsed, " in lines[0] and " left | train/loss " in lines[0]
 
 
@@ -65,6 +67,16 @@ def test_one_bar_over_all_epochs(capsys):
     final = out.split("\r")[-1]  # the last redraw of the one bar
     assert final.startswith("Training: 100%") and "5/5" in final and "epoch/s" in final
     assert "train/loss=" in final and "val/aoe_deg=3.5]" in final  # latest validation AOE (epoch 3)
+
+
+def test_with_a_bar_the_run_log_still_gets_the_plain_lines(tmp_path):
+    from gyrodenoise.job_log import console_to_job_log
+
+    with console_to_job_log(tmp_path / "train.log"):
+        fit(EpochProgressBar(print_every_n_epochs=2, plain=False), epochs=5)
+    lines = [ln for ln in (tmp_path / "train.log").read_text().splitlines() if ln.startswith("epoch ")]
+    assert [ln.split(" | ")[0] for ln in lines] == ["epoch 2/5", "epoch 3/5", "epoch 4/5", "epoch 5/5"]
+    assert "\r" not in (tmp_path / "train.log").read_text()
 
 
 def test_rejects_nonpositive_interval():

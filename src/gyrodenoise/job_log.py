@@ -28,7 +28,7 @@ class _Tee(io.TextIOBase):
 
     def write(self, s: str) -> int:
         self.console.write(s)
-        if "\r" not in s:
+        if "\r" not in s and "\x1b[" not in s:  # a bar's redraw or cursor move (tqdm's nested bars) is not text
             self.log.write(s)
         return len(s)
 
@@ -45,6 +45,12 @@ class _Tee(io.TextIOBase):
     @property
     def encoding(self) -> str:  # type: ignore[override]
         return getattr(self.console, "encoding", "utf-8")
+
+
+def write_to_job_log(text: str) -> None:
+    """`text` into the run's log file only, e.g. the progress a terminal shows as a redrawn bar (not copied)."""
+    if isinstance(sys.stdout, _Tee):
+        sys.stdout.log.write(text)
 
 
 def job_log_path() -> Path | None:

@@ -5,7 +5,8 @@ restarts every epoch and says nothing about the run.
 `EpochProgressBar` shows ONE bar over all epochs (epoch i/max_epochs, elapsed < time left, the current
 train loss and the latest validation AOE). Where stdout is not a terminal (a log file, a Slurm job, a
 test's captured output), redrawn bars would fill the file with carriage returns, so it prints one plain
-line every `print_every_n_epochs` epochs (and after the last one) and no bars at all:
+line every `print_every_n_epochs` epochs, after each validation and after the last epoch, and no bars at all (with
+a bar, the same lines go to the run's log file):
 
     epoch 40/300 | 0:08 elapsed, 0:52 left | train/loss 0.0712 | val/aoe_deg 1.310
 """
@@ -20,6 +21,8 @@ import lightning.pytorch as L
 from lightning.pytorch.callbacks import TQDMProgressBar
 from lightning.pytorch.callbacks.progress.tqdm_progress import Tqdm
 from tqdm import tqdm
+
+from gyrodenoise.job_log import write_to_job_log
 
 SHOWN = ("train/loss", "val/aoe_deg")  # what each line / the bar's postfix reports (logged with prog_bar=True)
 
@@ -88,15 +91,18 @@ class EpochProgressBar(TQDMProgressBar):
     def on_train_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         # validation (when due) has already run in this epoch: its AOE is in the metrics
         done = trainer.current_epoch + 1
+        last = trainer.max_epochs is not None and done >= trainer.max_epochs
+        # a line every N epochs, after each validation (its figure is new) and at the end
+        due = done % self.print_every_n_epochs == 0 or last or trainer.should_stop or self._val_epoch == done
         if self.is_enabled:
             self.train_progress_bar.n = done
             self.train_progress_bar.set_postfix(self.get_metrics(trainer), refresh=True)
-        elif self.plain and self._enabled:
-            last = trainer.max_epochs is not None and done >= trainer.max_epochs
-            if done % self.print_every_n_epochs == 0 or last or trainer.should_stop:
-                self._print_line(trainer, done)
+            if due:  # the bar is redrawn on the terminal only: the run's log file gets the plain line
+                write_to_job_log(self._line(trainer, done) + "\n")
+        elif self.plain and self._enabled and due:
+            print(self._line(trainer, done), flush=True)
 
-    def _print_line(self, trainer: L.Trainer, done: int) -> None:
+    def _line(self, trainer: L.Trainer, done: int) -> str:
         elapsed = time.monotonic() - self._start_time
         total = trainer.max_epochs if trainer.max_epochs is not None and trainer.max_epochs > 0 else None
         parts = [f"epoch {done}/{total or '?'}"]
@@ -110,4 +116,4 @@ class EpochProgressBar(TQDMProgressBar):
             f"{k} {v}" + (f" (epoch {val_epoch})" if k.startswith("val/") and val_epoch not in (None, done) else "")
             for k, v in self.get_metrics(trainer).items()
         ]
-        print(" | ".join(parts), flush=True)
+        return " | ".join(parts)
