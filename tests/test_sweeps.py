@@ -250,6 +250,10 @@ def test_collect_filters_and_errors(tmp_path):
     assert n == 3 and mean == pytest.approx(1.1) and sd == pytest.approx(0.1)
     assert "Unfinished runs left out (no summary.json): " in (tmp_path / "bn.md").read_text()
     assert "/m/crashed" in (tmp_path / "bn.md").read_text()  # named, not only counted
+    assert "repeated" not in (tmp_path / "bn.md").read_text()
+    # without the filter, batch_norm=true holds gelu and relu runs of the same seeds: said, not averaged silently
+    ablation.collect([tmp_path / "m"], tmp_path / "bn_all", keys=["model.batch_norm"])
+    assert "model.batch_norm=true: 6 runs but seed(s) 0, 1, 2 repeated" in (tmp_path / "bn_all.md").read_text()
 
     assert ablation.main([str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
     assert ablation.main([str(tmp_path / "m"), "--out", str(tmp_path / "x"), "--where", "model.act=tanh"]) == 2

@@ -153,6 +153,21 @@ def plot_png(settings: Sequence[Setting], keys: Sequence[str], title: str) -> by
     return buf.getvalue()
 
 
+def repeated_seed_notes(settings: Sequence[Setting], keys: Sequence[str]) -> list[str]:
+    """A note per setting whose runs repeat a seed: its spread is then not a seed spread (runs that differ in a
+    key not tabulated, or the same run twice)."""
+    notes = []
+    for s in settings:
+        seeds = [str(r.seed) for r in s.runs]
+        if repeated := sorted({x for x in seeds if seeds.count(x) > 1}):
+            label = ", ".join(f"{k}={v}" for k, v in zip(keys, s.values, strict=True))
+            notes.append(
+                f"{label}: {len(seeds)} runs but seed(s) {', '.join(repeated)} repeated: they differ in a key not in "
+                "the table (--keys to add it, --where to filter) or are the same run twice; the ± is no seed spread"
+            )
+    return notes
+
+
 def collect(
     dirs: Sequence[Path],
     out: Path,
@@ -173,6 +188,9 @@ def collect(
     if where:
         md += [f"Filter: {', '.join(f'{k}={v}' for k, v in where)}", ""]
     md += [markdown_table(settings, keys)]
+    for note in repeated_seed_notes(settings, keys):
+        md += [note, ""]
+        print(f"warning: {note}")
     if unfinished:
         left_out = ", ".join(portable_path(d) for d in unfinished)
         md += [f"Unfinished runs left out (no summary.json): {left_out}", ""]
