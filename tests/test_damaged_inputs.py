@@ -104,8 +104,12 @@ def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
         signal.signal(signal.SIGINT, handler)  # Lightning ignores further Ctrl-C while it shuts down
     err = capsys.readouterr().err
     assert "interrupted at epoch 1: no model.pt written; resume with ckpt_path=" in err
-    assert "(checkpoints are written every 2 epochs)" in err
+    assert "interrupted.ckpt (written at the interruption)" in err and "last.ckpt is written every 2 epochs" in err
     assert not (tmp_path / "run" / "model.pt").exists()
+    # the same command in the same folder (a requeued cluster job) goes on from that checkpoint and finishes
+    summary = train(config(root, tmp_path / "run", every_2, "trainer.max_epochs=4"))
+    assert "auto_resume: " in capsys.readouterr().out and summary["epochs"] == 4
+    assert not (tmp_path / "run" / "checkpoints" / "interrupted.ckpt").exists()  # removed at a normal end
 
 
 def test_an_interrupted_correct_rerun_leaves_no_earlier_summary(root, tmp_path, monkeypatch):

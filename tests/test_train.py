@@ -191,6 +191,7 @@ def test_diverged_run_stops_with_one_line_and_no_model(tmp_path):
         train(compose_config("train", overrides))
     assert "no model.pt written" in str(e.value)
     assert not (tmp_path / "model.pt").exists() and not (tmp_path / "summary.json").exists()
+    assert not (tmp_path / "checkpoints" / "interrupted.ckpt").exists()  # NaN weights: nothing to resume
 
 
 def test_ema_run_also_tests_its_raw_final_weights(root, tmp_path):

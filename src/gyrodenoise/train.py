@@ -32,7 +32,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
-from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
+from gyrodenoise.cli_errors import ConfigError, TrainingDiverged, hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.data.datamodule import ImuDataModule
@@ -304,6 +304,9 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
             _say_how_to_resume(trainer, cfg)
         if isinstance(e, SIGTERMException):  # Lightning raises it with no code: the process would exit 0
             raise SystemExit(128 + signal.SIGTERM) from None
+        raise
+    except TrainingDiverged:  # its weights are NaN: nothing to resume from (auto_resume would pick it up)
+        (out_dir / "checkpoints" / "interrupted.ckpt").unlink(missing_ok=True)
         raise
     wall_s = time.time() - start
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
