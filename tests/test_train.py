@@ -129,20 +129,26 @@ def test_csv_logger_alone_writes_the_curves_and_the_test(root, tmp_path):
     assert not (tmp_path / "run" / "tensorboard").exists()
 
 
+# experiment=sim_quick (the README's main job) cut to a few seconds of training
+TINY_SIM = [
+    "experiment=sim_quick",
+    "dataset.generation.duration_s=12",
+    "dataset.train_seqs=[drone_00]",
+    "dataset.val_seqs=[hand_05]",
+    "dataset.test_seqs=[drone_10]",
+    "dataset.window=256",
+    "model.channels=[4,8]",
+    "model.dilations=[1,2]",
+]
+
+
 def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     """experiment=sim_quick (the README's main job) on tiny settings: TensorBoard gets the scalars, the
     figures and the hparams; without a terminal the progress is one plain line every N epochs."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     overrides = [
-        "experiment=sim_quick",
-        "dataset.generation.duration_s=12",
-        "dataset.train_seqs=[drone_00]",
-        "dataset.val_seqs=[hand_05]",
-        "dataset.test_seqs=[drone_10]",
-        "dataset.window=256",
-        "model.channels=[4,8]",
-        "model.dilations=[1,2]",
+        *TINY_SIM,
         "trainer.max_epochs=4",
         "trainer.check_val_every_n_epoch=2",
         "callbacks.progress_bar.print_every_n_epochs=2",
@@ -174,14 +180,7 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
 def test_diverged_run_stops_with_one_line_and_no_model(tmp_path):
     """A NaN loss ends the fit at once with a message naming the epoch and what to change; no model.pt."""
     overrides = [
-        "experiment=sim_quick",
-        "dataset.generation.duration_s=12",
-        "dataset.train_seqs=[drone_00]",
-        "dataset.val_seqs=[hand_05]",
-        "dataset.test_seqs=[drone_10]",
-        "dataset.window=256",
-        "model.channels=[4,8]",
-        "model.dilations=[1,2]",
+        *TINY_SIM,
         "trainer.max_epochs=20",
         "loss.weight=1e306",
         "logger=csv",

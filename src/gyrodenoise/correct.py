@@ -33,7 +33,16 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning, run_checks
-from gyrodenoise.data.imu_csv import ACC_UNITS, GYRO_UNITS, TIME_UNITS, ImuRecording, asl_text, read_imu_csv, resample
+from gyrodenoise.data.imu_csv import (
+    ACC_UNITS,
+    GYRO_UNITS,
+    TIME_UNITS,
+    ImuRecording,
+    asl_text,
+    check_units,
+    read_imu_csv,
+    resample,
+)
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
@@ -187,13 +196,7 @@ def correct_arrays(
             raise ValueError(f"{name} has shape {a.shape}; expected (N, 3), one row per sample{hint}")
     if t_in.shape != (len(gyro),) or len(acc) != len(gyro):
         raise ValueError(f"t {t_in.shape}, gyro {gyro.shape}, acc {acc.shape}: give one stamp and one row per sample")
-    for what, unit, table in (
-        ("time_unit", time_unit, TIME_UNITS),
-        ("gyro_unit", gyro_unit, GYRO_UNITS),
-        ("acc_unit", acc_unit, ACC_UNITS),
-    ):
-        if unit not in table:
-            raise ValueError(f"{what}={unit!r}; choose one of {list(table)}")
+    check_units(time_unit, gyro_unit, acc_unit)
     if np.issubdtype(t_in.dtype, np.integer):  # int stamps stay exact (float64 ns of a 2014 epoch: 256-ns steps)
         t_ns = t_in.astype(np.int64) * TIME_UNITS[time_unit]
     else:

@@ -55,6 +55,17 @@ class ImuRecording:
         return ", ".join(self.columns[f] for f in fields)
 
 
+def check_units(time_unit: str, gyro_unit: str, acc_unit: str) -> None:
+    """ValueError naming a unit these readers do not know, with the ones they do."""
+    for name, val, table in (
+        ("time_unit", time_unit, TIME_UNITS),
+        ("gyro_unit", gyro_unit, GYRO_UNITS),
+        ("acc_unit", acc_unit, ACC_UNITS),
+    ):
+        if val not in table:
+            raise ValueError(f"{name}={val!r}; choose one of {', '.join(table)}")
+
+
 def _split(line: str, delimiter: str | None) -> list[str]:
     return [f.strip() for f in (line.split(delimiter) if delimiter else line.split())]
 
@@ -131,13 +142,7 @@ def read_imu_csv(
     """Parse the file; values in SI, time in int ns. Comment lines start with '#'; a first line
     with non-numeric fields (or a first comment line) is taken as the header."""
     path = Path(path)
-    for name, val, table in (
-        ("time_unit", time_unit, TIME_UNITS),
-        ("gyro_unit", gyro_unit, GYRO_UNITS),
-        ("acc_unit", acc_unit, ACC_UNITS),
-    ):
-        if val not in table:
-            raise ValueError(f"{name}={val!r}; choose one of {', '.join(table)}")
+    check_units(time_unit, gyro_unit, acc_unit)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: IMU file not found.")
     header: list[str] | None = None
