@@ -1,12 +1,13 @@
-"""The rule of a one-seed-per-fold EuRoC screen applied to its runs: each arm against ref, 6 folds.
+"""The rule of a EuRoC cross-validation screen applied to its runs: each arm against ref, 6 folds.
 
-    python benchmarks/euroc_cv_screen.py nobn        # benchmarks/queues/euroc_nobn_cv.txt
-    python benchmarks/euroc_cv_screen.py acc_input   # benchmarks/queues/euroc_acc_input_cv.txt
+    python benchmarks/euroc_cv_screen.py nobn            # benchmarks/queues/euroc_nobn_cv.txt
+    python benchmarks/euroc_cv_screen.py acc_input       # benchmarks/queues/euroc_acc_input_cv.txt
+    python benchmarks/euroc_cv_screen.py acc_diff_round  # benchmarks/queues/euroc_acc_diff_round.txt
 
-Per arm and fold k: d_k = the arm's held-out-flight AOE (seed 100+k) minus the mean of ref's three CPU runs on that
-fold (rounds 2 and 3, seeds 100+k, 200+k, 300+k). An arm is a candidate for an ensemble round only if the 95%
-t-interval of its six d_k lies below 0. The fold models' test AOE is shown for information. Writes
-benchmarks/results/<screen>.{md,json}.
+Per arm and fold k: d_k = the mean held-out-flight AOE of the arm's runs (seed 100+k in a screen; 100+k, 200+k and
+300+k in a round) minus the mean of ref's three CPU runs on that fold (rounds 2 and 3, seeds 100+k, 200+k, 300+k).
+An arm is a candidate only if the 95% t-interval of its six d_k lies below 0. The fold models' test AOE is shown for
+information. Writes benchmarks/results/<name>.{md,json}.
 """
 
 from __future__ import annotations
@@ -28,10 +29,12 @@ FOLDS = range(6)
 
 @dataclass(frozen=True)
 class Screen:
-    name: str  # runs in RUNS/name, result in RESULTS/name.{md,json}, rule in benchmarks/queues/name.txt
+    name: str  # result in RESULTS/name.{md,json}, rule in benchmarks/queues/name.txt
     title: str
     arms: dict[str, str]  # run-name prefix -> what the arm is
     decision: str  # the sentence the rule adds for an arm's interval
+    runs: str = ""  # the runs' folder under RUNS (default: name)
+    seeds: tuple[int, ...] = (100,)  # seed = s + k on fold k
 
 
 SCREENS = {
@@ -46,6 +49,14 @@ SCREENS = {
         "EuRoC: the network's accelerometer input at the 6-fold cross-validation protocol (a screen)",
         {"diff": "the accelerometer's first difference", "none": "no accelerometer (gyro only)"},
         "for `none`, an interval above 0 would resolve that the accelerometer input helps (the paper's design)",
+    ),
+    "acc_diff_round": Screen(
+        "euroc_acc_diff_round",
+        "EuRoC: the accelerometer's first difference at 3 seeds per fold (round 2's design)",
+        {"diff": "the accelerometer's first difference"},
+        "a candidate is not shipped by this round (streaming/export support and the 8-seed ensemble come first)",
+        runs="euroc_acc_input_cv",
+        seeds=(100, 200, 300),
     ),
 }
 
@@ -63,6 +74,18 @@ def read(path: Path) -> dict:
     }
 
 
+def _mean_run(runs: list[dict]) -> dict:
+    """One fold's runs of an arm as one: mean val and test AOE, each run's val kept for the table."""
+    return {
+        **runs[0],
+        "val": float(np.mean([r["val"] for r in runs])),
+        "test": float(np.mean([r["test"] for r in runs])),
+        "vals": [r["val"] for r in runs],
+        "wall_s": runs[0]["wall_s"],
+        "walls": [r["wall_s"] for r in runs if r["wall_s"]],
+    }
+
+
 def interval(d) -> str:
     return f"{d.mean:+.2f} deg, 95% t-interval [{d.t_ci[0]:+.2f}, {d.t_ci[1]:+.2f}]"
 
@@ -75,7 +98,11 @@ def main() -> int:
         k: [read(RUNS / f"euroc_cv{2 if s < 300 else 3}" / f"ref_f{k}_s{s + k}.json") for s in (100, 200, 300)]
         for k in FOLDS
     }
-    arms = {a: {k: read(RUNS / screen.name / f"{a}_f{k}_s{100 + k}.json") for k in FOLDS} for a in screen.arms}
+    folder = RUNS / (screen.runs or screen.name)
+    per_seed = {
+        a: {k: [read(folder / f"{a}_f{k}_s{s + k}.json") for s in screen.seeds] for k in FOLDS} for a in screen.arms
+    }
+    arms = {a: {k: _mean_run(runs[k]) for k in FOLDS} for a, runs in per_seed.items()}
     ref_val = {str(k): float(np.mean([r["val"] for r in ref[k]])) for k in FOLDS}
     ref_test = {str(k): float(np.mean([r["test"] for r in ref[k]])) for k in FOLDS}
     d_val = {a: paired_diff({str(k): runs[k]["val"] for k in FOLDS}, ref_val)[0] for a, runs in arms.items()}
@@ -83,17 +110,27 @@ def main() -> int:
     candidate = {a: d_val[a].t_ci[1] < 0 for a in arms}
     held_out = arms[next(iter(arms))]
     members = {k: " / ".join(f"{r['val']:.2f}" for r in ref[k]) for k in FOLDS}
-    arm_cols = [f"{a} (seed 100+k) | d" for a in arms]
+    seeds = " / ".join(f"{s}+k" for s in screen.seeds)
+    arm_cols = [f"{a} (seed {seeds}) | d" for a in arms]
+
+    def shown(run: dict) -> str:  # one seed: its AOE; several: each, then their mean
+        return (
+            f"{run['val']:.2f}"
+            if len(run["vals"]) == 1
+            else " / ".join(f"{v:.2f}" for v in run["vals"]) + (f" (mean {run['val']:.2f})")
+        )
+
     rows = [
         f"| {k} | {held_out[k]['held_out']} | {members[k]} | {ref_val[str(k)]:.2f} | "
-        + " | ".join(f"{runs[k]['val']:.2f} | {runs[k]['val'] - ref_val[str(k)]:+.2f}" for runs in arms.values())
+        + " | ".join(f"{shown(runs[k])} | {runs[k]['val'] - ref_val[str(k)]:+.2f}" for runs in arms.values())
         + f" | {ref_test[str(k)]:.2f} | "
         + " | ".join(f"{runs[k]['test']:.2f}" for runs in arms.values())
         + " |"
         for k in FOLDS
     ]
     n_cols = 4 + 2 * len(arms) + 1 + len(arms)
-    walls = [r["wall_s"] for runs in arms.values() for r in runs.values() if r["wall_s"]]
+    walls = [w for runs in arms.values() for r in runs.values() for w in r["walls"]]
+    machines = sorted({r["machine"] for runs in per_seed.values() for rs in runs.values() for r in rs})
     md = [
         f"# {screen.title}",
         "",
@@ -129,7 +166,7 @@ def main() -> int:
     if screen.decision:
         md.append(f"- the rule also says: {screen.decision}")
     md.append(
-        f"- machine: {held_out[0]['machine']}; process wall per run {min(walls):.0f}-{max(walls):.0f} s "
+        f"- machine: {'; '.join(machines)}; process wall per run {min(walls):.0f}-{max(walls):.0f} s "
         "(two runs at once, one thread each)"
     )
     out = RESULTS / screen.name
