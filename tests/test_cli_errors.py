@@ -32,6 +32,20 @@ def test_user_errors_exit_2_with_the_message(error, monkeypatch, capsys):
     assert capsys.readouterr().err.startswith(f"error: {error}\n")
 
 
+def test_a_full_disk_is_one_line_naming_the_file_and_other_os_errors_keep_the_trace(monkeypatch, capsys):
+    import errno
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    with pytest.raises(SystemExit) as exit_info, user_errors():
+        raise OSError(errno.ENOSPC, "No space left on device", "/run/checkpoints/last.ckpt")
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: /run/checkpoints/last.ckpt: No space left on device. Free space")
+    assert "hydra.run.dir" in err
+    with pytest.raises(OSError), user_errors():
+        raise OSError(errno.EIO, "I/O error")
+
+
 def test_full_error_switch_and_other_errors_keep_the_trace(monkeypatch):
     monkeypatch.setenv("HYDRA_FULL_ERROR", "1")
     with pytest.raises(FileNotFoundError), user_errors():

@@ -8,6 +8,7 @@ own switch) shows the trace as before.
 
 from __future__ import annotations
 
+import errno
 import functools
 import os
 import sys
@@ -34,6 +35,7 @@ class TrainingDiverged(RuntimeError):
 
 
 USER_ERRORS = (DataFormatError, FileNotFoundError, ConfigError, ModelFileError, TrainingDiverged)
+DISK_ERRNOS = (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT)
 
 
 @contextmanager
@@ -42,6 +44,13 @@ def user_errors() -> Iterator[None]:
         yield
     except USER_ERRORS as e:
         _one_line(str(e))
+    except OSError as e:  # a full, read-only or forbidden disk: the path and what to do, not a traceback
+        if e.errno not in DISK_ERRNOS:
+            raise
+        _one_line(
+            f"{e.filename or 'writing a file'}: {e.strerror}. Free space or give a writable folder (hydra.run.dir=... "
+            "for the outputs, GYRODENOISE_CACHE=... for the data cache)"
+        )
     except MissingMandatoryValue as e:  # e.g. dataset=asl_folder without dataset.root
         _one_line(f"{e.full_key} has no value (it is '???' in the config): give it, e.g. {e.full_key}=...")
     except (MisconfigurationException, InstantiationException) as e:  # Hydra wraps the Trainer's own error
