@@ -175,6 +175,14 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     assert 0 not in [e.step for e in ev.Scalars("val/aoe_deg")]
     assert [e.step for e in ev.Images("val/orientation")] == [e.step for e in ev.Scalars("val/aoe_deg")]
     assert "val/aoe_deg/hand_05" in tags["scalars"]  # each validation sequence
+    assert "val/raw_imu_aoe_deg" in tags["scalars"]  # the reference the correction has to beat
+
+
+def test_a_model_no_better_than_the_raw_gyro_is_said_so(root, tmp_path, capsys):
+    """lr 0: the model stays the raw IMU (zero head, C_hat = I); the run's validation equals the raw gyro's."""
+    summary = train(config(root, tmp_path, "optim.lr=0", "optim.scheduler.eta_min=0", "calibrated_baseline=false"))
+    assert summary["val"]["val/aoe_deg"] == pytest.approx(summary["val"]["val/raw_imu_aoe_deg"])
+    assert "is not better than the raw gyro's" in capsys.readouterr().out
 
 
 def test_diverged_run_stops_with_one_line_and_no_model(tmp_path):

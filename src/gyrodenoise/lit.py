@@ -33,6 +33,7 @@ class DenoiserModule(L.LightningModule):
         self.figure_every_n_val = figure_every_n_val
         self._val_outputs: list[dict] = []
         self._val_count = 0
+        self._raw_aoe: dict[tuple[str, str], float] = {}  # (group, sequence) -> the raw IMU's AOE (rad)
         # Lightning's model summary runs this through the model (eval mode, no_grad) to print the FLOPs of one
         # second of IMU at 200 Hz and the in/out shapes; without it the summary reads "0 FLOPs"
         self.example_input_array = torch.zeros(1, 200, 6)
@@ -93,11 +94,15 @@ class DenoiserModule(L.LightningModule):
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
         R_est, (a3d, ayaw) = self._integrate_and_score(batch, w_hat[0])
+        key = (batch.get("group", "val"), batch["name"])
+        if key not in self._raw_aoe:  # the raw IMU's AOE on the sequence, the reference to beat: computed once
+            self._raw_aoe[key] = self._integrate_and_score(batch, batch["imu"][0, :, :3])[1][0]
         return {
             "name": batch["name"],
             "group": batch.get("group", "val"),
             "loss": float(loss),
             "aoe": a3d,
+            "raw_aoe": self._raw_aoe[key],
             "aoe_yaw": ayaw,
             "batch": batch,
             "R_est": R_est,
@@ -120,6 +125,7 @@ class DenoiserModule(L.LightningModule):
             aoe_deg = math.degrees(np.mean([o["aoe"] for o in g]))
             self.log(f"{group}/aoe_deg", aoe_deg, prog_bar=group == "val", sync_dist=True)
             self.log(f"{group}/aoe_yaw_deg", math.degrees(np.mean([o["aoe_yaw"] for o in g])), sync_dist=True)
+            self.log(f"{group}/raw_imu_aoe_deg", math.degrees(np.mean([o["raw_aoe"] for o in g])), sync_dist=True)
             for o in g:  # each validation sequence (under DDP each process logs its own share: no sync)
                 self.log(f"{group}/aoe_deg/{o['name']}", math.degrees(o["aoe"]))
         if not self.trainer.sanity_checking and not all(math.isfinite(o["aoe"]) for o in outs):

@@ -344,6 +344,11 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     if alternative is not None and cfg.get("test_other_rule") and cfg.get("test"):
         test_other = _score_without_callbacks(cfg, dm, alternative, validate=False)[1]
     val_raw_final, test_raw_final = _score_without_callbacks(cfg, dm, raw_final) if raw_final is not None else ({}, {})
+    if (raw := val.get("val/raw_imu_aoe_deg")) is not None and val.get("val/aoe_deg", -math.inf) >= raw:
+        print(
+            f"warning: validation AOE {val['val/aoe_deg']:.2f} deg is not better than the raw gyro's {raw:.2f}: the "
+            f"model corrects nothing (a learning rate too high, now optim.lr={cfg.optim.lr}? too few epochs?)"
+        )
     for lg in trainer.loggers if test else []:  # the test figures beside the curves (not the post-fit validation)
         lg.log_metrics(test, step=trainer.global_step)
         lg.save()
