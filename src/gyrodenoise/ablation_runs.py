@@ -11,6 +11,7 @@ import math
 import statistics
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import yaml
@@ -50,20 +51,19 @@ class Run:
             if not isinstance(node, dict) or part not in node:
                 return MISSING
             node = node[part]
-        if isinstance(node, dict):  # a config group's content (logger, callbacks, trainer): name its choice
-            choice = self._group_choice(key)
-            if choice is not None:
-                return choice
+        if isinstance(node, dict) and key in self.group_choices:  # a group's content (logger, trainer): its name
+            return str(self.group_choices[key])
         return _fmt_value(node)
 
-    def _group_choice(self, key: str) -> str | None:
-        """The config-group choice Hydra recorded for `key` (.hydra/hydra.yaml runtime.choices), or None."""
+    @cached_property
+    def group_choices(self) -> dict:
+        """The config-group choices Hydra recorded (.hydra/hydra.yaml runtime.choices; {} without one), read once:
+        `value` asks for them per key and table."""
         hydra_file = Path(self.path) / ".hydra" / "hydra.yaml"
         if not hydra_file.is_file():
-            return None
+            return {}
         choices = ((yaml.safe_load(hydra_file.read_text()) or {}).get("hydra") or {}).get("runtime", {}).get("choices")
-        value = (choices or {}).get(key)
-        return None if value is None else str(value)
+        return {k: v for k, v in (choices or {}).items() if v is not None}
 
     def curve(self) -> list[tuple[int, float]]:
         """(epoch, val AOE) of the validations during fitting, from the CSV log when there is one.
