@@ -33,7 +33,7 @@ class DenoiserModule(L.LightningModule):
         self.figure_every_n_val = figure_every_n_val
         self._val_outputs: list[dict] = []
         self._val_count = 0
-        self._raw_aoe: dict[tuple[str, str], float] = {}  # (group, sequence) -> the raw IMU's AOE (rad)
+        self._raw: dict[tuple[str, str], tuple[torch.Tensor, float]] = {}  # (group, sequence): _raw_reference
         # Lightning's model summary runs this through the model (eval mode, no_grad) to print the FLOPs of one
         # second of IMU at 200 Hz and the in/out shapes; without it the summary reads "0 FLOPs"
         self.example_input_array = torch.zeros(1, 200, 6)
@@ -90,19 +90,25 @@ class DenoiserModule(L.LightningModule):
         R_est = integrate_gyro_torch(rot[0], gyro, batch["dt"][0])
         return R_est, aoe_torch(rot, R_est, batch["gt_mask"][0])
 
+    def _raw_reference(self, batch: dict) -> tuple[torch.Tensor, float]:
+        """The raw IMU integrated like the model's output on this sequence, and its AOE (rad): the reference the
+        correction has to beat, the same at every validation, so computed once per sequence."""
+        key = (batch.get("group", "val"), batch["name"])
+        if key not in self._raw:
+            R_raw, (a3d, _) = self._integrate_and_score(batch, batch["imu"][0, :, :3])
+            self._raw[key] = (R_raw, a3d)
+        return self._raw[key]
+
     def _evaluate_sequence(self, batch: dict) -> dict:
         w_hat = self.model(batch["imu"])
         loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
         R_est, (a3d, ayaw) = self._integrate_and_score(batch, w_hat[0])
-        key = (batch.get("group", "val"), batch["name"])
-        if key not in self._raw_aoe:  # the raw IMU's AOE on the sequence, the reference to beat: computed once
-            self._raw_aoe[key] = self._integrate_and_score(batch, batch["imu"][0, :, :3])[1][0]
         return {
             "name": batch["name"],
             "group": batch.get("group", "val"),
             "loss": float(loss),
             "aoe": a3d,
-            "raw_aoe": self._raw_aoe[key],
+            "raw_aoe": self._raw_reference(batch)[1],
             "aoe_yaw": ayaw,
             "batch": batch,
             "R_est": R_est,
@@ -165,7 +171,7 @@ class DenoiserModule(L.LightningModule):
                 gt_mask = b["gt_mask"][0].cpu().numpy()
                 w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
                 # the raw IMU integrated the same way: the reference the correction has to beat
-                R_raw = self._integrate_and_score(b, b["imu"][0, :, :3])[0].cpu().numpy()
+                R_raw = self._raw_reference(b)[0].cpu().numpy()
                 R_est = o["R_est"].cpu().numpy()
                 tb.add_figure(
                     f"{prefix}/orientation",
