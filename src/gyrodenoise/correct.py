@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise.arrays import as_rows
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import (
@@ -189,11 +190,7 @@ def correct_arrays(
     the ensemble's spread (or None), open-loop orientation R from `initial`, the checks' report. A failed check
     raises SanityCheckError naming the row (counted from 1) and the argument to change.
     """
-    t_in, gyro, acc = np.asarray(t), np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64)
-    for name, a in (("gyro", gyro), ("acc", acc)):
-        if a.ndim != 2 or a.shape[1] != 3:
-            hint = f" (it looks transposed: pass {name}.T)" if a.ndim == 2 and a.shape[0] == 3 else ""
-            raise ValueError(f"{name} has shape {a.shape}; expected (N, 3), one row per sample{hint}")
+    t_in, gyro, acc = np.asarray(t), as_rows(gyro, "gyro", 3), as_rows(acc, "acc", 3)
     if t_in.shape != (len(gyro),) or len(acc) != len(gyro):
         raise ValueError(f"t {t_in.shape}, gyro {gyro.shape}, acc {acc.shape}: give one stamp and one row per sample")
     check_units(time_unit, gyro_unit, acc_unit)

@@ -18,6 +18,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise.arrays import as_rows
+
 _SMALL = 1e-6  # below this angle (rad) the Taylor branches are exact to float64 precision
 MAX_STEP_S = 1.0  # integrate_gyro: a median step above this is stamps or nanoseconds, not periods (IMUs: >= 5 Hz)
 
@@ -163,11 +165,8 @@ def integrate_gyro(R0: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> np.ndarr
     all samples. R0: (3, 3) body to world. Returns (N, 3, 3) float64.
     The cumulative product is a parallel prefix scan (log2 N batched matmuls) in float64.
     """
-    gyro = np.asarray(gyro, dtype=np.float64)
+    gyro = as_rows(gyro, "gyro", 3, " rad/s")
     dt = np.asarray(dt, dtype=np.float64)
-    if gyro.ndim != 2 or gyro.shape[1] != 3:
-        hint = " (it looks transposed: pass gyro.T)" if gyro.ndim == 2 and gyro.shape[0] == 3 else ""
-        raise ValueError(f"gyro has shape {gyro.shape}; expected (N, 3) rad/s, one row per sample{hint}")
     if dt.ndim == 0:  # one sample period for all
         dt = np.full(len(gyro), float(dt))
     if dt.shape != (len(gyro),):

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from gyrodenoise.arrays import as_rows
 from gyrodenoise.models.denoiser import GyroCorrection
 
 
@@ -88,13 +89,8 @@ def model_device(model: nn.Module) -> torch.device:
 def predict_with_spread(model: CorrectionModel, imu: np.ndarray | torch.Tensor) -> tuple[np.ndarray, np.ndarray | None]:
     """Corrected gyro (N, 3) float64 of one whole sequence (N, 6) in eval mode, and the ensemble's
     per-sample std (N, 3) float64 (None for a single model, which has no spread)."""
-    arr = imu.detach().cpu().numpy() if isinstance(imu, torch.Tensor) else np.asarray(imu, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 6:
-        hint = " (it looks transposed: pass imu.T)" if arr.ndim == 2 and arr.shape[0] == 6 else ""
-        raise ValueError(
-            f"imu has shape {arr.shape}; expected (N, 6): one row per sample, gyro x, y, z [rad/s] then accelerometer "
-            f"x, y, z [m/s^2] (np.hstack([gyro, acc])){hint}"
-        )
+    columns = " of gyro x, y, z [rad/s] then accelerometer x, y, z [m/s^2] (np.hstack([gyro, acc]))"
+    arr = as_rows(imu.detach().cpu().numpy() if isinstance(imu, torch.Tensor) else imu, "imu", 6, columns)
     if len(arr) == 0 or not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr)).any(1).sum()) if len(arr) else 0
         raise ValueError(
