@@ -20,7 +20,7 @@ from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.sim.effects import Bias, Effect, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
-from gyrodenoise.sim.imu import simulate_imu, write_asl
+from gyrodenoise.sim.imu import asl_written, simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
 
 GENERATOR_VERSION = 1
@@ -63,11 +63,12 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
 def ensure_generated(generation: Mapping, names: list[str], cache_dir: str | Path | None = None) -> Path:
     """The data-set folder, generating the sequences that are not there yet."""
     root = Path(cache_dir or default_cache_dir()) / f"sim-{generation_key(generation, names)}"
-    missing = [n for n in names if not (root / n / "mav0" / "imu0" / "data.csv").is_file()]
+    missing = [n for n in names if not asl_written(root / n)]
     if missing:  # tens of seconds: say what the wait is for, and where the data go
         print(f"simulating {len(missing)} sequence(s) into {root} (once: later runs with these settings read them)")
     for name in missing:
-        generate_sequence(root, name, generation)
+        if not asl_written(root / name):  # another job on the same cache may have written it meanwhile
+            generate_sequence(root, name, generation)
     record = json.dumps({"generation": generation, "names": names}, indent=2)
     settings = root / "generation.json"
     if not settings.is_file() or settings.read_text() != record:
@@ -97,7 +98,7 @@ class SimDataModule(ImuDataModule):
         if root:  # an explicit folder: generate the missing sequences there
             data_root = Path(root)
             for name in names:
-                if not (data_root / name / "mav0" / "imu0" / "data.csv").is_file():
+                if not asl_written(data_root / name):
                     generate_sequence(data_root, name, gen)
         else:
             data_root = ensure_generated(gen, names, cache_dir)

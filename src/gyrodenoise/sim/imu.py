@@ -130,7 +130,8 @@ def _write_csv(path: Path, header: str, t_ns: np.ndarray, values: np.ndarray) ->
             fh.write(str(t) + "," + ",".join(repr(v) for v in row) + "\n")
 
 
-def _complete(folder: Path) -> bool:
+def asl_written(folder: Path) -> bool:
+    """Whether `write_asl` has put a sequence at `folder` (it renames a whole copy into place, so both files)."""
     return all((folder / "mav0" / d / "data.csv").is_file() for d in ("imu0", "state_groundtruth_estimate0"))
 
 
@@ -157,14 +158,14 @@ def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1, keep_ex
         gt_vals = np.concatenate([sim.gt_pos[::gt_stride], q[:, 3:], q[:, :3]], 1)
         _write_csv(gt_dir / "data.csv", GT_HEADER, sim.t_ns[::gt_stride], gt_vals)
         (tmp / "sim.json").write_text(json.dumps(sim.meta, indent=2))
-        if keep_existing and _complete(folder):  # another process wrote it meanwhile (same settings, same content)
+        if keep_existing and asl_written(folder):  # another process wrote it meanwhile (same settings, same content)
             return folder
         if folder.exists():
             shutil.rmtree(folder, ignore_errors=True)
         try:
             os.replace(tmp, folder)
         except OSError:  # ENOTEMPTY/EEXIST: another process renamed its copy in first
-            if not (keep_existing and _complete(folder)):
+            if not (keep_existing and asl_written(folder)):
                 raise
     finally:
         if tmp.exists():
