@@ -81,7 +81,6 @@ def _mean_run(runs: list[dict]) -> dict:
         "val": float(np.mean([r["val"] for r in runs])),
         "test": float(np.mean([r["test"] for r in runs])),
         "vals": [r["val"] for r in runs],
-        "wall_s": runs[0]["wall_s"],
         "walls": [r["wall_s"] for r in runs if r["wall_s"]],
     }
 
