@@ -166,9 +166,9 @@ def test_main_job_logs_to_tensorboard_and_prints_epoch_lines(tmp_path, capsys):
     ev = EventAccumulator(str(tmp_path / "tensorboard"), size_guidance={"images": 0})
     ev.Reload()
     tags = ev.Tags()
-    assert {"train/loss", "lr-Adam", "val/aoe_deg", "test/aoe_deg"} <= set(tags["scalars"]), tags["scalars"]
+    assert {"train/loss", "train/lr", "val/aoe_deg", "test/aoe_deg"} <= set(tags["scalars"]), tags["scalars"]
     assert [e.step for e in ev.Scalars("train/loss")] == [1, 3]  # every log_every_n_steps (one step per epoch)
-    assert [e.step for e in ev.Scalars("lr-Adam")] == [1, 3]
+    assert [e.step for e in ev.Scalars("train/lr")] == [1, 3]
     assert {"val/orientation", "val/gyro_correction"} <= set(tags["images"]), tags["images"]
     assert "_hparams_/session_start_info" in ev.summary_metadata
     # the hparams' metrics have tags of their own: the curves get no extra point at step 0
@@ -327,3 +327,20 @@ def test_an_unexpected_error_ends_up_in_the_run_log(tmp_path):
         raise RuntimeError("boom")
     text = log.read_text()
     assert "epoch 1" in text and "Traceback" in text and "RuntimeError: boom" in text
+
+
+@pytest.mark.parametrize("schedule", ["constant", "cosine_warm_restarts"])
+def test_the_learning_rate_is_logged_as_train_lr_for_either_schedule(schedule):
+    cfg = compose_config("train", [*TINY_SIM, f"optim.scheduler.name={schedule}"])
+    module = DenoiserModule.from_config(cfg)
+    conf = module.configure_optimizers()
+    sched = conf["lr_scheduler"]["scheduler"]
+    assert conf["lr_scheduler"]["name"] == "train/lr"  # LearningRateMonitor's tag, not "lr-Adam"
+    lr = cfg.optim.lr
+    for _ in range(3):
+        conf["optimizer"].step()
+        sched.step()
+    if schedule == "constant":
+        assert sched.get_last_lr() == [lr]  # the placeholder scheduler changes nothing
+    else:
+        assert sched.get_last_lr()[0] < lr

@@ -204,11 +204,13 @@ class DenoiserModule(L.LightningModule):
         o = self.hparams.optim
         opt = torch.optim.Adam(self.parameters(), lr=o["lr"], weight_decay=o.get("weight_decay", 0.0))
         sched = o.get("scheduler") or {"name": "constant"}
-        if sched["name"] == "constant":
-            return opt
-        if sched["name"] == "cosine_warm_restarts":
+        if sched["name"] == "constant":  # a scheduler that changes nothing: the rate is logged under its name too
+            s = torch.optim.lr_scheduler.ConstantLR(opt, factor=1.0, total_iters=0)
+        elif sched["name"] == "cosine_warm_restarts":
             s = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
                 opt, T_0=sched["T_0"], T_mult=sched.get("T_mult", 1), eta_min=sched.get("eta_min", 0.0)
             )
-            return {"optimizer": opt, "lr_scheduler": {"scheduler": s, "interval": "epoch"}}
-        raise ValueError(f"optim.scheduler.name={sched['name']!r}; choose 'cosine_warm_restarts' or 'constant'")
+        else:
+            raise ValueError(f"optim.scheduler.name={sched['name']!r}; choose 'cosine_warm_restarts' or 'constant'")
+        # "name": LearningRateMonitor's tag, beside train/loss (its default is the optimiser's class, "lr-Adam")
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": s, "interval": "epoch", "name": "train/lr"}}
