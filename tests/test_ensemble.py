@@ -359,16 +359,23 @@ def test_model_not_beating_calibrated_warns(tmp_path, capsys):
     if {"tumvi", "tumvi-denoiser"} <= set(available_models()):  # TUM-VI's default IS the calibrated model: name it
         assert "the calibrated model 'tumvi' instead" in not_better_warning(load_model("tumvi-denoiser")[1])
 
-    with pytest.warns(ModelQualityWarning, match="did not beat"):  # what evaluate does on loading
+    with pytest.warns(ModelQualityWarning, match="did not beat") as caught:  # the Python API warns by itself
+        load_model(bad)
+    assert len(caught) == 1
+    with pytest.warns(ModelQualityWarning, match="did not beat") as caught:  # what evaluate does on loading
         load_checked(str(bad))
+    assert len(caught) == 1  # once, not once by load_model and once by evaluate
     with warnings.catch_warnings():
         warnings.simplefilter("error", ModelQualityWarning)
         load_checked(str(good))
+        load_model(good)
+        load_model(bad, warn=False)
 
     f = write_asl_imu(tmp_path / "data.csv", smooth_imu(600))
     assert correct_main([str(f), "-m", str(bad), "-o", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err
     assert "warning: model" in err and "did not beat the 12-parameter calibrated baseline" in err
+    assert err.count("did not beat") == 1, err
     assert json.loads((tmp_path / "o" / "correct_summary.json").read_text())["beats_calibrated"] is False
     assert correct_main([str(f), "-m", str(good), "-o", str(tmp_path / "g")]) == 0
     assert "did not beat" not in capsys.readouterr().err

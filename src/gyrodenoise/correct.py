@@ -210,7 +210,7 @@ def correct_arrays(
         },  # fmt: skip
         units={"time": time_unit, "gyro": gyro_unit, "acc": acc_unit},
     )
-    loaded, meta = (model, {}) if isinstance(model, torch.nn.Module) else load_model(model)
+    loaded, meta = (model, {}) if isinstance(model, torch.nn.Module) else load_model(model, warn=False)
     if msg := not_better_warning(meta):
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     try:
@@ -273,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"{flag} {target} is a folder: give a file path (or -o DIR for a folder)")
         path = find_imu_file(args.input)
         try:
-            model, meta = load_model(args.model)
+            model, meta = load_model(args.model, warn=False)  # its warning is listed with the others
         except RuntimeError as e:  # a state dict that does not fit the model's config
             raise ValueError(f"model {args.model!r} cannot be loaded by this version of gyrodenoise: {e}") from None
         if args.engine == "streaming":  # a model without a streaming form is refused before the data is read

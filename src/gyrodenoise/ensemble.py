@@ -113,7 +113,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     cfgs: list[dict] = []
     records: list[dict] = []
     for p in paths:
-        model, meta = load_model(p)
+        model, meta = load_model(p, warn=False)
         if isinstance(model, EnsembleCorrection):
             if model.spread_scale != 1.0:
                 warnings.warn(
@@ -166,7 +166,7 @@ def scale_spread(
 ) -> Path:
     """Write a copy of the ensemble file `model_path` whose std output is the members' std times `scale`
     (replacing any earlier factor); `fitted_by` says where the factor comes from (kept in the metadata)."""
-    model, meta = load_model(model_path)
+    model, meta = load_model(model_path, warn=False)
     if not isinstance(model, EnsembleCorrection):
         raise TypeError(f"{model_path}: a single model has no spread to scale; give an ensemble file")
     if len(model) < 2:
@@ -192,7 +192,7 @@ def add_spread_reference(
 
     from gyrodenoise.config import compose_config
 
-    model, meta = load_model(model_path)
+    model, meta = load_model(model_path, warn=False)
     if not isinstance(model, EnsembleCorrection):
         raise TypeError(f"{model_path}: a single model has no spread; give an ensemble file")
     overrides = list(overrides or [f"dataset={meta.get('dataset')}"])
@@ -276,7 +276,7 @@ class BuildEnsembleCallback(_HydraCallback):
         try:  # the members' training data are the sweep's dataset
             import hydra
 
-            model, meta = load_model(out)
+            model, meta = load_model(out, warn=False)
             _save_with_reference(model, meta, hydra.utils.instantiate(config.dataset), out, "BuildEnsembleCallback")
         except Exception as e:  # noqa: BLE001 - the ensemble stands without it; say how to add it
             print(f"no spread reference recorded ({e}): add it with `python -m gyrodenoise.ensemble reference`")
@@ -329,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
         except (*USER_ERRORS, ValueError, TypeError) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
-        ref = load_model(out)[1]["spread_reference"]
+        ref = load_model(out, warn=False)[1]["spread_reference"]
         cells = ", ".join(f"{k} {math.degrees(v):.3f}" for k, v in ref["per_recording_rad_s"].items())
         print(f"wrote {out}: spread reference {math.degrees(ref['reference_rad_s']):.3f} deg/s ({cells})")
         return 0

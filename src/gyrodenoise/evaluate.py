@@ -82,7 +82,7 @@ def gyro_method(model: CorrectionModel | None) -> Callable[[Sequence], np.ndarra
 
 def load_checked(name_or_path: str) -> tuple[CorrectionModel, dict, str | None]:
     """load_model, and warn when the model's metadata says it did not beat the calibrated baseline."""
-    model, meta = load_model(name_or_path)
+    model, meta = load_model(name_or_path, warn=False)
     msg = not_better_warning(meta)
     if msg:
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)

@@ -12,6 +12,7 @@ Safety metadata: `beats_calibrated` (True / False / None: unknown) says whether 
 
 from __future__ import annotations
 
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -98,7 +99,9 @@ class ModelFileError(ValueError):
     """A file given as a model that is not one (the CLIs print it as one line)."""
 
 
-def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[CorrectionModel, dict]:
+def load_model(
+    name_or_path: str | Path, map_location: str = "cpu", *, warn: bool = True
+) -> tuple[CorrectionModel, dict]:
     """A shipped model's name (`available_models()`), a model file (a run's model.pt or calibrated.pt, an ensemble,
     a Lightning .ckpt) or a training run's folder -> (model in eval mode, metadata).
 
@@ -107,7 +110,10 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     metadata: 'path' (the file), 'name' (how reports name it), 'model' (its config); from training, when recorded:
     'sensor' (model, rate_hz, noise densities), 'rate_hz', 'dataset', 'train_parts' (the data it saw),
     'val_aoe_deg', 'test', 'beats_calibrated' (False: the 12-parameter calibrated model fitted on the same data did
-    better in validation; `evaluate` and `correct` warn), 'command', 'machine'.
+    better in validation), 'command', 'machine'.
+
+    warn: issue a `ModelQualityWarning` when the metadata says the model did not beat the calibrated baseline
+    (`not_better_warning`); callers that report it their own way pass False.
     """
     path = resolve(name_or_path)
     try:
@@ -143,7 +149,10 @@ def load_model(name_or_path: str | Path, map_location: str = "cpu") -> tuple[Cor
     model.training_rate_hz = model_rate(meta)  # the streaming corrector checks stamps against it (None: unknown)
     # the name reports use: the shipped name, else the name the file records (ensembles), else its path
     name = Path(path).stem if is_shipped(path) else meta.get("name") or portable_path(path)
-    return model, {"model": cfg, **meta, "path": str(path), "name": name}
+    meta = {"model": cfg, **meta, "path": str(path), "name": name}
+    if warn and (msg := not_better_warning(meta)):
+        warnings.warn(msg, ModelQualityWarning, stacklevel=2)
+    return model, meta
 
 
 class ModelQualityWarning(UserWarning):
@@ -183,7 +192,7 @@ def not_better_warning(meta: dict) -> str | None:
         not instead
         and dataset in shipped
         and dataset != name
-        and load_model(dataset)[1]["model"]["name"] == "calibrated"
+        and load_model(dataset, warn=False)[1]["model"]["name"] == "calibrated"
     ):
         instead = dataset  # the dataset's default is the calibrated model (TUM-VI): name the default, not a variant
     if not instead and dataset and f"{dataset}-calibrated" in shipped:
