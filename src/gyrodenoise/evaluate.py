@@ -9,6 +9,9 @@ Methods: raw IMU (integrated gyro), zero motion (initial orientation held), cali
 on ground truth at the first instant with ground truth; a part (e.g. split=val's [50s:]) is scored as a stream that
 starts there: the network gets no IMU history from before it (its first ~2.5 s see copies of the first sample, as
 in training's validation; room1's denoiser: 0.926 deg, 0.897 with the history).
+Other methods' orientation estimates join the table as columns: `+estimates.NAME=FOLDER` (FOLDER/<sequence>.txt)
+or `'+estimates.NAME=PATH/*.txt'` (* = the sequence's name), TUM trajectories on the IMU's clock
+(gyrodenoise.external_estimates).
 Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
 roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
 trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation; stamps exact to the ns;
@@ -40,6 +43,7 @@ from gyrodenoise.config import with_output_dir
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.external_estimates import check_files, check_names, coverage_note, load_external, nan_outside
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
@@ -124,16 +128,16 @@ def evaluate_sequence(seq: Sequence, gyros: dict[str, np.ndarray | None], distan
     return out
 
 
-def table_rows(results: dict[str, dict], averaged: list[str]) -> list[list[str]]:
+def table_rows(results: dict[str, dict], averaged: list[str], methods: tuple[str, ...] = METHODS) -> list[list[str]]:
     def cell(a: tuple[float, float]) -> str:
         return f"{math.degrees(a[0]):.2f}/{math.degrees(a[1]):.2f}"
 
     # a variant of a sequence (e.g. V1_01 against its original ground truth) is listed, not averaged
     rows = [
-        [name if name in averaged else f"{name}, not in the average", *[cell(r["aoe"][m]) for m in METHODS]]
+        [name if name in averaged else f"{name}, not in the average", *[cell(r["aoe"][m]) for m in methods]]
         for name, r in results.items()
     ]
-    avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in METHODS]
+    avg = [np.mean([results[n]["aoe"][m] for n in averaged], axis=0) for m in methods]
     rows.append([f"average of {len(averaged)}", *[cell(a) for a in avg]])
     return rows
 
@@ -169,6 +173,9 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
             f"{e} Name the models to score with weights.proposed=PATH (e.g. a training run's model.pt) and "
             "weights.calibrated=PATH (its calibrated.pt)."
         ) from None
+    estimates = {str(k): v for k, v in (cfg.get("estimates") or {}).items()}  # other methods' trajectory files
+    check_names(estimates, METHODS)
+    scored = (*METHODS, *estimates)
     methods = {  # "proposed" is run in the loop below, with its spread when it is an ensemble
         "raw IMU": gyro_method(None),
         "zero motion": lambda seq: None,
@@ -186,6 +193,7 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
                 dm.root, seq.name, variant_file, dm.max_gap_factor, dm.cache_dir
             )
 
+    check_files(estimates, [s.name for s in sequences.values()])  # before any work, not after a sequence's
     parts = [dm.origin(seq) for seq in sequences.values()]
     model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
     model_warnings += [
@@ -206,6 +214,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
     calib: dict[str, uncertainty.CalibrationResult] = {}
+    external: dict[str, dict[str, dict]] = {name: {} for name in estimates}  # name -> sequence -> file, coverage
+    coverage_notes: list[str] = []
     spread_ratios: dict[str, float] = {}  # against the ensemble's training recordings (gyrodenoise.spread_check)
     for label, seq in sequences.items():
         gyros = {m: fn(seq) for m, fn in methods.items()}
@@ -220,25 +230,35 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
         write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
+        external_errors = {}
+        for name, spec in estimates.items():
+            est = load_external(name, spec, seq)
+            mask = est.mask(seq)
+            r["aoe"][name] = aoe(seq.rot, est.R, mask)
+            r["roe"][name] = {d: roe(seq.rot, est.R, seq.pos, d, mask) for d in distances}
+            external[name][label] = {"file": portable_path(est.file), "coverage": est.coverage(seq)}
+            coverage_notes += [n for n in [coverage_note(name, label, est, seq)] if n]
+            external_errors[name] = nan_outside(orientation_errors(seq.rot, est.R), est.covered)
         if cfg.figures:
             figs = out / "figures"
             figs.mkdir(parents=True, exist_ok=True)
             shown = {m: r["estimates"][m] for m in ("raw IMU", "calibrated IMU", "proposed")}
             fig = plots.orientation_figure(seq.t, seq.rot, shown, label, seq.gt_mask)
             plots.save(fig, figs / f"orientation_{slug(label)}.png")
-            errs = {m: orientation_errors(seq.rot, R) for m, R in shown.items()}
+            errs = {m: orientation_errors(seq.rot, R) for m, R in shown.items()} | external_errors
             plots.save(plots.error_figure(seq.t, errs, label, seq.gt_mask), figs / f"error_{slug(label)}.png")
             w_tilde = gyros["proposed"] - seq.gyro @ proposed.C_hat.detach().double().numpy().T
             plots.save(plots.correction_figure(seq.t, w_tilde, label, spread), figs / f"correction_{slug(label)}.png")
 
     names = {"proposed": proposed_meta["name"], "calibrated IMU": calibrated_meta["name"]}
-    header = ["sequence", *[f"{m}: {names[m]}" if m in names else m for m in METHODS]]
-    rows = table_rows(results, averaged)
+    header = ["sequence", *[f"{m}: {names[m]}" if m in names else m for m in scored]]
+    rows = table_rows(results, averaged, scored)
     left_out = {n: int((~seq.gt_mask).sum()) for n, seq in sequences.items()}
     notes = [AOE_DEFINITION]
     notes += [
         f"{n}: {k} of {len(sequences[n])} samples inside ground-truth gaps left out" for n, k in left_out.items() if k
     ]
+    notes += coverage_notes
     write_text(
         out / "table.md",
         markdown_table(header, rows) + "".join(f"\n- {x}" for x in notes + [f"WARNING: {w}" for w in warned]) + "\n",
@@ -247,12 +267,12 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
 
     # ROE pooled over the averaged test sequences
     roe_pooled = {
-        d: {m: tuple(np.concatenate([results[n]["roe"][m][d][a] for n in averaged]) for a in (0, 1)) for m in METHODS}
+        d: {m: tuple(np.concatenate([results[n]["roe"][m][d][a] for n in averaged]) for a in (0, 1)) for m in scored}
         for d in distances
     }
     roe_rows = []
     for d in distances:
-        for m in METHODS:
+        for m in scored:
             s3, sy = (summarize(np.degrees(roe_pooled[d][m][a])) for a in (0, 1))
             roe_rows.append(
                 [f"{d:g}", m, *[f"{s[k]:.2f}" for s in (s3, sy) for k in ("q1", "median", "q3")], str(s3["n"])]
@@ -280,11 +300,13 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
             n: portable_path(seq.meta["gt_file"]) for n, seq in sequences.items() if "gt_file" in seq.meta
         },
         "roe_definition": roe_note,
-        "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in METHODS} for n, r in results.items()},
+        "aoe_deg": {n: {m: [math.degrees(v) for v in r["aoe"][m]] for m in scored} for n, r in results.items()},
         "average_aoe_deg": {
-            m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in METHODS
+            m: [math.degrees(v) for v in np.mean([results[n]["aoe"][m] for n in averaged], axis=0)] for m in scored
         },
     }
+    if estimates:  # each file read and the share of the ground-truth samples it was scored on
+        summary["external_estimates"] = external
     if warned:
         summary["warnings"] = warned
     if calib:
