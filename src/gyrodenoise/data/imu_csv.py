@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise.data.asl_write import IMU_HEADER as ASL_HEADER
 from gyrodenoise.data.readers import DataFormatError, text_lines
 
 G0 = 9.80665  # standard gravity, m/s^2 per g
@@ -23,10 +24,6 @@ TIME_UNITS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}  # ns p
 GYRO_UNITS = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
 ACC_UNITS = {"m/s^2": 1.0, "g": G0, "mg": G0 / 1000.0}
 FIELDS = ("t", "wx", "wy", "wz", "ax", "ay", "az")
-ASL_HEADER = (
-    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
-)
 CSV_LAYOUT = (
     f"a text CSV of IMU samples: by default ASL imu0/data.csv with the header '{ASL_HEADER}', or any delimited "
     "text with --columns and its units"

@@ -9,23 +9,17 @@ delay), then quantised. Everything random comes from one seeded numpy Generator.
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise.data.asl_write import asl_written, pose_values, write_sequence
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import Effect, WhiteNoise
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 
-IMU_HEADER = (
-    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
-)
-GT_HEADER = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"
+__all__ = ["SimulatedImu", "apply_error_model", "asl_written", "simulate_imu", "write_asl"]
 
 
 @dataclass
@@ -123,51 +117,15 @@ def simulate_imu(
     )
 
 
-def _write_csv(path: Path, header: str, t_ns: np.ndarray, values: np.ndarray) -> None:
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write(header + "\n")
-        for t, row in zip(t_ns.tolist(), values.tolist(), strict=True):
-            fh.write(str(t) + "," + ",".join(repr(v) for v in row) + "\n")
-
-
-def asl_written(folder: Path) -> bool:
-    """Whether `write_asl` has put a sequence at `folder` (it renames a whole copy into place, so both files)."""
-    return all((folder / "mav0" / d / "data.csv").is_file() for d in ("imu0", "state_groundtruth_estimate0"))
-
-
 def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1, keep_existing: bool = False) -> Path:
-    """<folder>/mav0/{imu0,state_groundtruth_estimate0}/data.csv + sim.json, written atomically.
-
-    The folder is assembled under a temporary name beside it and renamed into place, so a reader
-    never sees a half-written sequence. Quaternions are written w, x, y, z (ASL order).
-    """
-    folder = Path(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.tmp"))
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o777 & ~mask)  # mkdtemp makes 0700: others sharing the cache could not read the sequence
-    try:
-        imu_dir = tmp / "mav0" / "imu0"
-        gt_dir = tmp / "mav0" / "state_groundtruth_estimate0"
-        imu_dir.mkdir(parents=True)
-        gt_dir.mkdir(parents=True)
-        _write_csv(imu_dir / "data.csv", IMU_HEADER, sim.t_ns, np.concatenate([sim.gyro, sim.acc], 1))
-        q = sim.gt_quat_xyzw[::gt_stride]
-        q = q * np.where(q[:, 3:] < 0, -1.0, 1.0)
-        gt_vals = np.concatenate([sim.gt_pos[::gt_stride], q[:, 3:], q[:, :3]], 1)
-        _write_csv(gt_dir / "data.csv", GT_HEADER, sim.t_ns[::gt_stride], gt_vals)
-        (tmp / "sim.json").write_text(json.dumps(sim.meta, indent=2))
-        if keep_existing and asl_written(folder):  # another process wrote it meanwhile (same settings, same content)
-            return folder
-        if folder.exists():
-            shutil.rmtree(folder, ignore_errors=True)
-        try:
-            os.replace(tmp, folder)
-        except OSError:  # ENOTEMPTY/EEXIST: another process renamed its copy in first
-            if not (keep_existing and asl_written(folder)):
-                raise
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-    return folder
+    """<folder>/mav0/{imu0,state_groundtruth_estimate0}/data.csv + sim.json, written atomically
+    (`gyrodenoise.data.asl_write.write_sequence`)."""
+    return write_sequence(
+        folder,
+        sim.t_ns,
+        np.concatenate([sim.gyro, sim.acc], 1),
+        sim.t_ns[::gt_stride],
+        pose_values(sim.gt_pos[::gt_stride], sim.gt_quat_xyzw[::gt_stride]),
+        extra_files={"sim.json": json.dumps(sim.meta, indent=2)},
+        keep_existing=keep_existing,
+    )
