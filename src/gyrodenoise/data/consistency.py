@@ -61,6 +61,8 @@ class Consistency:
     # left-handed frame (a rotation cannot undo it, so one flipped axis with little motion about it can look
     # only a few degrees off: TUM-VI room 1 with its y axis flipped, 7.8 deg)
     mirrored: bool = False
+    # that rotation (gyro ~ axes_fit . truth rate; None: too little motion, or motion about one axis only)
+    axes_fit: Rotation | None = None
 
 
 @contextlib.contextmanager
@@ -111,7 +113,7 @@ def measure(seq: Sequence) -> Consistency:
         moving = ok & (truth_rate > MOVING_RAD_S)
     enough = moving.sum() > 100
     ratio = float(np.median(gyro_rate[moving]) / np.median(truth_rate[moving])) if enough else np.nan
-    axes_deg, mirrored = compare_axes(gyro_vec[moving], truth_vec[moving]) if enough else (np.nan, False)
+    axes_deg, mirrored, fit = compare_axes(gyro_vec[moving], truth_vec[moving]) if enough else (np.nan, False, None)
     return Consistency(
         gaps=int((dt > GAP_FACTOR * period).sum()),
         longest_step_s=float(dt.max()),
@@ -121,13 +123,15 @@ def measure(seq: Sequence) -> Consistency:
         corr_at_zero=corr0,
         axes_angle_deg=axes_deg,
         mirrored=mirrored,
+        axes_fit=fit,
     )
 
 
-def compare_axes(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> tuple[float, bool]:
+def compare_axes(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> tuple[float, bool, Rotation | None]:
     """(angle in deg of the rotation that best maps the truth's rate vectors onto the gyro's, whether the best
-    orthogonal map is a mirror), from one SVD of the gyro-truth cross-covariance, where the noise of each side
-    averages out (the truth's own spread would count its noise as motion).
+    orthogonal map is a mirror, that rotation or None where one axis leaves it undetermined), from one SVD of the
+    gyro-truth cross-covariance, where the noise of each side averages out (the truth's own spread would count its
+    noise as motion).
 
     Motion about one axis (a turntable, a pendulum) fixes only that axis: any turn about it fits equally, so the
     angle is then the one between the two rate axes. A mirror (determinant -1) is judged only for motion about
@@ -136,8 +140,8 @@ def compare_axes(gyro_vec: np.ndarray, truth_vec: np.ndarray) -> tuple[float, bo
     mirrored = bool(sv[2] >= MIRROR_MIN_RATIO * sv[0] and np.linalg.det(u @ vt) < 0)
     if sv[1] > SINGLE_AXIS_RATIO * sv[0]:
         fit, _ = Rotation.align_vectors(gyro_vec, truth_vec)
-        return float(np.degrees(fit.magnitude())), mirrored
-    return float(np.degrees(np.arccos(np.clip(u[:, 0] @ vt[0], -1.0, 1.0)))), mirrored
+        return float(np.degrees(fit.magnitude())), mirrored, fit
+    return float(np.degrees(np.arccos(np.clip(u[:, 0] @ vt[0], -1.0, 1.0)))), mirrored, None
 
 
 def check(seq: Sequence) -> Consistency:

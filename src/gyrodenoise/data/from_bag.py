@@ -1,0 +1,379 @@
+"""A ROS bag (ROS 1 .bag, or a ROS 2 folder of .db3 / .mcap) to one sequence in the ASL layout.
+
+    python -m gyrodenoise.data.from_bag BAG --list
+    python -m gyrodenoise.data.from_bag BAG --out ROOT/NAME [--imu-topic T] [--gt-topic T | --no-gt]
+
+The IMU topic (sensor_msgs/Imu, SI units by ROS convention REP 145) becomes mav0/imu0/data.csv; a pose topic
+(geometry_msgs/PoseStamped, PoseWithCovarianceStamped, TransformStamped or nav_msgs/Odometry: a motion-capture
+or ground-truth pose of the body in a world frame) becomes mav0/state_groundtruth_estimate0/data.csv, so that
+`dataset=asl_folder dataset.root=ROOT` trains on it and `gyrodenoise-correct ROOT/NAME` corrects it. Stamps are
+the messages' header stamps (the sensors' clocks) unless `--stamp record` takes the time the bag recorded them.
+The written files are read back by the project's readers, and the IMU checked against the pose (units, axes,
+clock) before the command says it is done. Reading bags needs the `rosbags` package: pip install "gyrodenoise[rosbag]".
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.data.asl_write import GT_FILE, IMU_FILE, pose_values, write_sequence
+from gyrodenoise.data.consistency import AXES_MAX_DEG, noting_data_warnings
+from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.paths import portable_path
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
+def _pose(m: object) -> object:  # geometry_msgs/Pose: position, orientation
+    return m.pose
+
+
+def _pose_of_cov(m: object) -> object:
+    return m.pose.pose
+
+
+class _TransformAsPose:
+    def __init__(self, m: object) -> None:
+        self.position, self.orientation = m.transform.translation, m.transform.rotation
+
+
+# the pose messages read as ground truth, and where their geometry_msgs/Pose is
+POSE_TYPES: dict[str, Callable[[object], object]] = {
+    "geometry_msgs/msg/PoseStamped": _pose,
+    "geometry_msgs/msg/PoseWithCovarianceStamped": _pose_of_cov,
+    "nav_msgs/msg/Odometry": _pose_of_cov,
+    "geometry_msgs/msg/TransformStamped": _TransformAsPose,
+}
+NOT_A_POSE = {  # types users reach for that carry no orientation, or several frames at once
+    "geometry_msgs/msg/PointStamped": "a position only (no orientation): it cannot train a gyro",
+    "tf2_msgs/msg/TFMessage": "several frames in one topic; record the body's pose as a TransformStamped or "
+    "PoseStamped topic",
+}
+UNIT_QUAT_TOL = 1e-3  # |q| further than this from 1: not a rotation (a zero quaternion = no data)
+
+
+class BagError(DataFormatError):
+    """A bag, topic or message that cannot become a sequence; the message says which and what to do."""
+
+
+@dataclass
+class Stream:
+    """One topic's messages as arrays, in time order."""
+
+    topic: str
+    msgtype: str
+    t_ns: np.ndarray
+    values: np.ndarray
+    reordered: int = 0  # messages that were out of time order in the bag (sorted)
+    notes: list[str] = field(default_factory=list)
+
+
+def _open(bag: Path):  # noqa: ANN202 - rosbags' AnyReader; imported here so that the package does not need it
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise BagError(
+            'reading ROS bags needs the rosbags package: pip install "gyrodenoise[rosbag]" (or pip install rosbags)'
+        ) from None
+    if not bag.exists():
+        raise FileNotFoundError(f"{bag}: no such bag (a ROS 1 .bag file, or a ROS 2 bag folder with metadata.yaml)")
+    # ROS 2 bags written without their message definitions are read with the standard types of a recent release
+    return AnyReader([bag], default_typestore=get_typestore(Stores.LATEST))
+
+
+def topics(bag: Path) -> list[tuple[str, str, int]]:
+    """(topic, message type, message count) of every topic in the bag."""
+    try:
+        with _open(bag) as reader:
+            return sorted((c.topic, c.msgtype, c.msgcount) for c in reader.connections)
+    except BagError:
+        raise
+    except Exception as e:  # rosbags' own errors (not a bag, damaged index): one line with the file
+        raise BagError(f"{bag}: cannot be read as a ROS bag ({type(e).__name__}: {e})") from None
+
+
+def _listing(found: list[tuple[str, str, int]]) -> str:
+    return "; ".join(f"{t} ({ty}, {n} messages)" for t, ty, n in found) or "no topics"
+
+
+def choose_topics(
+    bag: Path, found: list[tuple[str, str, int]], imu_topic: str | None, gt_topic: str | None, no_gt: bool
+) -> tuple[str, str | None]:
+    """The IMU topic and the pose topic (None: IMU only): the ones named, else the only one of its kind."""
+    by_topic = {t: ty for t, ty, _ in found}
+    imus = [t for t, ty, _ in found if ty == IMU_TYPE]
+    poses = [t for t, ty, _ in found if ty in POSE_TYPES]
+    if imu_topic is None:
+        if len(imus) != 1:
+            raise BagError(
+                f"{bag}: {'no' if not imus else len(imus)} sensor_msgs/Imu topics"
+                f"{': ' + ', '.join(imus) if imus else ''}; name one with --imu-topic. The bag holds: {_listing(found)}"
+            )
+        imu_topic = imus[0]
+    elif by_topic.get(imu_topic) != IMU_TYPE:
+        what = f"is a {by_topic[imu_topic]}" if imu_topic in by_topic else "is not in the bag"
+        raise BagError(f"{bag}: --imu-topic {imu_topic} {what}; sensor_msgs/Imu topics: {', '.join(imus) or 'none'}")
+    if no_gt:
+        return imu_topic, None
+    if gt_topic is None:
+        if len(poses) > 1:
+            raise BagError(
+                f"{bag}: several pose topics ({', '.join(poses)}); name the ground truth with --gt-topic, or "
+                "write the IMU alone with --no-gt"
+            )
+        return imu_topic, (poses[0] if poses else None)
+    ty = by_topic.get(gt_topic)
+    if ty not in POSE_TYPES:
+        why = NOT_A_POSE.get(ty, f"a {ty}" if ty else "not in the bag")
+        raise BagError(
+            f"{bag}: --gt-topic {gt_topic} is {why}. Ground truth is read from {', '.join(sorted(POSE_TYPES))}; "
+            f"pose topics in this bag: {', '.join(poses) or 'none'}"
+        )
+    return imu_topic, gt_topic
+
+
+def _imu_row(m: object) -> list[float]:
+    w, a = m.angular_velocity, m.linear_acceleration
+    return [w.x, w.y, w.z, a.x, a.y, a.z]
+
+
+def _pose_row(pose_of: Callable[[object], object]) -> Callable[[object], list[float]]:
+    def row(m: object) -> list[float]:
+        p = pose_of(m)
+        q = p.orientation
+        return [p.position.x, p.position.y, p.position.z, q.x, q.y, q.z, q.w]
+
+    return row
+
+
+def read_stream(bag: Path, topic: str, msgtype: str, stamp: str) -> Stream:
+    """A topic's stamps (int ns: header stamps, or the bag's record times) and values, sorted by stamp."""
+    row = _imu_row if msgtype == IMU_TYPE else _pose_row(POSE_TYPES[msgtype])
+    t, rec, values = [], [], []
+    with _open(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, t_record, raw in reader.messages(connections=conns):
+            m = reader.deserialize(raw, conn.msgtype)
+            t.append(int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec))
+            rec.append(int(t_record))
+            values.append(row(m))
+    if not values:
+        raise BagError(f"{bag}: topic {topic} has no messages")
+    t_ns = np.asarray(rec if stamp == "record" else t, dtype=np.int64)
+    v = np.asarray(values, dtype=np.float64)
+    s = Stream(topic, msgtype, t_ns, v)
+    if stamp == "header" and (t_ns <= 0).any():
+        raise BagError(
+            f"{bag}: {topic}: {(t_ns <= 0).sum()} of {len(t_ns)} messages have no header stamp (0): the driver did "
+            "not set it. Use --stamp record (the time the bag recorded each message; it carries the transport's "
+            "delay and jitter)"
+        )
+    bad = ~np.isfinite(v).all(1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise BagError(
+            f"{bag}: {topic}: {bad.sum()} messages with NaN/inf values, the first the {k + 1}th (t {t_ns[k]} ns)"
+        )
+    order = np.argsort(t_ns, kind="stable")
+    s.reordered = int((order != np.arange(len(order))).sum())
+    s.t_ns, s.values = t_ns[order], v[order]
+    dup = np.diff(s.t_ns) == 0
+    if dup.any():
+        k = int(np.argmax(dup))
+        hint = (
+            "the header clock is coarser than the stream; try --stamp record"
+            if stamp == "header"
+            else "the bag recorded them in the same nanosecond; try --stamp header"
+        )
+        raise BagError(
+            f"{bag}: {topic}: {dup.sum()} messages repeat the stamp of the one before (the first at {s.t_ns[k]} ns): "
+            + hint
+        )
+    if s.reordered:
+        s.notes.append(f"{topic}: {s.reordered} messages were out of time order in the bag and are written sorted")
+    return s
+
+
+def body_to_imu(gt: Stream, imu_in_body: Rotation) -> np.ndarray:
+    """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu."""
+    q = gt.values[:, 3:]
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.abs(norm - 1.0) > UNIT_QUAT_TOL
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise BagError(
+            f"{gt.topic}: {bad.sum()} orientations are not unit quaternions (|q| = {norm[k]:.3g} at {gt.t_ns[k]} ns; "
+            "a zero quaternion means no pose): remove those messages or record the ground truth without them"
+        )
+    rot = Rotation.from_quat(q / norm[:, None]) * imu_in_body
+    return pose_values(gt.values[:, :3], rot.as_quat())
+
+
+def check_written(folder: Path, with_gt: bool, imu_in_body: Rotation) -> tuple[list[str], list[str]]:
+    """Read the written sequence back with the project's readers; with ground truth, check the IMU against it.
+    Returns the data warnings and the advice for this importer's options."""
+    from gyrodenoise.data.consistency import check
+    from gyrodenoise.data.readers import read_groundtruth, read_imu
+    from gyrodenoise.data.sequence import build_sequence
+
+    imu = read_imu(folder / IMU_FILE)
+    if not with_gt:
+        return [], []
+    with noting_data_warnings() as found:
+        m = check(build_sequence(folder.name, imu, read_groundtruth(folder / GT_FILE)))
+    advice = []
+    if m.axes_fit is not None and not m.mirrored and m.axes_angle_deg > AXES_MAX_DEG:
+        fix = imu_in_body * m.axes_fit.inv()  # the IMU frame in the pose's body frame, as the gyro sees it
+        advice.append(
+            f"the gyro turns about axes {m.axes_angle_deg:.0f} deg away from the pose's body axes: if the pose is of "
+            "a body the IMU is rotated in (a mocap marker set), rerun with --imu-in-body "
+            + " ".join(f"{x:.6f}" for x in fix.as_quat(canonical=True))
+            + " (x y z w, fitted from the rates)"
+        )
+    return found, advice
+
+
+def import_bag(
+    bag: str | Path,
+    out: str | Path,
+    imu_topic: str | None = None,
+    gt_topic: str | None = None,
+    no_gt: bool = False,
+    stamp: str = "header",
+    imu_in_body_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+    gt_time_offset_s: float = 0.0,
+    overwrite: bool = False,
+) -> dict:
+    """Write the bag's IMU (and pose) topic as the ASL sequence `out`; returns what was done (also written to
+    `out`/bag_import.json). Raises BagError (a DataFormatError) with the bag, topic and what to do."""
+    bag, out = Path(bag), Path(out)
+    if stamp not in ("header", "record"):
+        raise BagError(f"--stamp {stamp}: use header (the sensors' clocks) or record (the bag's clock)")
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out} exists; choose another --out or pass --overwrite")
+    found = topics(bag)
+    imu_topic, gt_topic = choose_topics(bag, found, imu_topic, gt_topic, no_gt)
+    types = {t: ty for t, ty, _ in found}
+    imu = read_stream(bag, imu_topic, IMU_TYPE, stamp)
+    gt = read_stream(bag, gt_topic, types[gt_topic], stamp) if gt_topic else None
+    imu_in_body = Rotation.from_quat(imu_in_body_xyzw)
+    summary = {
+        "bag": portable_path(bag),
+        "imu_topic": imu_topic,
+        "gt_topic": gt_topic,
+        "gt_type": types.get(gt_topic),
+        "stamp": stamp,
+        "imu_messages": len(imu.t_ns),
+        "imu_rate_hz": float(1e9 / np.median(np.diff(imu.t_ns))) if len(imu.t_ns) > 1 else None,
+        "gt_messages": len(gt.t_ns) if gt else 0,
+        "imu_in_body_xyzw": list(imu_in_body.as_quat()),
+        "gt_time_offset_s": gt_time_offset_s,
+        "notes": imu.notes + (gt.notes if gt else []),
+    }
+    if gt is None:
+        summary["notes"].append(
+            "no ground-truth pose topic: IMU only (gyrodenoise-correct reads it; training needs a pose)"
+        )
+    gt_t = gt.t_ns + int(round(gt_time_offset_s * 1e9)) if gt else None
+    folder = write_sequence(
+        out,
+        imu.t_ns,
+        imu.values,
+        gt_t,
+        body_to_imu(gt, imu_in_body) if gt else None,
+        extra_files={"bag_import.json": json.dumps(summary, indent=2) + "\n"},
+    )
+    try:
+        warnings_found, advice = check_written(folder, gt is not None, imu_in_body)
+    except DataFormatError as e:  # e.g. a gyro in deg/s: leave no sequence that looks usable
+        shutil.rmtree(folder, ignore_errors=True)
+        raise BagError(f"{e} (read back from the bag's import; {folder} was removed)") from None
+    summary.update(output=str(folder), data_warnings=warnings_found, advice=advice)
+    return summary
+
+
+def _quat(text: list[str]) -> tuple[float, float, float, float]:
+    q = np.asarray([float(x) for x in text])
+    n = np.linalg.norm(q)
+    if abs(n - 1.0) > UNIT_QUAT_TOL:
+        raise BagError(f"--imu-in-body {' '.join(text)}: |q| = {n:.4g}, not a unit quaternion (x y z w)")
+    return tuple(q / n)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m gyrodenoise.data.from_bag",
+        description="Write a ROS bag's IMU topic (and a ground-truth pose topic) as one sequence in the ASL layout "
+        "that dataset=asl_folder trains on and gyrodenoise-correct corrects.",
+        epilog='Needs pip install "gyrodenoise[rosbag]". Then: python -m gyrodenoise.train dataset=asl_folder '
+        "dataset.root=ROOT 'dataset.train_seqs=[NAME,...]' ...",
+    )
+    ap.add_argument("bag", type=Path, help="a ROS 1 .bag file, or a ROS 2 bag folder (.db3 or .mcap)")
+    ap.add_argument("--list", action="store_true", help="list the topics (type, messages) and exit")
+    ap.add_argument("--out", type=Path, help="the sequence folder to write: ROOT/NAME")
+    ap.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default: the only one)")
+    ap.add_argument("--gt-topic", help="pose topic of the ground truth (default: the only one, if any)")
+    ap.add_argument("--no-gt", action="store_true", help="write the IMU alone, even if the bag has a pose topic")
+    ap.add_argument(
+        "--stamp",
+        choices=("header", "record"),
+        default="header",
+        help="header: the messages' header stamps (default); record: the time the bag recorded each message",
+    )
+    ap.add_argument(
+        "--imu-in-body",
+        nargs=4,
+        metavar=("QX", "QY", "QZ", "QW"),
+        default=["0", "0", "0", "1"],
+        help="the IMU frame's orientation in the pose's body frame (e.g. a mocap marker set), as a quaternion "
+        "x y z w; the ground truth written is the IMU's orientation (default: the same frame)",
+    )
+    ap.add_argument("--gt-time-offset", type=float, default=0.0, help="seconds added to the ground truth's stamps")
+    ap.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
+    args = ap.parse_args(argv)
+    try:
+        if args.list:
+            for t, ty, n in topics(args.bag):
+                kind = "IMU" if ty == IMU_TYPE else "pose" if ty in POSE_TYPES else ""
+                print(f"{t}\t{ty}\t{n}\t{kind}")
+            return 0
+        if args.out is None:
+            ap.error("--out ROOT/NAME is required (or --list)")
+        s = import_bag(
+            args.bag,
+            args.out,
+            args.imu_topic,
+            args.gt_topic,
+            args.no_gt,
+            args.stamp,
+            _quat(args.imu_in_body),
+            args.gt_time_offset,
+            args.overwrite,
+        )
+    except (DataFormatError, FileNotFoundError, FileExistsError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    rate = f", {s['imu_rate_hz']:.1f} Hz" if s["imu_rate_hz"] else ""
+    gt = f"; {s['gt_messages']} poses from {s['gt_topic']}" if s["gt_topic"] else ""
+    print(
+        f"wrote {s['output']}: {s['imu_messages']} IMU samples from {s['imu_topic']}{rate}{gt} (stamps: {s['stamp']})"
+    )
+    for line in s["notes"] + s["advice"]:
+        print(f"note: {line}")
+    for line in s["data_warnings"]:
+        print(f"warning: {line}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,202 @@
+"""ROS bags (ROS 1 and ROS 2, written here with rosbags' own writers) imported as ASL sequences."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from gyrodenoise.data import from_bag
+from gyrodenoise.data.readers import read_groundtruth, read_imu
+from gyrodenoise.sim import handheld_trajectory, simulate_imu
+
+rosbags = pytest.importorskip("rosbags", reason="pip install 'gyrodenoise[rosbag]' (in the dev extra) to read bags")
+from rosbags.typesys import Stores, get_typestore  # noqa: E402
+
+TS = get_typestore(Stores.ROS2_HUMBLE)
+T = TS.types
+MOCAP_STRIDE = 2  # the pose at 100 Hz, the IMU at 200 Hz
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return simulate_imu(handheld_trajectory(30.0, seed=5), [], rate_hz=200.0, seed=7)
+
+
+def _stamp(t_ns: int, frame: str) -> object:
+    return T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=int(t_ns // 1_000_000_000), nanosec=int(t_ns % 1_000_000_000)),
+        frame_id=frame,
+    )
+
+
+def _vec(v) -> object:
+    return T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def _quat(q) -> object:
+    return T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+
+
+def imu_msg(t_ns: int, gyro, acc) -> object:
+    return T["sensor_msgs/msg/Imu"](
+        header=_stamp(t_ns, "imu"),
+        orientation=_quat([0, 0, 0, 1]),
+        orientation_covariance=np.r_[-1.0, np.zeros(8)],  # REP 145: no orientation estimate
+        angular_velocity=_vec(gyro),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=_vec(acc),
+        linear_acceleration_covariance=np.zeros(9),
+    )
+
+
+def pose_msg(msgtype: str, t_ns: int, p, q) -> object:
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]), orientation=_quat(q)
+    )
+    if msgtype == "geometry_msgs/msg/PoseStamped":
+        return T[msgtype](header=_stamp(t_ns, "world"), pose=pose)
+    if msgtype == "geometry_msgs/msg/TransformStamped":
+        tf = T["geometry_msgs/msg/Transform"](translation=_vec(p), rotation=_quat(q))
+        return T[msgtype](header=_stamp(t_ns, "world"), child_frame_id="body", transform=tf)
+    if msgtype == "geometry_msgs/msg/PointStamped":
+        return T[msgtype](header=_stamp(t_ns, "world"), point=pose.position)
+    raise ValueError(msgtype)
+
+
+def write_bag(
+    path: Path,
+    sim,
+    ros2: bool = False,
+    gt_type: str | None = "geometry_msgs/msg/PoseStamped",
+    body_rot: Rotation | None = None,
+    gyro_scale: float = 1.0,
+    zero_stamps: bool = False,
+    extra_imu_topic: bool = False,
+    extra_pose_topic: bool = False,
+) -> Path:
+    """The simulated IMU on /imu0, its pose (of a body rotated by `body_rot` from the IMU) on /mocap."""
+    if ros2:
+        from rosbags.rosbag2 import Writer
+
+        writer, serialize = Writer(path, version=9), TS.serialize_cdr
+    else:
+        from rosbags.rosbag1 import Writer
+
+        writer, serialize = Writer(path), TS.serialize_ros1
+    R_body = Rotation.from_quat(sim.gt_quat_xyzw) * (body_rot.inv() if body_rot else Rotation.identity())
+    with writer as w:
+        imu_topics = ["/imu0", "/imu1"] if extra_imu_topic else ["/imu0"]
+        imus = [w.add_connection(t, "sensor_msgs/msg/Imu", typestore=TS) for t in imu_topics]
+        gts = [w.add_connection("/mocap", gt_type, typestore=TS)] if gt_type else []
+        if extra_pose_topic:
+            gts.append(w.add_connection("/odom_copy", "geometry_msgs/msg/PoseStamped", typestore=TS))
+        for k, t in enumerate(sim.t_ns.tolist()):
+            msg = imu_msg(0 if zero_stamps else t, sim.gyro[k] * gyro_scale, sim.acc[k])
+            for c in imus:
+                w.write(c, t + 2_000_000, serialize(msg, "sensor_msgs/msg/Imu"))  # recorded 2 ms after the sample
+            if gts and k % MOCAP_STRIDE == 0:
+                for c in gts:
+                    m = pose_msg(c.msgtype, t, sim.gt_pos[k], R_body[k].as_quat())
+                    w.write(c, t + 5_000_000, serialize(m, c.msgtype))
+    return path
+
+
+@pytest.mark.parametrize(
+    "ros2, gt_type", [(False, "geometry_msgs/msg/PoseStamped"), (True, "geometry_msgs/msg/TransformStamped")]
+)
+def test_bag_becomes_the_same_sequence(tmp_path, sim, ros2, gt_type):
+    bag = write_bag(tmp_path / ("rec" if ros2 else "rec.bag"), sim, ros2=ros2, gt_type=gt_type)
+    s = from_bag.import_bag(bag, tmp_path / "data" / "rec")
+    assert s["imu_topic"] == "/imu0" and s["gt_topic"] == "/mocap" and s["data_warnings"] == [] and s["advice"] == []
+    imu = read_imu(tmp_path / "data" / "rec" / "mav0" / "imu0" / "data.csv")
+    np.testing.assert_array_equal(imu.t_ns, sim.t_ns)  # header stamps, exact
+    np.testing.assert_array_equal(imu.gyro, sim.gyro)  # float64 all the way (ROS stores float64)
+    np.testing.assert_array_equal(imu.acc, sim.acc)
+    gt = read_groundtruth(tmp_path / "data" / "rec" / "mav0" / "state_groundtruth_estimate0" / "data.csv")
+    np.testing.assert_array_equal(gt.t_ns, sim.t_ns[::MOCAP_STRIDE])
+    err = Rotation.from_quat(gt.quat_xyzw) * Rotation.from_quat(sim.gt_quat_xyzw[::MOCAP_STRIDE]).inv()
+    assert err.magnitude().max() < 1e-12
+    meta = json.loads((tmp_path / "data" / "rec" / "bag_import.json").read_text())
+    assert meta["imu_messages"] == len(sim.t_ns) and meta["gt_messages"] == len(gt.t_ns) and meta["stamp"] == "header"
+
+
+def test_record_stamps_and_listing(tmp_path, sim, capsys):
+    bag = write_bag(tmp_path / "rec.bag", sim)
+    assert from_bag.main([str(bag), "--list"]) == 0
+    out = capsys.readouterr().out
+    assert "/imu0\tsensor_msgs/msg/Imu\t" in out and "\tIMU" in out and "/mocap\tgeometry_msgs/msg/PoseStamped" in out
+    from_bag.import_bag(bag, tmp_path / "r", stamp="record")
+    imu = read_imu(tmp_path / "r" / "mav0" / "imu0" / "data.csv")
+    np.testing.assert_array_equal(imu.t_ns, sim.t_ns + 2_000_000)
+
+
+def test_imu_rotated_in_the_mocap_body(tmp_path, sim, capsys):
+    """A marker set rotated from the IMU: the import advises the rotation it fits; with it, the truth is the IMU's."""
+    body = Rotation.from_euler("zyx", [90, 0, 20], degrees=True)  # the IMU's orientation in the marker body
+    bag = write_bag(tmp_path / "rec.bag", sim, body_rot=body)
+    assert from_bag.main([str(bag), "--out", str(tmp_path / "a")]) == 0
+    cap = capsys.readouterr()
+    assert "deg away from the pose's body axes" in cap.out and "away from the ground truth's body axes" in cap.err
+    quat = cap.out.split("--imu-in-body ")[1].split(" (")[0].split()
+    fitted = Rotation.from_quat([float(x) for x in quat])
+    assert (fitted * body.inv()).magnitude() < np.radians(1.0)
+    s = from_bag.import_bag(bag, tmp_path / "b", imu_in_body_xyzw=tuple(body.as_quat()))
+    assert s["data_warnings"] == [] and s["advice"] == []
+    gt = read_groundtruth(tmp_path / "b" / "mav0" / "state_groundtruth_estimate0" / "data.csv")
+    err = Rotation.from_quat(gt.quat_xyzw) * Rotation.from_quat(sim.gt_quat_xyzw[::MOCAP_STRIDE]).inv()
+    assert err.magnitude().max() < 1e-9
+
+
+def test_imu_only_bag_is_corrected_by_gyrodenoise_correct(tmp_path, sim):
+    bag = write_bag(tmp_path / "rec.bag", sim, gt_type=None)
+    s = from_bag.import_bag(bag, tmp_path / "rec")
+    assert s["gt_topic"] is None and any("IMU only" in n for n in s["notes"])
+    assert not (tmp_path / "rec" / "mav0" / "state_groundtruth_estimate0").exists()
+    from gyrodenoise.data.imu_csv import read_imu_csv
+
+    assert len(read_imu_csv(tmp_path / "rec" / "mav0" / "imu0" / "data.csv").t_ns) == len(sim.t_ns)
+
+
+def test_errors_name_the_topic_and_what_to_do(tmp_path, sim, capsys):
+    two = write_bag(tmp_path / "two.bag", sim, extra_imu_topic=True, extra_pose_topic=True)
+    with pytest.raises(from_bag.BagError, match=r"2 sensor_msgs/Imu topics: /imu0, /imu1; name one with --imu-topic"):
+        from_bag.import_bag(two, tmp_path / "x")
+    with pytest.raises(from_bag.BagError, match=r"several pose topics \(/mocap, /odom_copy\); name the ground truth"):
+        from_bag.import_bag(two, tmp_path / "x", imu_topic="/imu0")
+    with pytest.raises(from_bag.BagError, match=r"--imu-topic /mocap is a geometry_msgs/msg/PoseStamped"):
+        from_bag.import_bag(two, tmp_path / "x", imu_topic="/mocap")
+    assert from_bag.import_bag(two, tmp_path / "x", imu_topic="/imu1", no_gt=True)["gt_topic"] is None
+
+    point = write_bag(tmp_path / "point.bag", sim, gt_type="geometry_msgs/msg/PointStamped")
+    with pytest.raises(from_bag.BagError, match=r"a position only \(no orientation\)"):
+        from_bag.import_bag(point, tmp_path / "y", gt_topic="/mocap")
+
+    zero = write_bag(tmp_path / "zero.bag", sim, zero_stamps=True, gt_type=None)
+    with pytest.raises(from_bag.BagError, match=r"have no header stamp \(0\).*--stamp record"):
+        from_bag.import_bag(zero, tmp_path / "z")
+
+    assert from_bag.main([str(tmp_path / "x.bag"), "--out", str(tmp_path / "x")]) == 2  # exists
+    assert "exists; choose another --out or pass --overwrite" in capsys.readouterr().err
+    assert from_bag.main([str(tmp_path / "nope.bag"), "--out", str(tmp_path / "n")]) == 2
+    assert "no such bag" in capsys.readouterr().err
+    (tmp_path / "junk.bag").write_bytes(b"not a bag at all")
+    with pytest.raises(from_bag.BagError, match=r"junk.bag: cannot be read as a ROS bag"):
+        from_bag.topics(tmp_path / "junk.bag")
+
+
+def test_gyro_in_deg_per_s_is_refused_and_nothing_left(tmp_path, sim):
+    bag = write_bag(tmp_path / "deg.bag", sim, gyro_scale=180.0 / np.pi)
+    with pytest.raises(from_bag.BagError, match=r"looks like deg/s.*was removed"):
+        from_bag.import_bag(bag, tmp_path / "deg")
+    assert not (tmp_path / "deg").exists()
+
+
+def test_without_rosbags_the_message_says_what_to_install(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # import fails as if not installed
+    with pytest.raises(from_bag.BagError, match=r'pip install "gyrodenoise\[rosbag\]"'):
+        from_bag.topics(tmp_path / "any.bag")
