@@ -157,7 +157,12 @@ def test_missing_sequences_fail_before_training(asl_root):
                             test_seqs=["room_2"], window=256)  # fmt: skip
     with pytest.raises(FileNotFoundError, match=r"nowhere: data folder not found .*GYRODENOISE_DATA") as err:
         nowhere.check_sequences(train=False, test=True, test_hint="pass test=false")
-    assert "test=false" not in str(err.value)
+    assert "test=false" not in str(err.value) and "gyrodenoise.data.fetch" not in str(err.value)
+    # ... and for a dataset the project can download, the command that downloads it
+    euroc = ImuDataModule(name="euroc", root=str(asl_root / "nowhere"), train_seqs=["MH_01_easy"], test_seqs=[],
+                          window=256)  # fmt: skip
+    with pytest.raises(FileNotFoundError, match=r"python -m gyrodenoise.data.fetch euroc --dest \S*nowhere$"):
+        euroc.check_sequences(test=False)
     # a root one level too high (the folder that holds the dataset's folder): the folder to give is named
     too_high = ImuDataModule(name="my_imu", root=str(asl_root.parent), train_seqs=["walk_1"], test_seqs=[], window=256)
     one_down = rf"walk_1 is one level further down: give {asl_root} as dataset.root\.$"

@@ -214,3 +214,35 @@ def test_archive_without_imu(server, tmp_path):
     make_zip(p, {"readme.txt": b"hello"})
     with pytest.raises(FetchError, match="ASL-format archive"):
         fetch("euroc", tmp_path / "d", ["MH_02_easy"], url, progress=False)
+
+
+def test_euroc_v1_01_gets_the_recomputed_ground_truth_its_config_names(server, tmp_path, monkeypatch):
+    """The EuRoC config scores V1_01_easy against OpenVINS's recomputed truth: fetch downloads it beside the archive's
+    (also into a sequence fetched before), and a missing one says where it comes from and how to go without it."""
+    root, url = server
+    seq, rel = "V1_01_easy", "mav0/state_groundtruth_estimate0/data_recomputed_openvins.csv"
+    p = root / "vicon_room1" / seq / f"{seq}.zip"
+    p.parent.mkdir(parents=True)
+    make_zip(p, asl_files("state_groundtruth_estimate0"))
+    (root / "recomputed.csv").write_text(GT)
+    ds = fetch_mod.DATASETS["euroc"]
+    monkeypatch.setitem(ds.extra_files, seq, {rel: f"{url}/recomputed.csv"})
+    dest = tmp_path / "euroc"
+    fetch("euroc", dest, [seq], url, progress=False)
+    assert (dest / seq / rel).read_text() == GT
+    load_sequence(dest, seq, rel.removeprefix("mav0/"), cache_dir="")
+
+    (dest / seq / rel).unlink()  # a sequence fetched before: the missing file is named with the command
+    with pytest.raises(FileNotFoundError) as e:
+        load_sequence(dest, seq, rel.removeprefix("mav0/"), cache_dir="")
+    msg = str(e.value)
+    assert f"python -m gyrodenoise.data.fetch euroc --dest {dest} --sequences {seq}" in msg and "recomputed.csv" in msg
+    assert f"'~dataset.gt_files.{seq}'" in msg
+    fetch("euroc", dest, [seq], url, progress=False)  # complete sequence: only the extra file is downloaded
+    assert (dest / seq / rel).is_file() and RangeHandler.log[-1].startswith("/recomputed.csv")
+
+    (root / "recomputed.csv").write_text("<html>moved</html>\n")  # a mirror's error page is not kept
+    (dest / seq / rel).unlink()
+    with pytest.raises(FetchError, match="not a ground-truth file the loaders read"):
+        fetch("euroc", dest, [seq], url, progress=False)
+    assert not (dest / seq / rel).exists()

@@ -221,3 +221,11 @@ def test_imu_stamps_in_bursts_are_not_called_another_unit(tmp_path):
 def test_a_header_without_its_hash_is_named(tmp_path):
     with pytest.raises(DataFormatError, match="A header line must start with '#'"):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER.lstrip("#"), imu_rows()))
+
+
+def test_a_missing_sequence_says_whether_the_root_exists(tmp_path):
+    (tmp_path / "root").mkdir()
+    with pytest.raises(FileNotFoundError, match=r"root holds no sequence folder"):
+        load_sequence(tmp_path / "root", "seq", cache_dir="")
+    with pytest.raises(FileNotFoundError, match=r"nowhere does not exist \(relative paths start at "):
+        load_sequence(tmp_path / "nowhere", "seq", cache_dir="")

@@ -48,6 +48,25 @@ def atomic_save_npz(path: Path, **arrays: np.ndarray) -> None:
         np.savez(tmp, **arrays)
 
 
+def missing_groundtruth_message(mav0: Path, name: str, gt_file: str) -> str:
+    """What to do when the ground-truth file a dataset config names for a sequence is not there."""
+    from gyrodenoise.data.fetch import extra_file_source
+
+    gt_path, root = mav0 / gt_file, mav0.parent.parent
+    url = extra_file_source(root.name, name, f"mav0/{gt_file}")  # known for the dataset's own folder name
+    get = (
+        f"`python -m gyrodenoise.data.fetch {root.name} --dest {root} --sequences {name}` downloads it "
+        f"(from {url}), or put it there by hand; "
+        if url
+        else ""
+    )
+    return (
+        f"{gt_path}: ground-truth file not found; the dataset config names it for {name} (dataset.gt_files). "
+        f"{get}to use the sequence's standard ground truth instead, drop the entry: '~dataset.gt_files.{name}' "
+        f"(and '~dataset.eval_gt_variants.{name}' where the config lists one)."
+    )
+
+
 def load_sequence(
     root: str | Path,
     name: str,
@@ -64,7 +83,7 @@ def load_sequence(
     imu_path = mav0 / "imu0" / "data.csv"
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     if not gt_path.is_file():
-        raise FileNotFoundError(f"{gt_path}: ground-truth file not found (dataset config gt_file={gt_file!r}).")
+        raise FileNotFoundError(missing_groundtruth_message(mav0, name, gt_file))
     if not imu_path.is_file():
         raise FileNotFoundError(f"{imu_path}: IMU file not found (ASL layout mav0/imu0/data.csv).")
     settings = {"max_gap_factor": max_gap_factor, "name": name}

@@ -29,6 +29,7 @@ from gyrodenoise.data import consistency
 from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.checks import RATE_TOL
+from gyrodenoise.data.fetch import DATASETS as FETCHABLE
 from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
 
 
@@ -193,6 +194,11 @@ class ImuDataModule(L.LightningDataModule):
                 f"{', '.join(missing)} in the ASL layout (<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root "
                 f"to that folder, or GYRODENOISE_DATA to the folder that holds '{self.name}/' (the shipped dataset "
                 "configs read $GYRODENOISE_DATA/<dataset>)."
+                + (
+                    f" To download it: python -m gyrodenoise.data.fetch {self.name} --dest {self.root}"
+                    if self.name in FETCHABLE
+                    else ""
+                )
             )
         if missing and (hint := root_level_hint(Path(self.root), missing[0], "dataset.root")):  # root one level off
             raise FileNotFoundError(f"{self.root}: sequence folder(s) not found: {', '.join(missing)}. {hint.rstrip()}")

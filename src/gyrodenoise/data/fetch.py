@@ -44,7 +44,8 @@ class Dataset:
     keep: tuple[str, ...]  # folders under mav0/ to keep
     md5_files: bool = False  # the server publishes <archive stem>.md5 beside each archive
     info: str = ""
-    extra: dict = field(default_factory=dict)
+    # sequence -> {path under the sequence folder: URL}: files the loaders' configs name that the archive lacks
+    extra_files: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
 def _euroc(seq: str) -> str:
@@ -62,6 +63,14 @@ DATASETS: dict[str, Dataset] = {
         base_url="http://robotics.ethz.ch/~asl-datasets/ijrr_euroc_mav_dataset",
         archives={s: _euroc(s) for s in EUROC_SEQUENCES},
         keep=("imu0", "state_groundtruth_estimate0"),
+        # V1_01_easy's released orientation is ~5 deg off; dataset=euroc scores it against OpenVINS's recomputation
+        extra_files={
+            "V1_01_easy": {
+                "mav0/state_groundtruth_estimate0/data_recomputed_openvins.csv": (
+                    "https://raw.githubusercontent.com/rpng/open_vins/master/ov_data/euroc_mav/V1_01_easy.csv"
+                )
+            }
+        },
         info="EuRoC MAV (ETH Zurich), ASL zip per sequence. The files now live in the ETH Research "
         "Collection too; point --base-url at any mirror with the <group>/<SEQ>/<SEQ>.zip layout.",
     ),
@@ -247,6 +256,30 @@ def is_complete(seq_dir: Path, keep: tuple[str, ...]) -> bool:
     return all((seq_dir / "mav0" / k / "data.csv").is_file() for k in keep)
 
 
+def fetch_extra_files(ds: Dataset, seq: str, seq_dir: Path, progress: bool = True) -> list[Path]:
+    """Download the sequence's extra files that are not there yet; a ground truth is checked by the reader."""
+    from gyrodenoise.data.readers import DataFormatError, read_groundtruth
+
+    written = []
+    for rel, url in ds.extra_files.get(seq, {}).items():
+        path = seq_dir / rel
+        if path.is_file():
+            continue
+        download(url, path, progress)
+        try:
+            read_groundtruth(path)
+        except DataFormatError as e:
+            path.unlink()
+            raise FetchError(f"{url}: not a ground-truth file the loaders read ({e}); deleted it.") from None
+        written.append(path)
+    return written
+
+
+def extra_file_source(dataset: str, seq: str, rel: str) -> str | None:
+    """The URL `fetch` takes `rel` (a path under the sequence folder) from, if it knows one."""
+    return DATASETS[dataset].extra_files.get(seq, {}).get(rel) if dataset in DATASETS else None
+
+
 def fetch(
     dataset: str,
     dest: str | Path,
@@ -269,6 +302,7 @@ def fetch(
         seq_dir = dest / seq
         if is_complete(seq_dir, ds.keep):
             print(f"{seq}: already there, skipped", file=sys.stderr)
+            fetch_extra_files(ds, seq, seq_dir, progress)
             out.append(seq_dir)
             continue
         archive_rel = ds.archives[seq]
@@ -285,6 +319,7 @@ def fetch(
             )
         if not keep_archives:
             archive.unlink()
+        written += fetch_extra_files(ds, seq, seq_dir, progress)
         print(f"{seq}: {', '.join(str(p.relative_to(dest)) for p in written)}", file=sys.stderr)
         out.append(seq_dir)
     if downloads.is_dir() and not any(downloads.iterdir()):

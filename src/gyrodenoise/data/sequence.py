@@ -144,7 +144,13 @@ def sequence_folder(root: str | Path, name: str) -> Path:
         raise FileNotFoundError(
             f"{mav0}: sequence folder not found. "
             + (f"Did you mean {typo}? " if typo else "")
-            + (f"{root} holds {', '.join(here)}. " if here else f"{root} holds no sequence folder. ")
+            + (
+                f"{root} holds {', '.join(here)}. "
+                if here
+                else f"{root} holds no sequence folder. "
+                if Path(root).is_dir()
+                else f"{root} does not exist (relative paths start at {Path.cwd()}). "
+            )
             + root_level_hint(Path(root), name)
             + f"The data root must be the folder that holds '{name}/mav0/imu0/data.csv' (ASL layout)."
         )
