@@ -4,6 +4,7 @@ interrupted rerun leaves no earlier run's summary beside its new outputs."""
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import warnings
 from pathlib import Path
@@ -93,6 +94,15 @@ class InterruptAtEpoch(L.Callback):
             raise KeyboardInterrupt
 
 
+class FirstEpoch(L.Callback):
+    """Records the epoch a fit starts at (0 unless it resumed from a checkpoint)."""
+
+    seen: list[int] = []
+
+    def on_train_epoch_start(self, trainer, module) -> None:
+        FirstEpoch.seen.append(trainer.current_epoch)
+
+
 def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
     handler = signal.getsignal(signal.SIGINT)
     cb = "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtEpoch"
@@ -106,6 +116,13 @@ def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
     assert "interrupted at epoch 1: no model.pt written; resume with ckpt_path=" in err
     assert "interrupted.ckpt (written at the interruption)" in err and "last.ckpt is written every 2 epochs" in err
     assert not (tmp_path / "run" / "model.pt").exists()
+    # auto_resume=false starts afresh in that folder: Lightning's OnExceptionCheckpoint made fit() restore the
+    # newest last/interrupted checkpoint there by itself (gyrodenoise.interruption_checkpoint)
+    shutil.copytree(tmp_path / "run", tmp_path / "fresh")
+    FirstEpoch.seen.clear()
+    first = "+callbacks.first._target_=test_damaged_inputs.FirstEpoch"
+    assert train(config(root, tmp_path / "fresh", first, every_2, "trainer.max_epochs=4", "auto_resume=false"))
+    assert FirstEpoch.seen == [0, 1, 2, 3] and "auto_resume: " not in capsys.readouterr().out
     # the same command in the same folder (a requeued cluster job) goes on from that checkpoint and finishes
     summary = train(config(root, tmp_path / "run", every_2, "trainer.max_epochs=4"))
     assert "auto_resume: " in capsys.readouterr().out and summary["epochs"] == 4
