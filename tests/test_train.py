@@ -10,7 +10,7 @@ import torch
 from gyrodenoise.cli_errors import TrainingDiverged
 from gyrodenoise.config import compose_config
 from gyrodenoise.lit import DenoiserModule
-from gyrodenoise.train import format_test_table, train
+from gyrodenoise.train import format_test_table, schedule_cut_note, train
 
 
 @pytest.fixture
@@ -344,3 +344,16 @@ def test_the_learning_rate_is_logged_as_train_lr_for_either_schedule(schedule):
         assert sched.get_last_lr() == [lr]  # the placeholder scheduler changes nothing
     else:
         assert sched.get_last_lr()[0] < lr
+
+
+def test_a_run_that_ends_inside_a_cosine_cycle_is_told(monkeypatch):
+    def note(*overrides: str) -> str | None:
+        return schedule_cut_note(compose_config("train", ["dataset=euroc", *overrides]))
+
+    assert note() is None and note("experiment=paper_schedule") is None  # 600 = T_0; 1800 = 600 + 1200
+    assert note("optim.scheduler.name=constant", "trainer.max_epochs=30") is None
+    assert note("trainer.max_epochs=30", "optim.scheduler.T_0=30") is None
+    short = note("trainer.max_epochs=30")
+    assert "30 epochs into a 600-epoch cosine cycle" in short and "ends at 0.00994" in short
+    assert "optim.scheduler.T_0=30" in short
+    assert "300 epochs into a 1200-epoch" in note("experiment=paper_schedule", "trainer.max_epochs=900")

@@ -146,6 +146,27 @@ def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserMo
     return raw
 
 
+def schedule_cut_note(cfg: DictConfig) -> str | None:
+    """What to say when the run ends inside a cosine cycle (a short `trainer.max_epochs` with the default T_0): the
+    rate never anneals, and the final weights are those of a high rate."""
+    sched, epochs = cfg.optim.get("scheduler") or {}, cfg.trainer.get("max_epochs")
+    if sched.get("name") != "cosine_warm_restarts" or not epochs or epochs < 0:
+        return None
+    start, length = 0, int(sched["T_0"])
+    while start + length < epochs:  # the cycle the last epoch falls in
+        start, length = start + length, length * int(sched.get("T_mult", 1))
+    if start + length == epochs:
+        return None
+    lr, eta_min = float(cfg.optim.lr), float(sched.get("eta_min", 0.0))
+    end = eta_min + (lr - eta_min) * (1 + math.cos(math.pi * (epochs - start) / length)) / 2
+    return (
+        f"trainer.max_epochs={epochs} ends {epochs - start} epochs into a {length}-epoch cosine cycle "
+        f"(optim.scheduler.T_0={sched['T_0']}, T_mult={sched.get('T_mult', 1)}): the learning rate ends at {end:.3g}, "
+        f"not annealed to eta_min={eta_min:g}. For a shorter run give the cycle its length too, e.g. "
+        f"optim.scheduler.T_0={epochs}"
+    )
+
+
 def build_module(cfg: DictConfig) -> DenoiserModule:
     """The module of the run, its optimiser and schedule built once to check the config: a bad choice
     (`select`, `optim.scheduler.name`, `model.act`, ...) ends the command before the fit, in one line."""
@@ -168,6 +189,8 @@ def build_module(cfg: DictConfig) -> DenoiserModule:
         module.configure_optimizers()
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    if note := schedule_cut_note(cfg):
+        print(f"warning: {note}")
     rf = int(getattr(module.model, "receptive_field", 1))
     if window is not None and window < rf:
         print(
