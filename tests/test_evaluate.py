@@ -264,7 +264,8 @@ def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):
     model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
     monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "out"
-    run_evaluate_asl(root, model, model, out)
+    run_evaluate_asl(root, model, model, out, "trajectories=false", "figures=false")
+    assert (out / "table.md").is_file() and not (out / "trajectories").exists()  # trajectories=false: none written
     table = (out / "table.md").read_text()
     assert "turns about axes" in table or "mirror image" in table  # w last read as w first: often a reflection
     results = json.loads((out / "results.json").read_text())

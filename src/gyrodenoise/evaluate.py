@@ -14,7 +14,8 @@ or `'+estimates.NAME=PATH/*.txt'` (* = the sequence's name), TUM trajectories on
 (gyrodenoise.external_estimates).
 Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
 roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
-trajectories/<sequence>/<method>.txt (TUM format, readable by evo and rpg_trajectory_evaluation; stamps exact to the ns;
+trajectories/<sequence>/<method>.txt (`trajectories=false`: none; TUM format, readable by evo and
+rpg_trajectory_evaluation; stamps exact to the ns;
 groundtruth.txt holds positions and only the samples with ground truth, the estimates orientation only, translation
 zero: score them on orientation, e.g. `evo_ape tum groundtruth.txt proposed.txt --pose_relation angle_deg`).
 An ensemble as the proposed model adds its uncertainty: a +-2 sigma band in the correction figures,
@@ -229,7 +230,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
                 warnings.warn(w, ModelQualityWarning, stacklevel=2)
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
-        write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
+        if cfg.get("trajectories", True):
+            write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
         external_errors = {}
         for name, spec in estimates.items():
             est = load_external(name, spec, seq)

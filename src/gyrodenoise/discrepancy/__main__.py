@@ -2,7 +2,7 @@
 
     python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
         --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
-        --out reports/discrepancy_euroc
+        --out outputs/discrepancy_euroc
 
 Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 """
@@ -41,10 +41,10 @@ def _effects(s: str) -> list[str]:
     return names
 
 
-EXAMPLE = """example (EuRoC, as in reports/discrepancy_euroc):
+EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
-      --network euroc --gyro-noise-density 1.6968e-4 --out reports/discrepancy_euroc
+      --network euroc --gyro-noise-density 1.6968e-4 --out outputs/discrepancy_euroc
 each sequence held out once, verdicts side by side: python -m gyrodenoise.discrepancy.splits --help
 """
 
