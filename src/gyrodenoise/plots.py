@@ -18,6 +18,22 @@ from gyrodenoise.so3 import rpy_of
 from gyrodenoise.uncertainty import CalibrationResult
 
 AXES = ("roll", "pitch", "yaw")
+# one colour per method in every figure (matplotlib's cycle by position gave calibrated orange in one, green in another)
+METHOD_COLORS = {"raw IMU": "C0", "calibrated IMU": "C1", "proposed": "C2", "zero motion": "C7"}
+
+
+def method_colors(names: list[str]) -> dict[str, str]:
+    """The colour of each method: fixed for the built-in ones, the rest of matplotlib's cycle for others."""
+    spare = iter(c for c in (f"C{k}" for k in (3, 4, 5, 6, 8, 9)) if c not in METHOD_COLORS.values())
+    return {n: METHOD_COLORS.get(n) or next(spare, "0.3") for n in names}
+
+
+def _broken_at_turns(y_deg: np.ndarray) -> np.ndarray:
+    """A copy with NaN where the curve steps by more than 180 deg between samples (an error passing +-180 deg
+    wraps to the other side): drawn as a gap, not as a vertical line across the panel."""
+    y = np.array(y_deg, dtype=float)
+    y[1:][np.abs(np.diff(y_deg)) > 180.0] = np.nan
+    return y
 
 
 def subplots(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (6.4, 4.8), **kwargs) -> tuple[Figure, Any]:
@@ -52,10 +68,11 @@ def orientation_figure(
     # each estimate on the ground truth's 360-degree branch, sample by sample: unwrapped on their own, the
     # series can end up whole turns apart (near pitch +-90 deg roll and yaw jump), which hides the error
     on_branch = {name: gt + _wrap(rpy_of(R) - rpy_gt) for name, R in estimates.items()}
+    colors = method_colors(list(on_branch))
     for k, ax in enumerate(axs):
         ax.plot(t, np.degrees(gt[:, k]), "k", lw=1.5, label="ground truth")
         for name, rpy in on_branch.items():
-            ax.plot(t, np.degrees(rpy[:, k]), lw=1, label=name)
+            ax.plot(t, _broken_at_turns(np.degrees(rpy[:, k])), lw=1, label=name, color=colors[name])
         ax.set_ylabel(f"{AXES[k]} (deg)")
         ax.grid(alpha=0.3)
     axs[0].legend(loc="best", fontsize=8)
@@ -77,11 +94,12 @@ def error_figure(
     no error is drawn where it is False (against interpolated ground truth it would not be an error)."""
     fig, axs = subplots(2, 1, figsize=(9, 5.5), sharex=True)
     _shade_gaps(axs, t, gt_mask)
+    colors = method_colors(list(errors))
     for name, (e3d, eyaw) in errors.items():
         if gt_mask is not None:
             e3d, eyaw = np.where(gt_mask, e3d, np.nan), np.where(gt_mask, eyaw, np.nan)
-        axs[0].plot(t, np.degrees(e3d), lw=1, label=name)
-        axs[1].plot(t, np.degrees(np.abs(eyaw)), lw=1, label=name)
+        axs[0].plot(t, np.degrees(e3d), lw=1, label=name, color=colors[name])
+        axs[1].plot(t, np.degrees(np.abs(eyaw)), lw=1, label=name, color=colors[name])
     axs[0].set_ylabel("3D error (deg)")
     axs[1].set_ylabel("|yaw error| (deg)")
     axs[1].set_xlabel("t (s)")
@@ -131,7 +149,7 @@ def calibration_figure(result: CalibrationResult, title: str = "") -> Figure:
     pos = np.concatenate([pred[pred > 0], act[act > 0]])
     if len(pos):
         lim = [pos.min() * 0.8, pos.max() * 1.25]
-        ax.plot(lim, lim, "k--", lw=1, label="calibrated")
+        ax.plot(lim, lim, "k--", lw=1, label="spread = error (a calibrated uncertainty)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     for axis in (ax.xaxis, ax.yaxis):  # 1-2-5 labels: default minor labels overlap on narrow log ranges
@@ -154,7 +172,7 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
     methods = list(next(iter(roe.values())).keys()) if roe else []
     fig, axs = subplots(1, 2, figsize=(11, 4))
     width = 0.8 / max(len(methods), 1)
-    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = method_colors(methods)
     for a, ax in enumerate(axs):
         for m, name in enumerate(methods):
             data = [np.degrees(roe[d][name][a]) for d in dists]
@@ -169,8 +187,8 @@ def roe_boxplot(roe: dict[float, dict[str, tuple[np.ndarray, np.ndarray]]], titl
                 medianprops={"color": "black", "lw": 1.5},
             )
             for box in bp["boxes"]:
-                box.set_facecolor(colors[m % len(colors)])
-            ax.plot([], [], color=colors[m % len(colors)], lw=6, label=name)
+                box.set_facecolor(colors[name])
+            ax.plot([], [], color=colors[name], lw=6, label=name)
         ax.set_xticks(np.arange(len(dists)), [f"{d:g} m" for d in dists])
         ax.set_xlabel("travelled distance")
         ax.set_yscale("log")
