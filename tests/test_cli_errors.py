@@ -152,3 +152,18 @@ def test_a_root_one_level_off_is_named_with_the_root_to_give(tiny_asl_root, tmp_
     cfg = compose_config("train", ["dataset=euroc", f"dataset.root={tiny_asl_root / 'a'}", *seqs])
     with pytest.raises(FileNotFoundError, match=f"give its parent, {tiny_asl_root}, as dataset.root"):
         hydra.utils.instantiate(cfg.dataset).check_sequences()
+
+
+def test_the_projects_warnings_print_as_one_line_inside_a_command():
+    """A data warning read like a crash: Python's '<site-packages path>:<line>: DataFormatWarning:' and the source
+    line of the warnings.warn call (first-hour audit). Other packages' warnings keep Python's format. (Python's
+    showwarning prints what formatwarning returns; pytest records warnings instead of printing them.)"""
+    import warnings
+
+    from gyrodenoise.data.readers import DataFormatWarning
+
+    msg = "x.csv:3: the file does not end with a line break"
+    with user_errors():
+        assert warnings.formatwarning(msg, DataFormatWarning, "/site/readers.py", 84) == f"warning: {msg}\n"
+        assert "DeprecationWarning: old" in warnings.formatwarning("old", DeprecationWarning, "/site/lib.py", 1)
+    assert "DataFormatWarning: " + msg in warnings.formatwarning(msg, DataFormatWarning, "/site/readers.py", 84)

@@ -23,6 +23,7 @@ from omegaconf.errors import MissingMandatoryValue
 
 from gyrodenoise.config import misspelt_key_message
 from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.notices import plain_project_warnings
 from gyrodenoise.pretrained import ModelFileError
 
 
@@ -40,8 +41,10 @@ DISK_ERRNOS = (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT)
 
 @contextmanager
 def user_errors() -> Iterator[None]:
+    """Errors in what the user gave end the command with one line; the project's warnings print as one line too."""
     try:
-        yield
+        with plain_project_warnings():
+            yield
     except USER_ERRORS as e:
         _one_line(str(e))
     except OSError as e:  # a full, read-only or forbidden disk: the path and what to do, not a traceback

@@ -9,8 +9,10 @@ log or warn is left alone.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import warnings
+from collections.abc import Iterator
 
 LIGHTNING_LOGGER = "lightning.pytorch.utilities.rank_zero"
 ONNX_REGISTRATION_LOGGER = "torch.onnx._internal.exporter._registration"
@@ -37,3 +39,22 @@ def quiet_library_notices() -> None:
         if not any(isinstance(f, _DropNoise) for f in log.filters):
             log.addFilter(_DropNoise(prefixes))
     warnings.filterwarnings("ignore", message=LEAFSPEC_DEPRECATION)
+
+
+@contextlib.contextmanager
+def plain_project_warnings() -> Iterator[None]:
+    """Inside a command: gyrodenoise's own warnings (data, sanity, model quality) print as `warning: <message>`, like
+    the commands' other lines, not as Python's `<file>:<line>: <Category>: ...` plus the source line of the
+    `warnings.warn` call, which reads like a crash. Other packages' warnings keep Python's format."""
+    plain = warnings.formatwarning
+
+    def fmt(message, category, filename, lineno, line=None) -> str:  # noqa: ANN001 - warnings' own signature
+        if category.__module__.startswith("gyrodenoise."):
+            return f"warning: {message}\n"
+        return plain(message, category, filename, lineno, line)
+
+    warnings.formatwarning = fmt
+    try:
+        yield
+    finally:
+        warnings.formatwarning = plain
