@@ -18,6 +18,9 @@ def test_hydra_entry_points_start_when_called_as_a_console_script(module, tmp_pa
     run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "Configuration group" in run.stdout and "dataset" in run.stdout
+    assert run.stdout.startswith(f"python -m gyrodenoise.{module} ")  # its own help, not the training one
+    if module != "evaluate":  # a help page, not Hydra's dump of the ~240-line training config
+        assert len(run.stdout.splitlines()) < 40 and "retain_freed_memory" not in run.stdout
     if module == "evaluate":  # it composes the dataset group only: its help names every dataset, no training group
         from gyrodenoise.config import CONF_DIR
 
