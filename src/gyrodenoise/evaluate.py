@@ -46,7 +46,7 @@ from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.external_estimates import check_files, check_names, coverage_note, load_external, nan_outside
 from gyrodenoise.job_log import console_to_job_log
-from gyrodenoise.metrics import ROE_STRIDE, aoe, orientation_errors, roe, summarize
+from gyrodenoise.metrics import AOE_DEFINITION, ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import (
@@ -65,10 +65,6 @@ from gyrodenoise.tables import csv_text, markdown_table
 from gyrodenoise.trajectory_files import tum_text
 
 METHODS = ("raw IMU", "zero motion", "calibrated IMU", "proposed")
-AOE_DEFINITION = (
-    "AOE 3D/yaw in degrees: the RMS, over the samples with ground truth, of the angle of R_gt^T R_est (yaw: of the "
-    "world-frame error R_est R_gt^T); every estimate is aligned on ground truth at its first sample."
-)
 ROE_DEFINITION = (
     "ROE in degrees: the angle of dR_gt^T dR_est between a start sample (every {stride}th) and the first sample "
     "{d} m of ground-truth path later (positions interpolated linearly across gaps), pooled over the averaged "

@@ -24,7 +24,9 @@ from omegaconf import DictConfig, OmegaConf
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated
 from gyrodenoise.cli_errors import hydra_key_hints, user_errors
+from gyrodenoise.data.datamodule import TAIL_NAME_NOTE
 from gyrodenoise.job_log import console_to_job_log
+from gyrodenoise.metrics import AOE_DEFINITION
 from gyrodenoise.paths import invoked_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import machine_description
@@ -77,7 +79,9 @@ def fit(cfg: DictConfig) -> dict:
     for group, per_seq in scores.items():
         cells = ", ".join(f"{k} {v:.2f}" for k, v in per_seq.items())
         print(f"{group} AOE {means[group]:.3f} deg ({cells})")
-    if not scores:
+    if scores:
+        print(f"({AOE_DEFINITION} {TAIL_NAME_NOTE})")
+    else:
         print(
             "no validation or test data to score on (whole training sequences and test=false): score the fit on a "
             "held-out sequence with dataset.cv_fold=K, or on the test sequences with test=true"

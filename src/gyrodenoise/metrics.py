@@ -14,6 +14,11 @@ import torch
 from gyrodenoise import so3
 from gyrodenoise.so3 import relative_rotvec, yaw_of
 
+AOE_DEFINITION = (
+    "AOE 3D/yaw in degrees: the RMS, over the samples with ground truth, of the angle of R_gt^T R_est (yaw: of the "
+    "world-frame error R_est R_gt^T); every estimate is aligned on ground truth at its first sample."
+)
+
 ROE_STRIDE = 10  # a pair starts every 10th sample: 0.05 s at 200 Hz, pairs overlap heavily anyway
 
 

@@ -35,9 +35,10 @@ from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cli_errors import ConfigError, TrainingDiverged, hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.cpu_memory import retain_freed_memory
-from gyrodenoise.data.datamodule import ImuDataModule
+from gyrodenoise.data.datamodule import TAIL_NAME_NOTE, ImuDataModule
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
+from gyrodenoise.metrics import AOE_DEFINITION
 from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import quiet_library_notices
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
@@ -438,7 +439,9 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         print(f"test sequences ({cfg.dataset.name}, {cfg.model.name}):\n{table}", end="")
         print(
             f"(each cut to 1 + a multiple of {dm.block} samples, as the loss needs: the last digit can differ from "
-            "`python -m gyrodenoise.evaluate`, which scores them whole)"
+            "`python -m gyrodenoise.evaluate`, which scores them whole)\n"
+            f"{AOE_DEFINITION} Raw IMU: the gyro as recorded; calibrated: the 12-parameter baseline fitted on the "
+            f"same training data. {TAIL_NAME_NOTE}"
         )
     print(f"outputs in {out_dir}")
     for lg in trainer.loggers:

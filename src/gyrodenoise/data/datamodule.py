@@ -107,6 +107,10 @@ class RandomCrops(Dataset):
         }
 
 
+# how the validation parts of the training sequences are named in the commands' output (`ImuDataModule.setup`)
+TAIL_NAME_NOTE = "NAME[Ns:] is a training sequence after its first N seconds, the part it trained on."
+
+
 class ImuDataModule(L.LightningDataModule):
     """Splits by sequence name and time, as in the paper (Section IV-A)."""
 
