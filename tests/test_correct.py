@@ -384,3 +384,36 @@ def test_a_second_run_into_the_same_folder_says_it_replaces_the_first(tmp_path, 
     assert run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)[0] == 0
     code, _, err = run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)
     assert code == 0 and "replacing the outputs of an earlier run" in err
+
+
+def _user_csv(path, header, t_ns, gyro, acc, order=(0, 1, 2, 3, 4, 5, 6), t_scale=1e-9, g_scale=1.0, a_scale=1.0):
+    cols = np.column_stack([(t_ns - T0) * t_scale, gyro * g_scale, acc * a_scale])[:, list(order)]
+    np.savetxt(path, cols, delimiter=",", header=header, comments="", fmt="%.12g")
+    return path
+
+
+def test_units_the_header_declares_are_read_and_said(tmp_path, model_file, capsys):
+    """A header 't [s],gx [deg/s],...,ax [g]' was read as ns, rad/s, m/s^2 and refused one unit per rerun
+    (first-hour audit); the units it declares are now read, a note says so, and a flag still overrides them."""
+    t_ns, gyro, acc = synth()
+    header = "t [s],gx [deg/s],gy [deg/s],gz [deg/s],ax [g],ay [g],az [g]"
+    f = _user_csv(tmp_path / "phone.csv", header, t_ns, gyro, acc, g_scale=180 / math.pi, a_scale=1 / G0)
+    code, out, _ = run([f, "-m", model_file, "-o", tmp_path / "a"], capsys)
+    assert code == 0 and "note: read time in s, gyro in deg/s, acc in g, as the header declares" in out
+    rec = read_imu_csv(f)
+    np.testing.assert_allclose(rec.gyro, gyro, atol=1e-9)
+    np.testing.assert_allclose(rec.acc, acc, atol=1e-9)
+    assert rec.units_from_header == ["time", "gyro", "acc"] and abs(int(rec.t_ns[1] - rec.t_ns[0]) - 5_000_000) <= 1
+    # a flag wins over the header (here wrongly: the gyro read as rad/s is 57 times too large and refused)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "b", "--gyro-unit", "rad/s"], "--gyro-unit deg/s")
+
+
+def test_columns_whose_header_names_say_otherwise_get_the_columns_to_pass(tmp_path, model_file, capsys):
+    t_ns, gyro, acc = synth()
+    f = _user_csv(tmp_path / "swapped.csv", "time,ax,ay,az,gx,gy,gz", t_ns, gyro, acc, order=(0, 4, 5, 6, 1, 2, 3))
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "a", "--time-unit", "s"], "wx <- 'ax'")
+    assert "Pass --columns 1,5,6,7,2,3,4 (read off the header)" in err
+    code, _, _ = run(
+        [f, "-m", model_file, "-o", tmp_path / "b", "--time-unit", "s", "--columns", "1,5,6,7,2,3,4"], capsys
+    )
+    assert code == 0

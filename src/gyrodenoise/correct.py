@@ -245,9 +245,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="t,wx,wy,wz,ax,ay,az as header names or 1-based numbers (default: 1,2,3,4,5,6,7, the ASL order)",
     )
     ap.add_argument("--delimiter", help="field separator (default: guessed among , ; tab whitespace)")
-    ap.add_argument("--time-unit", choices=list(TIME_UNITS), default="ns")
-    ap.add_argument("--gyro-unit", choices=list(GYRO_UNITS), default="rad/s")
-    ap.add_argument("--acc-unit", choices=list(ACC_UNITS), default="m/s^2")
+    # not given: the unit the header's column names declare ('gx [deg/s]', 't (s)'), else the ASL format's
+    ap.add_argument("--time-unit", choices=list(TIME_UNITS), help="(default: the header's, else ns)")
+    ap.add_argument("--gyro-unit", choices=list(GYRO_UNITS), help="(default: the header's, else rad/s)")
+    ap.add_argument("--acc-unit", choices=list(ACC_UNITS), help="(default: the header's, else m/s^2)")
     ap.add_argument(
         "--resample",
         action="store_true",
@@ -298,6 +299,9 @@ def main(argv: list[str] | None = None) -> int:
     model_warnings = [w for w in (not_better_warning(meta), spread_warning(ratio, str(path), meta)) if w]
     for w in [*model_warnings, *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
+    if rec.units_from_header:  # read in the units its header declares: say so, the flags would override them
+        said = ", ".join(f"{k} in {rec.units[k]}" for k in rec.units_from_header)
+        print(f"note: read {said}, as the header declares (--{rec.units_from_header[0]}-unit ... overrides)")
     out_dir = args.out_dir or default_out_dir(path)
     out_csv = args.out_csv or out_dir / "imu_corrected.csv"
     out_tum = args.out_tum or out_dir / "orientation.txt"
@@ -323,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
         "engine": args.engine,
         "samples": len(res.rec),
         "duration_s": float((res.rec.t_ns[-1] - res.rec.t_ns[0]) * 1e-9),
+        "input_units": rec.units,  # as read: given, else the header's, else the ASL format's
+        "units_from_header": rec.units_from_header,
         "input_rate_hz": res.report.rate_hz,
         "resampled_to_hz": res.resampled_to_hz,
         "g_measured_m_s2": res.report.g_measured,

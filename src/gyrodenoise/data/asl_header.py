@@ -117,3 +117,49 @@ def groundtruth_header_problem(names: list[str]) -> str | None:
         )
         problems.append(wrong + f". gyrodenoise reads t, p_x, p_y, p_z [m], q_w, q_x, q_y, q_z by position: {hint}")
     return "; ".join(problems) + "." if problems else None
+
+
+_RAD_RATE = re.compile(r"rad\s*/?\s*s|rad\s+s\^-1|rps")
+_SI_ACC = re.compile(r"m\s*/?\s*s\s*\^?-?2|m s\^-2|mps2|m_?s_?2")
+_TIME_FLAG = {"ns": "ns", "µs": "us", "ms": "ms", "s": "s"}
+
+
+def declared_units(time_name: str, gyro_names: list[str], acc_names: list[str]) -> dict[str, str]:
+    """{'time' | 'gyro' | 'acc': unit in the reader's spelling} for what the named columns' units say (brackets,
+    parentheses or a suffix like `_dps`); a quantity whose columns say nothing (or disagree) is left out."""
+    out = {}
+    t_unit = _split(time_name)[1]
+    t = _TIME_UNITS.get(t_unit) or ("ns" if t_unit == "ns" else None)
+    if t:
+        out["time"] = _TIME_FLAG[t]
+
+    def one(names: list[str], unit_of) -> str | None:
+        units = {unit_of(_split(n)[1]) for n in names}
+        return units.pop() if len(units) == 1 else None
+
+    gyro = one(gyro_names, lambda u: "deg/s" if _DEG_RATE.search(u) else "rad/s" if _RAD_RATE.search(u) else None)
+    acc = one(
+        acc_names,
+        lambda u: ("mg" if "mg" in u else "g") if _G_UNIT.match(u) else "m/s^2" if _SI_ACC.search(u) else None,
+    )
+    out |= {k: v for k, v in (("gyro", gyro), ("acc", acc)) if v}
+    return out
+
+
+_TIME_NAME = re.compile(r"^(t|time|times?tamp|stamp|ts|t_?ns|header\.stamp)$")
+
+
+def columns_from_names(names: list[str]) -> str | None:
+    """A `--columns` value (t, gyro x y z, acc x y z as 1-based numbers) read off a header whose names say each of
+    the seven unambiguously; None otherwise."""
+    found: dict[tuple[str, str], int] = {}
+    time_cols = [i for i, n in enumerate(names) if _TIME_NAME.match(_split(n)[0].lstrip("#").strip())]
+    for i, n in enumerate(names):
+        kind, axis = classify(n)
+        if kind in ("gyro", "acc") and axis in "xyz" and axis:
+            if (kind, axis) in found:
+                return None
+            found[(kind, axis)] = i
+    if len(time_cols) != 1 or len(found) != 6:
+        return None
+    return ",".join(str(i + 1) for i in [time_cols[0], *(found[k] for k in IMU_ORDER)])

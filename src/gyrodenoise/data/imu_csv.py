@@ -12,10 +12,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise.data import asl_header
 from gyrodenoise.data.asl_write import IMU_HEADER as ASL_HEADER
 from gyrodenoise.data.readers import DataFormatError, text_lines
 
@@ -39,6 +41,7 @@ class ImuRecording:
     path: Path
     columns: dict[str, str]  # field (t, wx, ...) -> how the file names it, for messages
     units: dict[str, str]
+    units_from_header: list[str] = dataclass_field(default_factory=list)  # quantities whose unit the header declared
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -52,14 +55,14 @@ class ImuRecording:
         return ", ".join(self.columns[f] for f in fields)
 
 
-def check_units(time_unit: str, gyro_unit: str, acc_unit: str) -> None:
-    """ValueError naming a unit these readers do not know, with the ones they do."""
+def check_units(time_unit: str | None, gyro_unit: str | None, acc_unit: str | None) -> None:
+    """ValueError naming a unit these readers do not know, with the ones they do (None: not given)."""
     for name, val, table in (
         ("time_unit", time_unit, TIME_UNITS),
         ("gyro_unit", gyro_unit, GYRO_UNITS),
         ("acc_unit", acc_unit, ACC_UNITS),
     ):
-        if val not in table:
+        if val is not None and val not in table:
             raise ValueError(f"{name}={val!r}; choose one of {', '.join(table)}")
 
 
@@ -128,16 +131,47 @@ def _refuse_pose_columns(header: list[str] | None, idx: list[int], path: Path) -
         )
 
 
+DEFAULT_UNITS = {"time": "ns", "gyro": "rad/s", "acc": "m/s^2"}  # the ASL format's
+
+
+def _check_header(
+    header: list[str] | None, idx: list[int], path: Path, given: dict[str, str | None]
+) -> tuple[dict[str, str], list[str]]:
+    """The units to read (each one given, else the one the header's mapped column names declare, else the ASL
+    format's) and the quantities whose unit came from the header. Mapped columns whose header names are other
+    quantities or axes are refused in one message, with a --columns read off the header where it can be."""
+    names = [header[i] for i in idx] if header and max(idx) < len(header) else []
+    kinds = [asl_header.classify(n) for n in names[1:]]
+    pairs = zip(FIELDS[1:], names[1:], kinds, asl_header.IMU_ORDER, strict=True) if names else []
+    wrong = [
+        f"{name} <- '{n}'"
+        for name, n, (kind, axis), (want, want_axis) in pairs
+        if (kind in ("gyro", "acc") and kind != want) or (kind == want and axis not in (None, want_axis))
+    ]
+    if wrong:
+        fix = asl_header.columns_from_names(header)
+        raise DataFormatError(
+            f"{path}: the columns mapped to {', '.join(wrong)} are other quantities or axes by their header names "
+            f"(the order read: {','.join(FIELDS)}). "
+            + (f"Pass --columns {fix} (read off the header)." if fix else "Map them with --columns.")
+        )
+    said = asl_header.declared_units(names[0], names[1:4], names[4:7]) if names else {}
+    units = {k: given[k] or said.get(k) or default for k, default in DEFAULT_UNITS.items()}
+    return units, [k for k in said if not given[k] and said[k] != DEFAULT_UNITS[k]]
+
+
 def read_imu_csv(
     path: str | Path,
     columns: str = "1,2,3,4,5,6,7",
-    time_unit: str = "ns",
-    gyro_unit: str = "rad/s",
-    acc_unit: str = "m/s^2",
+    time_unit: str | None = None,
+    gyro_unit: str | None = None,
+    acc_unit: str | None = None,
     delimiter: str | None = None,
 ) -> ImuRecording:
     """Parse the file; values in SI, time in int ns. Comment lines start with '#'; a first line
-    with non-numeric fields (or a first comment line) is taken as the header."""
+    with non-numeric fields (or a first comment line) is taken as the header. A unit not given is the one the
+    header's names declare for the mapped columns ('gx [deg/s]', 't (s)', 'acc_x_g'), else the ASL format's
+    (ns, rad/s, m/s^2); `ImuRecording.units_from_header` names those taken from the header."""
     path = Path(path)
     check_units(time_unit, gyro_unit, acc_unit)
     if not path.is_file():
@@ -149,7 +183,9 @@ def read_imu_csv(
     line_numbers: list[int] = []
     problems: list[tuple[int, str]] = []  # (line, message) of every bad line, reported together
     short_lines, short_fields = 0, 0  # lines with too few columns, and the first one's count
-    ns_per = TIME_UNITS[time_unit]
+    given = {"time": time_unit, "gyro": gyro_unit, "acc": acc_unit}
+    units, units_from_header = dict(DEFAULT_UNITS), []
+    ns_per = TIME_UNITS[units["time"]]
     for lineno, raw in text_lines(path, CSV_LAYOUT):
         s = raw.strip()
         if not s:
@@ -167,6 +203,8 @@ def read_imu_csv(
                 continue
             idx = _resolve_columns(columns, header, path)
             _refuse_pose_columns(header, idx, path)
+            units, units_from_header = _check_header(header, idx, path, given)
+            ns_per = TIME_UNITS[units["time"]]
         if len(fields) <= max(idx):
             short_lines += 1
             short_fields = short_fields or len(fields)
@@ -179,7 +217,7 @@ def read_imu_csv(
             )
             continue
         t_field = fields[idx[0]]
-        if time_unit == "ns" and "." in t_field and _is_number(t_field) and float(t_field) % 1:
+        if units["time"] == "ns" and "." in t_field and _is_number(t_field) and float(t_field) % 1:
             raise DataFormatError(
                 f"{path}:{lineno}: the time column is {t_field!r}, with a fractional part, in nanoseconds "
                 "(--time-unit ns, the default): the stamps are likely seconds (or ms/us); pass --time-unit s "
@@ -236,12 +274,13 @@ def read_imu_csv(
     }
     return ImuRecording(
         t_ns=np.array(stamps, dtype=np.int64),
-        gyro=values[:, 0:3] * GYRO_UNITS[gyro_unit],
-        acc=values[:, 3:6] * ACC_UNITS[acc_unit],
+        gyro=values[:, 0:3] * GYRO_UNITS[units["gyro"]],
+        acc=values[:, 3:6] * ACC_UNITS[units["acc"]],
         lines=lines,
         path=path,
         columns=desc,
-        units={"time": time_unit, "gyro": gyro_unit, "acc": acc_unit},
+        units=units,
+        units_from_header=units_from_header,
     )
 
 
