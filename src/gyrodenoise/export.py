@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("model", help="shipped model name (e.g. euroc) or path of a .pt model / .ckpt checkpoint")
     ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length)")
     ap.add_argument("--pt2", type=Path, help="output torch.export program (.pt2)")
-    ap.add_argument("--opset", type=int, default=OPSET)
+    ap.add_argument("--opset", type=int, default=OPSET, help=f"ONNX opset of the graph (default {OPSET})")
     ap.add_argument(
         "--stateful",
         action="store_true",

@@ -44,7 +44,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--duration", type=float, default=None, help="seconds of IMU data (default: 60 procedural, all euroc)"
     )
-    p.add_argument("--seed", type=int, default=0, help="one seed, one sensor: effect values depend on it only")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="one seed, one sensor: effect values depend on it only (a single number for a 3-axis effect, e.g. "
+        "scale_factor=3000ppm, is a magnitude: each axis gets it with a sign drawn from the seed; give "
+        "3000:-3000:3000ppm for chosen signs)",
+    )
     p.add_argument(
         "--preset",
         default="null",
@@ -70,7 +77,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--mocap-jitter", default=None, help="std of the capture time about the stamp, e.g. 100us")
     p.add_argument("--euroc-root", type=Path, default=None, help="folder holding the EuRoC ASL sequences")
     p.add_argument("--smoothing", type=float, default=15.0, help="euroc: low-pass corner of the replay, Hz")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing sequence folder of the same name")
     return p.parse_args(argv)
 
 
