@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -65,6 +66,11 @@ def pose_msg(msgtype: str, t_ns: int, p, q) -> object:
         return T[msgtype](header=_stamp(t_ns, "world"), child_frame_id="body", transform=tf)
     if msgtype == "geometry_msgs/msg/PointStamped":
         return T[msgtype](header=_stamp(t_ns, "world"), point=pose.position)
+    if msgtype == "tf2_msgs/msg/TFMessage":  # the body's pose beside another frame's, as a tf tree publishes them
+        body = pose_msg("geometry_msgs/msg/TransformStamped", t_ns, p, q)
+        other = pose_msg("geometry_msgs/msg/TransformStamped", t_ns, [0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0])
+        other.child_frame_id, other.header.frame_id = "camera", "body"
+        return T[msgtype](transforms=[other, body])
     raise ValueError(msgtype)
 
 
@@ -142,7 +148,8 @@ def test_imu_rotated_in_the_mocap_body(tmp_path, sim, capsys):
     assert from_bag.main([str(bag), "--out", str(tmp_path / "a")]) == 0
     cap = capsys.readouterr()
     assert "deg away from the pose's body axes" in cap.out and "away from the ground truth's body axes" in cap.err
-    quat = cap.out.split("--imu-in-body ")[1].split(" (")[0].split()
+    quat = cap.out.split("--imu-in-body ")[1].split()[:4]
+    assert "--imu-in-body " + " ".join(quat) + " --overwrite" in cap.out  # the rerun as printed replaces the import
     fitted = Rotation.from_quat([float(x) for x in quat])
     assert (fitted * body.inv()).magnitude() < np.radians(1.0)
     s = from_bag.import_bag(bag, tmp_path / "b", imu_in_body_xyzw=tuple(body.as_quat()))
@@ -181,7 +188,7 @@ def test_errors_name_the_topic_and_what_to_do(tmp_path, sim, capsys):
         from_bag.import_bag(zero, tmp_path / "z")
 
     assert from_bag.main([str(tmp_path / "x.bag"), "--out", str(tmp_path / "x")]) == 2  # exists
-    assert "exists; choose another --out or pass --overwrite" in capsys.readouterr().err
+    assert "holds an earlier import; choose another --out or pass --overwrite" in capsys.readouterr().err
     assert from_bag.main([str(tmp_path / "nope.bag"), "--out", str(tmp_path / "n")]) == 2
     assert "no such bag" in capsys.readouterr().err
     (tmp_path / "junk.bag").write_bytes(b"not a bag at all")
@@ -191,7 +198,7 @@ def test_errors_name_the_topic_and_what_to_do(tmp_path, sim, capsys):
 
 def test_gyro_in_deg_per_s_is_refused_and_nothing_left(tmp_path, sim):
     bag = write_bag(tmp_path / "deg.bag", sim, gyro_scale=180.0 / np.pi)
-    with pytest.raises(from_bag.BagError, match=r"looks like deg/s.*was removed"):
+    with pytest.raises(from_bag.BagError, match=r"/imu0: the gyro is 57.3 times .* Rerun with --gyro-unit deg/s"):
         from_bag.import_bag(bag, tmp_path / "deg")
     assert not (tmp_path / "deg").exists()
 
@@ -200,3 +207,88 @@ def test_without_rosbags_the_message_says_what_to_install(tmp_path, monkeypatch)
     monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # import fails as if not installed
     with pytest.raises(from_bag.BagError, match=r'pip install "gyrodenoise\[rosbag\]"'):
         from_bag.topics(tmp_path / "any.bag")
+
+
+def test_a_tf_topic_gives_the_pose_of_one_frame_pair(tmp_path, sim, capsys):
+    bag = write_bag(tmp_path / "tf.bag", sim, gt_type="tf2_msgs/msg/TFMessage")
+    assert from_bag.main([str(bag), "--list"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "/mocap\ttf2_msgs/msg/TFMessage" in out
+        and "--tf-frames world body\t" in out
+        and "--tf-frames body camera" in out
+    )
+    s = from_bag.import_bag(bag, tmp_path / "no_pose")  # /tf is no pose topic by itself: said, not passed over
+    assert s["gt_topic"] is None and any("--gt-topic /mocap --tf-frames PARENT CHILD" in n for n in s["notes"])
+    with pytest.raises(from_bag.BagError, match=r"choose a pair, --tf-frames PARENT CHILD \(pairs there"):
+        from_bag.import_bag(bag, tmp_path / "a", gt_topic="/mocap")
+    with pytest.raises(from_bag.BagError, match=r"no transform world -> imu; .*world body"):
+        from_bag.import_bag(bag, tmp_path / "a", gt_topic="/mocap", tf_frames=("world", "imu"))
+    s = from_bag.import_bag(bag, tmp_path / "a", gt_topic="/mocap", tf_frames=("/world", "body"))
+    assert s["data_warnings"] == [] and s["gt_messages"] == len(sim.t_ns[::MOCAP_STRIDE])
+    gt = read_groundtruth(tmp_path / "a" / "mav0" / "state_groundtruth_estimate0" / "data.csv")
+    err = Rotation.from_quat(gt.quat_xyzw) * Rotation.from_quat(sim.gt_quat_xyzw[::MOCAP_STRIDE]).inv()
+    assert err.magnitude().max() < 1e-12
+
+
+def test_out_replaces_only_an_earlier_import(tmp_path, sim):
+    """--overwrite deleted whatever --out named: a folder of sequences, even the folder holding the bag (an
+    independent check of the importer)."""
+    (tmp_path / "bags").mkdir()
+    bag = write_bag(tmp_path / "bags" / "rec.bag", sim)
+    data = tmp_path / "data"
+    (data / "seqA" / "mav0").mkdir(parents=True)
+    with pytest.raises(from_bag.BagError, match=r"is not a sequence this command wrote .* give ROOT/NAME"):
+        from_bag.import_bag(bag, data, overwrite=True)
+    assert (data / "seqA" / "mav0").is_dir()
+    with pytest.raises(from_bag.BagError, match=r"holds the bag itself"):
+        from_bag.import_bag(bag, tmp_path / "bags", overwrite=True)
+    assert bag.is_file()
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(from_bag.BagError, match=r"afile is a file"):
+        from_bag.import_bag(bag, tmp_path / "afile", overwrite=True)
+    (data / "rec").mkdir()  # an empty folder is a new one
+    from_bag.import_bag(bag, data / "rec")
+    with pytest.raises(FileExistsError, match=r"holds an earlier import"):
+        from_bag.import_bag(bag, data / "rec")
+    assert from_bag.import_bag(bag, data / "rec", overwrite=True, stamp="record")["stamp"] == "record"
+
+
+def test_duplicates_damage_and_folders_without_metadata(tmp_path, sim):
+    bag = write_bag(tmp_path / "rec.bag", sim)
+    twice = tmp_path / "twice.bag"  # every 100th IMU message recorded twice
+    from rosbags.rosbag1 import Writer
+
+    with Writer(twice) as w:
+        c = w.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=TS)
+        for k, t in enumerate(sim.t_ns.tolist()):
+            data = TS.serialize_ros1(imu_msg(t, sim.gyro[k], sim.acc[k]), "sensor_msgs/msg/Imu")
+            for _ in range(2 if k % 100 == 0 else 1):
+                w.write(c, t, data)
+    s = from_bag.import_bag(twice, tmp_path / "t")
+    assert s["imu_messages"] == len(sim.t_ns) and any(
+        "recorded twice (same stamp, same values) kept once" in n for n in s["notes"]
+    )
+
+    cut = tmp_path / "cut.bag"  # a recording stopped mid-write
+    cut.write_bytes(bag.read_bytes()[: bag.stat().st_size * 2 // 3])
+    with pytest.raises(from_bag.BagError, match=r"cut.bag: .*(damaged or cut short|cannot be read).*rosbag reindex"):
+        from_bag.import_bag(cut, tmp_path / "c")
+
+    ros2 = write_bag(tmp_path / "r2", sim, ros2=True)
+    loose = tmp_path / "loose"
+    loose.mkdir()
+    for f in ros2.iterdir():
+        if f.suffix == ".db3":
+            shutil.copy(f, loose / f.name)
+    with pytest.raises(
+        from_bag.BagError, match=r"needs its metadata.yaml, and this one has none \(it holds \['r2.*db3'\]\)"
+    ):
+        from_bag.topics(loose)
+
+
+def test_a_gyro_in_deg_per_s_is_read_with_gyro_unit(tmp_path, sim):
+    bag = write_bag(tmp_path / "deg.bag", sim, gyro_scale=180.0 / np.pi)
+    s = from_bag.import_bag(bag, tmp_path / "deg", gyro_unit="deg/s")
+    assert s["data_warnings"] == [] and s["gyro_unit_in_bag"] == "deg/s"
+    np.testing.assert_allclose(read_imu(tmp_path / "deg" / "mav0" / "imu0" / "data.csv").gyro, sim.gyro, atol=1e-12)

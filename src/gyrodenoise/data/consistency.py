@@ -43,6 +43,14 @@ SINGLE_AXIS_RATIO = 0.05  # the truth's rates span one axis when their 2nd singu
 MIRROR_MIN_RATIO = 0.05
 
 
+class GyroUnitError(DataFormatError):
+    """The gyro is ~57 times the ground truth's rate about the same axes: deg/s read as rad/s."""
+
+    def __init__(self, message: str, ratio: float) -> None:
+        super().__init__(message)
+        self.ratio = ratio
+
+
 class DataConsistencyWarning(UserWarning):
     """The IMU and the ground truth of a sequence disagree in a way that spoils training or scores."""
 
@@ -152,10 +160,11 @@ def check(seq: Sequence) -> Consistency:
     where = f"{seq.name} ({files[0]}, truth {files[1]})"  # portable: the message is kept in reports
     same_axes = not m.axes_angle_deg > AXES_MAX_DEG and not m.mirrored  # nan (too little motion) counts as the same
     if np.isfinite(m.rate_ratio) and 0.6 * DEG_PER_RAD <= m.rate_ratio <= 1.4 * DEG_PER_RAD and same_axes:
-        raise DataFormatError(
+        raise GyroUnitError(
             f"{where}: the gyro is {m.rate_ratio:.1f} times the rate of the ground truth's orientation, about the "
             "same axes: it looks like deg/s. gyrodenoise reads rad/s (the ASL format's unit): multiply the gyro "
-            "columns by pi/180 (0.0174533)."
+            "columns by pi/180 (0.0174533).",
+            m.rate_ratio,
         )
     cropped = int(seq.meta.get("imu_samples_cropped", 0))
     if cropped > MAX_CROPPED_SHARE * (cropped + len(seq)):  # EuRoC/TUM-VI: 0-2.8 %, the IMU running before the mocap
