@@ -357,3 +357,21 @@ def test_a_run_that_ends_inside_a_cosine_cycle_is_told(monkeypatch):
     assert "30 epochs into a 600-epoch cosine cycle" in short and "ends at 0.00994" in short
     assert "optim.scheduler.T_0=30" in short
     assert "300 epochs into a 1200-epoch" in note("experiment=paper_schedule", "trainer.max_epochs=900")
+
+
+def test_an_installed_copy_records_the_commit_its_wheel_was_built_from(tmp_path, monkeypatch):
+    """`pip install .` leaves no checkout beside the package: summary.json recorded only "0.1.0" for every commit
+    (first-hour audit). setup.py writes the commit into the wheel; a checkout still answers for itself."""
+    import json
+
+    import gyrodenoise
+    from gyrodenoise.train import _code_version
+
+    here = _code_version()
+    assert here["commit"] and "built" not in here  # this test runs from the repository's checkout (or CI's clone)
+    site = tmp_path / "site-packages" / "gyrodenoise"
+    site.mkdir(parents=True)
+    monkeypatch.setattr(gyrodenoise, "__file__", str(site / "__init__.py"))
+    assert _code_version() == {"package": gyrodenoise.__version__}  # no build record: the version only
+    (site / "_build_info.json").write_text(json.dumps({"commit": "abc1234", "dirty": False}))
+    assert _code_version() == {"package": gyrodenoise.__version__, "commit": "abc1234", "dirty": False, "built": True}

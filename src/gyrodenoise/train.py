@@ -12,6 +12,7 @@ validation and test metrics of the kept weights).
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import sys
@@ -242,14 +243,20 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
 
 def _code_version() -> dict:
     """The package version and, run from a checkout of this repository (src/gyrodenoise), its commit and whether
-    src/ differs from it. An installed copy records the version only: a git repository around site-packages (a
-    .venv inside someone's project) is not this code's."""
+    src/ differs from it; an installed copy (`pip install .`), the commit its wheel was built from
+    (gyrodenoise/_build_info.json, written by setup.py; `"built": true`). A git repository around site-packages (a
+    .venv inside someone's project) is not this code's and is not asked."""
     import gyrodenoise
 
     out: dict = {"package": gyrodenoise.__version__}
-    repo = Path(gyrodenoise.__file__).resolve().parents[2]
+    package = Path(gyrodenoise.__file__).resolve().parent
+    repo = package.parents[1]
     if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
         out["commit"], out["dirty"] = rev
+    elif (info := package / "_build_info.json").is_file():
+        built = json.loads(info.read_text(encoding="utf-8"))
+        if built.get("commit"):
+            out |= {"commit": built["commit"], "dirty": built.get("dirty"), "built": True}
     return out
 
 
