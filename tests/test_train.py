@@ -363,15 +363,27 @@ def test_an_installed_copy_records_the_commit_its_wheel_was_built_from(tmp_path,
     """`pip install .` leaves no checkout beside the package: summary.json recorded only "0.1.0" for every commit
     (first-hour audit). setup.py writes the commit into the wheel; a checkout still answers for itself."""
     import json
+    import subprocess
 
     import gyrodenoise
     from gyrodenoise.train import _code_version
 
-    here = _code_version()
-    assert here["commit"] and "built" not in here  # this test runs from the repository's checkout (or CI's clone)
+    version = gyrodenoise.__version__
     site = tmp_path / "site-packages" / "gyrodenoise"
     site.mkdir(parents=True)
     monkeypatch.setattr(gyrodenoise, "__file__", str(site / "__init__.py"))
-    assert _code_version() == {"package": gyrodenoise.__version__}  # no build record: the version only
+    assert _code_version() == {"package": version}  # no build record: the version only
     (site / "_build_info.json").write_text(json.dumps({"commit": "abc1234", "dirty": False}))
-    assert _code_version() == {"package": gyrodenoise.__version__, "commit": "abc1234", "dirty": False, "built": True}
+    assert _code_version() == {"package": version, "commit": "abc1234", "dirty": False, "built": True}
+
+    repo = tmp_path / "checkout"  # a checkout around the package: its own commit, whatever a build left there
+    (repo / "src" / "gyrodenoise").mkdir(parents=True)
+    (repo / "pyproject.toml").write_text("[project]\nname = 'gyrodenoise'\n")
+    (repo / "src" / "gyrodenoise" / "__init__.py").write_text("")
+    (repo / "src" / "gyrodenoise" / "_build_info.json").write_text(json.dumps({"commit": "abc1234", "dirty": False}))
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-qm", "x"]):
+        subprocess.run(git + args, check=True, capture_output=True)
+    head = subprocess.run(git + ["rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    monkeypatch.setattr(gyrodenoise, "__file__", str(repo / "src" / "gyrodenoise" / "__init__.py"))
+    assert _code_version() == {"package": version, "commit": head, "dirty": False}
