@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.data.asl_write import GT_FILE, IMU_FILE, pose_values, write_sequence
 from gyrodenoise.data.consistency import AXES_MAX_DEG, GyroUnitError, noting_data_warnings
-from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.data.readers import QUAT_NORM_TOL, DataFormatError, quaternion_norms
 from gyrodenoise.paths import portable_path
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -60,7 +60,6 @@ POSE_TYPES: dict[str, Callable[[object], object]] = {
 NOT_A_POSE = {  # a type users reach for that carries no orientation
     "geometry_msgs/msg/PointStamped": "a position only (no orientation): it cannot train a gyro",
 }
-UNIT_QUAT_TOL = 1e-3  # |q| further than this from 1: not a rotation (a zero quaternion = no data)
 GYRO_UNITS = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
 REPAIR = "repair it (MCAP: `mcap recover`; ROS 1: `rosbag reindex`) and import the repaired file"
 
@@ -278,12 +277,10 @@ def read_stream(bag: Path, topic: str, msgtype: str, stamp: str, tf_frames: tupl
 def body_to_imu(gt: Stream, imu_in_body: Rotation) -> np.ndarray:
     """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu."""
     q = gt.values[:, 3:]
-    norm = np.linalg.norm(q, axis=1)
-    bad = np.abs(norm - 1.0) > UNIT_QUAT_TOL
-    if bad.any():
-        k = int(np.argmax(bad))
+    norm, k, count = quaternion_norms(q)
+    if k is not None:
         raise BagError(
-            f"{gt.topic}: {bad.sum()} orientations are not unit quaternions (|q| = {norm[k]:.3g} at {gt.t_ns[k]} ns; "
+            f"{gt.topic}: {count} orientations are not unit quaternions (|q| = {norm[k]:.3g} at {gt.t_ns[k]} ns; "
             "a zero quaternion means no pose): remove those messages or record the ground truth without them"
         )
     rot = Rotation.from_quat(q / norm[:, None]) * imu_in_body
@@ -413,7 +410,7 @@ def import_bag(
 def _quat(text: list[str]) -> tuple[float, float, float, float]:
     q = np.asarray([float(x) for x in text])
     n = np.linalg.norm(q)
-    if abs(n - 1.0) > UNIT_QUAT_TOL:
+    if abs(n - 1.0) > QUAT_NORM_TOL:
         raise BagError(f"--imu-in-body {' '.join(text)}: |q| = {n:.4g}, not a unit quaternion (x y z w)")
     return tuple(q / n)
 

@@ -248,6 +248,13 @@ def read_imu(path: str | Path) -> ImuData:
     return ImuData(t_ns=t, gyro=v[:, 0:3], acc=v[:, 3:6], path=Path(path))
 
 
+def quaternion_norms(q: np.ndarray, tol: float = QUAT_NORM_TOL) -> tuple[np.ndarray, int | None, int]:
+    """|q| of each row, the index of the first row more than `tol` from 1 (None: none is) and how many are."""
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.abs(norm - 1.0) > tol
+    return norm, (int(np.argmax(bad)) if bad.any() else None), int(bad.sum())
+
+
 def read_groundtruth(path: str | Path) -> GroundTruthData:
     """ASL ground truth: t[ns], p_x, p_y, p_z [m], q_w, q_x, q_y, q_z, then optional columns."""
     path = Path(path)
@@ -255,13 +262,11 @@ def read_groundtruth(path: str | Path) -> GroundTruthData:
         path, 8, "ground truth", GT_LAYOUT, _header_check(asl_header.groundtruth_header_problem)
     )
     q_wxyz = v[:, 3:7]
-    norm = np.linalg.norm(q_wxyz, axis=1)
-    bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
-    if bad.any():
-        k = int(np.argmax(bad))
+    norm, k, count = quaternion_norms(q_wxyz)
+    if k is not None:
         raise DataFormatError(
             f"{path}:{lines[k]}: quaternion (columns 5-8, w x y z) has norm {norm[k]:.6f}, more than "
-            f"{QUAT_NORM_TOL} from 1 ({int(bad.sum())} such lines). Check the column order "
+            f"{QUAT_NORM_TOL} from 1 ({count} such lines). Check the column order "
             "(t, p_x, p_y, p_z, q_w, q_x, q_y, q_z) and the file's units."
         )
     q_wxyz = q_wxyz / norm[:, None]
