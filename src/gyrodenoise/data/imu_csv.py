@@ -134,7 +134,7 @@ def _refuse_pose_columns(header: list[str] | None, idx: list[int], path: Path) -
 DEFAULT_UNITS = {"time": "ns", "gyro": "rad/s", "acc": "m/s^2"}  # the ASL format's
 
 
-def _check_header(
+def _header_units(
     header: list[str] | None, idx: list[int], path: Path, given: dict[str, str | None]
 ) -> tuple[dict[str, str], list[str]]:
     """The units to read (each one given, else the one the header's mapped column names declare, else the ASL
@@ -203,7 +203,7 @@ def read_imu_csv(
                 continue
             idx = _resolve_columns(columns, header, path)
             _refuse_pose_columns(header, idx, path)
-            units, units_from_header = _check_header(header, idx, path, given)
+            units, units_from_header = _header_units(header, idx, path, given)
             ns_per = TIME_UNITS[units["time"]]
         if len(fields) <= max(idx):
             short_lines += 1
