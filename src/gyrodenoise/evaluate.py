@@ -42,9 +42,16 @@ from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.consistency import noting_data_warnings
+from gyrodenoise.data.consistency import DataConsistencyWarning, noting_data_warnings
 from gyrodenoise.data.sequence import Sequence
-from gyrodenoise.external_estimates import check_files, check_names, coverage_note, load_external, nan_outside
+from gyrodenoise.external_estimates import (
+    check_files,
+    check_names,
+    coverage_note,
+    frame_problems,
+    load_external,
+    nan_outside,
+)
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import AOE_DEFINITION, ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
@@ -190,8 +197,22 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
                 dm.root, seq.name, variant_file, dm.max_gap_factor, dm.cache_dir
             )
 
-    check_files(estimates, [s.name for s in sequences.values()])  # before any work, not after a sequence's
     parts = [dm.origin(seq) for seq in sequences.values()]
+    # other methods' files: found, read, placed and checked against the gyro before any work (not after a sequence's);
+    # a validation part (split=val) reads its recording's file
+    check_files(estimates, [name for name, _ in parts])
+    externals = {
+        label: {name: load_external(name, spec, seq, part[0]) for name, spec in estimates.items()}
+        for (label, seq), part in zip(sequences.items(), parts, strict=True)
+    }
+    estimate_warnings = [
+        w
+        for label, ests in externals.items()
+        for name, est in ests.items()
+        for w in frame_problems(name, label, est, sequences[label])
+    ]
+    for w in estimate_warnings:
+        warnings.warn(w, DataConsistencyWarning, stacklevel=2)
     model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
     model_warnings += [
         w for w in (other_imu_warning(m, dm.name, dm.sensor) for m in (proposed_meta, calibrated_meta)) if w
@@ -206,6 +227,7 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         if w
     ]
     warned = [w for w in (proposed_warning, calibrated_warning, *model_warnings, *data_warnings) if w]
+    warned += estimate_warnings
     for w in model_warnings:
         warnings.warn(w, ModelQualityWarning, stacklevel=2)
     distances = [float(d) for d in cfg.roe_distances]
@@ -229,8 +251,7 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         if cfg.get("trajectories", True):
             write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
         external_errors = {}
-        for name, spec in estimates.items():
-            est = load_external(name, spec, seq)
+        for name, est in externals[label].items():
             mask = est.mask(seq)
             r["aoe"][name] = aoe(seq.rot, est.R, mask)
             r["roe"][name] = {d: roe(seq.rot, est.R, seq.pos, d, mask) for d in distances}

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise.data.readers import DataFormatError
+
 
 def tum_text(t_ns: np.ndarray, R: np.ndarray, comment: str, pos: np.ndarray | None = None) -> str:
     """One line per sample after a `# comment` line; translation `pos` (m), or zero for an orientation-only
@@ -23,7 +25,7 @@ def tum_text(t_ns: np.ndarray, R: np.ndarray, comment: str, pos: np.ndarray | No
     return "\n".join(lines) + "\n"
 
 
-class TrajectoryFileError(ValueError):
+class TrajectoryFileError(DataFormatError):
     """A trajectory file that cannot be read as a TUM trajectory; the message names the file and line."""
 
 
