@@ -273,3 +273,14 @@ def test_data_warnings_reach_the_table_and_results(tmp_path, monkeypatch):
     results = json.loads((out / "results.json").read_text())
     assert any("quaternion order" in w for w in results["warnings"])
     assert results["wall_s"] > 0  # the run's own wall time, for the reports that quote it
+
+
+def test_table_headers_name_a_model_file_by_its_run_not_its_whole_path():
+    from gyrodenoise.evaluate import model_label
+
+    assert model_label("euroc") == "euroc" and model_label("tumvi-calibrated") == "tumvi-calibrated"
+    assert (
+        model_label("/home/me/outputs/train/euroc-denoiser/2026-11-27_08-25-25/model.pt")
+        == "2026-11-27_08-25-25/model.pt"
+    )
+    assert model_label("ens.pt") == "ens.pt"

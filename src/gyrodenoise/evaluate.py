@@ -104,6 +104,15 @@ def estimate(seq: Sequence, gyro: np.ndarray | None) -> np.ndarray:
     return integrate_gyro(seq.rot[0], gyro, seq.dt)
 
 
+def model_label(name: str) -> str:
+    """A table header's name for a model: a shipped name as it is, a file as `<its folder>/<file>` (a training
+    run's model.pt: the run's time stamp), not the whole path (the table's notes give it)."""
+    path = Path(name)
+    if path.suffix not in (".pt", ".ckpt") and len(path.parts) < 2:
+        return name
+    return f"{path.parent.name}/{path.name}" if path.parent.name else path.name
+
+
 def write_trajectories(folder: Path, seq: Sequence, estimates: dict[str, np.ndarray]) -> None:
     """groundtruth.txt (positions too, only the samples with ground truth: an occlusion's SLERP is not a measurement)
     and one orientation-only file per method, all on the IMU's stamps."""
@@ -270,10 +279,11 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
             plots.save(plots.correction_figure(seq.t, w_tilde, label, spread), figs / f"correction_{slug(label)}.png")
 
     names = {"proposed": proposed_meta["name"], "calibrated IMU": calibrated_meta["name"]}
-    header = ["sequence", *[f"{m}: {names[m]}" if m in names else m for m in scored]]
+    header = ["sequence", *[f"{m}: {model_label(names[m])}" if m in names else m for m in scored]]
     rows = table_rows(results, averaged, scored)
     left_out = {n: int((~seq.gt_mask).sum()) for n, seq in sequences.items()}
     notes = [AOE_DEFINITION]
+    notes += [f"{m}: {name}" for m, name in names.items() if model_label(name) != name]  # the whole path, once
     notes += [
         f"{n}: {k} of {len(sequences[n])} samples inside ground-truth gaps left out" for n, k in left_out.items() if k
     ]
