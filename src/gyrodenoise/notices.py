@@ -58,3 +58,19 @@ def plain_project_warnings() -> Iterator[None]:
         yield
     finally:
         warnings.formatwarning = plain
+
+
+DEVICE_LINES = ("GPU available:", "TPU available:", "HPU available:", "IPU available:")
+
+
+@contextlib.contextmanager
+def device_lines_said() -> Iterator[None]:
+    """Inside: Lightning's "GPU available: ..." lines of a second Trainer of the same run (training's scoring
+    trainer), said already by the first, are not printed again."""
+    log = logging.getLogger(LIGHTNING_LOGGER)
+    drop = _DropNoise(DEVICE_LINES)
+    log.addFilter(drop)
+    try:
+        yield
+    finally:
+        log.removeFilter(drop)

@@ -41,7 +41,7 @@ from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.lit import DenoiserModule
 from gyrodenoise.metrics import AOE_DEFINITION
 from gyrodenoise.models.build import causality_leak
-from gyrodenoise.notices import quiet_library_notices
+from gyrodenoise.notices import device_lines_said, quiet_library_notices
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import git_revision, machine_description
@@ -209,14 +209,16 @@ def _score_without_callbacks(cfg: DictConfig, dm, module: DenoiserModule, valida
     # default_root_dir: a folder that does not exist. Under SLURM, Lightning restores a trainer whose ckpt_path is
     # None from <default_root_dir>/hpc_ckpt_*.ckpt (written by its SIGUSR1 auto-requeue): validate/test would
     # load that checkpoint's weights into `module` instead of scoring the weights given
-    plain: L.Trainer = hydra.utils.instantiate(
-        cfg.trainer,
-        callbacks=[],
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        default_root_dir=str(Path(cfg.paths.output_dir) / ".scoring-no-hpc-resume"),
-    )
+    with device_lines_said():
+        plain: L.Trainer = hydra.utils.instantiate(
+            cfg.trainer,
+            callbacks=[],
+            logger=False,
+            enable_checkpointing=False,
+            enable_progress_bar=False,
+            enable_model_summary=False,  # the run's trainer printed it
+            default_root_dir=str(Path(cfg.paths.output_dir) / ".scoring-no-hpc-resume"),
+        )
     val = (plain.validate(module, datamodule=dm, verbose=False) or [{}])[0] if validate else {}  # {}: no val data
     test = plain.test(module, datamodule=dm, verbose=False)[0] if cfg.get("test") else {}
     return val, test

@@ -108,7 +108,7 @@ class RandomCrops(Dataset):
 
 
 # how the validation parts of the training sequences are named in the commands' output (`ImuDataModule.setup`)
-TAIL_NAME_NOTE = "NAME[Ns:] is a training sequence after its first N seconds, the part it trained on."
+TAIL_NAME_NOTE = "NAME[Ns:] is the part of a training sequence after its first N seconds (the seconds trained on)."
 
 
 class ImuDataModule(L.LightningDataModule):
