@@ -265,12 +265,20 @@ def fetch_extra_files(ds: Dataset, seq: str, seq_dir: Path, progress: bool = Tru
         path = seq_dir / rel
         if path.is_file():
             continue
-        download(url, path, progress)
-        try:
-            read_groundtruth(path)
-        except DataFormatError as e:
-            path.unlink()
-            raise FetchError(f"{url}: not a ground-truth file the loaders read ({e}); deleted it.") from None
+        try:  # the sequence itself is there: a failure here is said and the fetch goes on
+            download(url, path, progress)
+            try:
+                read_groundtruth(path)
+            except DataFormatError as e:
+                path.unlink()
+                raise FetchError(f"{url}: not a ground-truth file the loaders read ({e}); deleted it") from None
+        except FetchError as e:
+            print(
+                f"warning: {seq}: {rel} not fetched: {e}. The dataset config reads it; run the same command again to "
+                "fetch it, or put the file there by hand",
+                file=sys.stderr,
+            )
+            continue
         written.append(path)
     return written
 
