@@ -214,6 +214,6 @@ def test_augmentation_noise_follows_the_data_rate_not_a_wrong_nominal_one(asl_ro
         dm.train_dataloader()
         return dm.augment.gyro_noise_std
 
-    with pytest.warns(UserWarning, match=r"sensor.rate_hz=400, but the training data sample at 200\.0 Hz"):
+    with pytest.warns(UserWarning, match=r"sensor.rate_hz=400, but the training sequences are sampled at 200\.0 Hz"):
         assert gyro_std(400.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(200.0), rel=1e-6)
     assert gyro_std(205.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(205.0))  # within 5 %: the nominal rate

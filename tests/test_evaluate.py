@@ -43,8 +43,7 @@ def run_evaluate_asl(root, proposed, calibrated, out, *overrides: str) -> dict:
     return run_evaluate(
         "dataset=asl_folder",
         f"dataset.root={root}",
-        "dataset.train_seqs=[]",
-        "dataset.test_seqs=[seq]",
+        "dataset.test_seqs=[seq]",  # no dataset.train_seqs: scoring the test sequences does not read them
         f"weights.proposed={proposed}",
         f"weights.calibrated={calibrated}",
         "threads=1",
@@ -179,6 +178,11 @@ def test_a_model_of_another_imu_is_named():
     assert other_imu_warning(tumvi, "tumvi") is None
     assert other_imu_warning(tumvi, "my_imu", {"model": "BMI160"}) is None  # own recordings of the same sensor
     assert other_imu_warning({"name": "old"}, "euroc") is None
+    # the folder it was trained on, under another dataset.name (its training's label not repeated): the same data
+    mine = {"name": "model.pt", "dataset": "consumer100", "data_root": "/data/mine", "sensor": {"model": "unknown"}}
+    assert other_imu_warning(mine, "asl_folder", {"model": "unknown"}, "/data/mine") is None
+    other = other_imu_warning(mine, "asl_folder", {"model": "unknown"}, "/data/other", "weights.calibrated")
+    assert "not on asl_folder" in other and "pass weights.calibrated=..." in other
 
 
 def test_orientation_figure_keeps_estimates_on_the_ground_truths_branch():

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
@@ -169,10 +169,14 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     # results.json, written last, is the mark of a finished evaluation: an earlier one's must not outlive a rerun
     # stopped halfway beside the new tables
     (out / "results.json").unlink(missing_ok=True)
-    dm = hydra.utils.instantiate(cfg.dataset)
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
+    if split == "test" and OmegaConf.is_missing(cfg.dataset, "train_seqs"):  # asl_folder's '???': not read to test
+        cfg = cfg.copy()
+        with open_dict(cfg):
+            cfg.dataset.train_seqs = []
+    dm = hydra.utils.instantiate(cfg.dataset)
     with noting_data_warnings() as data_warnings:  # the sequences are read and checked here
         dm.check_sequences(
             train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
@@ -224,7 +228,9 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         warnings.warn(w, DataConsistencyWarning, stacklevel=2)
     model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
     model_warnings += [
-        w for w in (other_imu_warning(m, dm.name, dm.sensor) for m in (proposed_meta, calibrated_meta)) if w
+        w
+        for m, setting in ((proposed_meta, "weights.proposed"), (calibrated_meta, "weights.calibrated"))
+        if (w := other_imu_warning(m, dm.name, dm.sensor, dm.root, setting))
     ]
     rates = {seq.name: seq.rate_hz for seq in sequences.values()}
     model_warnings += [

@@ -31,7 +31,7 @@ from torch import nn
 
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
-from gyrodenoise.notices import quiet_library_notices
+from gyrodenoise.notices import plain_project_warnings, quiet_library_notices
 from gyrodenoise.pretrained import load_model
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
 from gyrodenoise.stateful_graph import StatefulCorrection
@@ -227,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
         if target is not None and target.is_dir():  # found only after the export's work otherwise, with a raw error
             ap.error(f"{flag} {target} is a folder: give a file path, e.g. {target / ('model' + target.suffix)}")
     try:
-        model, meta = load_model(args.model)
+        with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
+            model, meta = load_model(args.model)
         if args.pt2:
             print(f"wrote {export_pt2(model, args.pt2, args.stateful)}")
         if args.onnx:
@@ -238,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
                 err = parity(model, args.onnx)
                 how = "in chunks of 1 to 700 samples, " if args.stateful else ""
                 msg += (
-                    f" (onnxruntime {how}vs PyTorch on the whole sequence: max |diff| {err:.2e} rad/s over "
+                    f" (onnxruntime {how}vs PyTorch on one random input sequence: max |diff| {err:.2e} rad/s over "
                     f"{', '.join(output_names(model))})"
                 )
                 if not err <= PARITY_TOL_RAD_S:  # NaN included

@@ -225,11 +225,21 @@ def training_overlap_warning(meta: dict, parts: list[tuple[str, float]]) -> str 
     )
 
 
-def other_imu_warning(meta: dict, dataset: str, sensor: dict | None = None) -> str | None:
+def other_imu_warning(
+    meta: dict,
+    dataset: str,
+    sensor: dict | None = None,
+    root: str | Path | None = None,
+    setting: str = "weights.proposed",
+) -> str | None:
     """The warning for scoring a model on a dataset it was not trained on, unless both name the same IMU model
-    (own recordings of the same sensor); None when the metadata does not say (older files)."""
+    (own recordings of the same sensor) or the data come from the folder it was trained on (the same recordings under
+    another `dataset.name`); None when the metadata does not say (older files). `setting`: the option that names
+    the model."""
     trained = meta.get("dataset")
     if not trained or trained == dataset:
+        return None
+    if root is not None and meta.get("data_root") == str(Path(root).resolve()):
         return None
     model_sensor, data_sensor = (meta.get("sensor") or {}).get("model"), (sensor or {}).get("model")
     if model_sensor and model_sensor == data_sensor and model_sensor != "unknown":  # asl_folder's placeholder
@@ -238,7 +248,7 @@ def other_imu_warning(meta: dict, dataset: str, sensor: dict | None = None) -> s
     name = meta.get("name", meta.get("path", "this model"))
     return (
         f"model {name} was trained on {trained}{imu}, not on {dataset}: it learned the errors of another IMU, so "
-        f"its figures here say little about the method (train one on {dataset}, or pass weights.proposed=...)."
+        f"its figures here say little about the method (train one on {dataset}, or pass {setting}=...)."
     )
 
 

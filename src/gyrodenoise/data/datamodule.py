@@ -228,6 +228,9 @@ class ImuDataModule(L.LightningDataModule):
         """What a model file records of the data it was trained on (read back by evaluate, correct, export)."""
         return {
             "dataset": self.name,
+            "data_root": str(
+                Path(self.root).resolve()
+            ),  # the same folder later is the same dataset, whatever its label
             "sensor": dict(self.sensor),
             "rate_hz": self.rate_hz,
             "train_seqs": list(self.train_names),
@@ -323,9 +326,17 @@ class ImuDataModule(L.LightningDataModule):
         nominal, measured = self.sensor.get("rate_hz"), self.rate_hz
         if nominal is None or abs(measured / nominal - 1.0) > NOMINAL_RATE_TOL:
             if nominal is not None:
+                counts = (
+                    " The settings that count samples are set for 200 Hz: scale dataset.window, loss.increments and "
+                    "model.dilations with the rate (README, 'train on your own ASL folders')."
+                    if abs(measured / 200.0 - 1.0) > NOMINAL_RATE_TOL
+                    else ""
+                )
                 warnings.warn(
-                    f"dataset.sensor.rate_hz={nominal:g}, but the training data sample at {measured:.1f} Hz: the "
-                    f"augmentation noise uses {measured:.1f} Hz. Set dataset.sensor.rate_hz to your IMU's rate.",
+                    f"dataset.sensor.rate_hz={nominal:g}, but the training sequences are sampled at {measured:.1f} Hz: "
+                    f"the augmentation noise uses {measured:.1f} Hz. Set dataset.sensor.rate_hz to your IMU's rate."
+                    + counts,
+                    consistency.DataConsistencyWarning,
                     stacklevel=1,  # this module, not Lightning's caller
                 )
             self.augment = self._augment_config(measured)

@@ -30,7 +30,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         " workflow on data it did not generate; see src/gyrodenoise/testworld/README.md.",
         epilog="examples:\n"
         + __doc__.split("\n\n")[1].rstrip()
-        + "\n\neffects (datasheet units; 'a:b:c' gives per-axis values):\n"
+        + "\n\neffects: NAME=VALUE with its unit written on, e.g. bias=0.8deg/s (below: each one's datasheet unit;\n"
+        + "other units of the same quantity convert, e.g. rad/s, deg/h; 'a:b:c' gives per-axis values):\n"
         + describe(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
