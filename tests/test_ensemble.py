@@ -379,6 +379,10 @@ def test_model_not_beating_calibrated_warns(tmp_path, capsys):
     assert json.loads((tmp_path / "o" / "correct_summary.json").read_text())["beats_calibrated"] is False
     assert correct_main([str(f), "-m", str(good), "-o", str(tmp_path / "g")]) == 0
     assert "did not beat" not in capsys.readouterr().err
+    # --strict: the outputs are written and the exit status tells a script (3), only for a model warning
+    assert correct_main([str(f), "-m", str(bad), "-o", str(tmp_path / "s"), "--strict"]) == 3
+    assert (tmp_path / "s" / "imu_corrected.csv").is_file() and "exit 3 (--strict)" in capsys.readouterr().err
+    assert correct_main([str(f), "-m", str(good), "-o", str(tmp_path / "t"), "--strict"]) == 0
 
 
 # ------------------------------------------------------------------ uncertainty calibration

@@ -257,6 +257,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--drop-duplicates", action="store_true", help="keep the first sample of duplicated stamps")
     ap.add_argument("--force", action="store_true", help="unit checks warn instead of stopping")
+    ap.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 3 (the outputs still written) when a warning says the model does not fit: it did not beat the "
+        "calibrated baseline, or its ensemble disagrees on this recording far more than on its training data",
+    )
     ap.add_argument("--engine", choices=ENGINES, default="batch", help="batch model or streaming corrector")
     ap.add_argument(
         "--initial-orientation",
@@ -361,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
             "of that IMU model (for another IMU, train a model on its own data: README, train on your own ASL folders)",
             file=sys.stderr,
         )
+    if args.strict and model_warnings:  # a script can tell a correction the model itself distrusts
+        print(f"exit 3 (--strict): {len(model_warnings)} model warning(s) above", file=sys.stderr)
+        return 3
     return 0
 
 
