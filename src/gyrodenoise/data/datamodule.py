@@ -232,7 +232,7 @@ class ImuDataModule(L.LightningDataModule):
                 Path(self.root).resolve()
             ),  # the same folder later is the same dataset, whatever its label
             "sensor": dict(self.sensor),
-            "rate_hz": self.rate_hz,
+            "rate_hz": float(f"{self.rate_hz:.9g}"),  # stamps' rounding (100.00000000000213) is not a rate
             "train_seqs": list(self.train_names),
             "train_duration_s": self.train_duration_s,
         }
