@@ -417,3 +417,11 @@ def test_columns_whose_header_names_say_otherwise_get_the_columns_to_pass(tmp_pa
         [f, "-m", model_file, "-o", tmp_path / "b", "--time-unit", "s", "--columns", "1,5,6,7,2,3,4"], capsys
     )
     assert code == 0
+
+
+def test_a_header_column_of_no_axis_does_not_break_the_columns_read_off_it():
+    """A 'gyro_norm' column (a kind, no axis) raised TypeError where --columns is read off a header."""
+    from gyrodenoise.data.asl_header import columns_from_names
+
+    assert columns_from_names(["t", "gyro_norm", "gx", "gy", "gz", "ax", "ay", "az"]) == "1,3,4,5,6,7,8"
+    assert columns_from_names(["time", "ax", "ay", "az", "gx", "gy", "gz"]) == "1,5,6,7,2,3,4"

@@ -156,7 +156,7 @@ def columns_from_names(names: list[str]) -> str | None:
     time_cols = [i for i, n in enumerate(names) if _TIME_NAME.match(_split(n)[0].lstrip("#").strip())]
     for i, n in enumerate(names):
         kind, axis = classify(n)
-        if kind in ("gyro", "acc") and axis in "xyz" and axis:
+        if kind in ("gyro", "acc") and axis and axis in "xyz":  # a column of no axis (gyro_norm) is not one
             if (kind, axis) in found:
                 return None
             found[(kind, axis)] = i
