@@ -24,7 +24,7 @@ METHOD_COLORS = {"raw IMU": "C0", "calibrated IMU": "C1", "proposed": "C2", "zer
 
 def method_colors(names: list[str]) -> dict[str, str]:
     """The colour of each method: fixed for the built-in ones, the rest of matplotlib's cycle for others."""
-    spare = iter(c for c in (f"C{k}" for k in (3, 4, 5, 6, 8, 9)) if c not in METHOD_COLORS.values())
+    spare = iter(("C3", "C4", "C5", "C6", "C8", "C9"))  # the cycle without the built-in methods' colours
     return {n: METHOD_COLORS.get(n) or next(spare, "0.3") for n in names}
 
 

@@ -73,7 +73,6 @@ class Stream:
     """One topic's messages as arrays, in time order."""
 
     topic: str
-    msgtype: str
     t_ns: np.ndarray
     values: np.ndarray
     notes: list[str] = field(default_factory=list)
@@ -250,7 +249,7 @@ def read_stream(bag: Path, topic: str, msgtype: str, stamp: str, tf_frames: tupl
             "gyrodenoise does not fill them in silently; remove them from the bag"
         )
     order = np.lexsort((np.arange(len(t_ns)), t_ns))  # by stamp, stable
-    s = Stream(topic, msgtype, t_ns[order], v[order])
+    s = Stream(topic, t_ns[order], v[order])
     if reordered := int((order != np.arange(len(order))).sum()):
         s.notes.append(f"{topic}: {reordered} messages were out of time order in the bag and are written sorted")
     same_t = np.diff(s.t_ns) == 0
