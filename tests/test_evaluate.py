@@ -71,11 +71,13 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     # outputs: tables, figures, TUM files that parse back to unit quaternions
     for name in ("table.md", "table.csv", "roe.md", "roe.csv", "results.json", "figures/roe.png"):
         assert (tmp_path / name).is_file(), name
-    tum = np.loadtxt(tmp_path / "trajectories" / slug("V1_01_easy (data_recomputed_openvins)") / "proposed.txt")
+    # the row of the configured ground truth under the recording's name (the * of +estimates reads it back)
+    tum = np.loadtxt(tmp_path / "trajectories" / "V1_01_easy" / "proposed.txt")
+    assert (tmp_path / "trajectories" / slug("V1_01_easy (original GT)") / "groundtruth.txt").is_file()
     assert tum.shape[1] == 8 and np.allclose(np.linalg.norm(tum[:, 4:], axis=1), 1.0)
     assert tum[0, 0] > 1.4e9  # absolute seconds, as the ground truth
     # stamps printed exactly from the IMU's ns (float64 absolute seconds were ~100 ns off)
-    folder = tmp_path / "trajectories" / slug("V1_01_easy (data_recomputed_openvins)")
+    folder = tmp_path / "trajectories" / "V1_01_easy"
     first_stamp = (folder / "proposed.txt").read_text().splitlines()[1].split()[0]
     imu_stamps = {
         line.split(",")[0] for line in (euroc_root / "V1_01_easy/mav0/imu0/data.csv").open() if line[0] != "#"
@@ -86,6 +88,13 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     assert summary["machine"] and summary["command"].startswith("gyrodenoise.evaluate.evaluate(cfg) called from Python")
     assert summary["config"]["dataset"]["name"] == "euroc"
     assert "RMS" in summary["aoe_definition"] and "RMS" in (tmp_path / "table.md").read_text()
+    # the written trajectories read back with the * form of +estimates score as the method that wrote them
+    again = run_evaluate(
+        "dataset=euroc", f"dataset.root={euroc_root}", "dataset.test_seqs=[V1_01_easy]", f"out_dir={tmp_path / 'b'}",
+        f"+estimates.mine={tmp_path / 'trajectories' / '*' / 'proposed.txt'}", "figures=false", "trajectories=false",
+    )  # fmt: skip
+    scored = again["aoe_deg"]["V1_01_easy (data_recomputed_openvins)"]  # (the original GT's row spans other samples)
+    np.testing.assert_allclose(scored["mine"], scored["proposed"], atol=1e-4)
 
 
 def test_tumvi_models_on_validation_parts_match_report(tumvi_root, tmp_path):

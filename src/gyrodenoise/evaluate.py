@@ -14,7 +14,8 @@ or `'+estimates.NAME=PATH/*.txt'` (* = the sequence's name), TUM trajectories on
 (gyrodenoise.external_estimates).
 Outputs in `out_dir`: table.md / table.csv (AOE 3D/yaw per sequence and average),
 roe.md / roe.csv (ROE median and quartiles at each distance), results.json, figures/ and
-trajectories/<sequence>/<method>.txt (`trajectories=false`: none; TUM format, readable by evo and
+trajectories/<sequence>/<method>.txt (V1_01 against its original ground truth: V1_01_easy__original_GT/;
+`trajectories=false`: none; TUM format, readable by evo and
 rpg_trajectory_evaluation; stamps exact to the ns;
 groundtruth.txt holds positions and only the samples with ground truth, the estimates orientation only, translation
 zero: score them on orientation, e.g. `evo_ape tum groundtruth.txt proposed.txt --pose_relation angle_deg`).
@@ -264,7 +265,10 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         r = evaluate_sequence(seq, gyros, distances)
         results[label] = r
         if cfg.get("trajectories", True):
-            write_trajectories(out / "trajectories" / slug(label), seq, r["estimates"])
+            # the row of the dataset's own ground truth under the recording's name, so that the `*` form of
+            # +estimates reads these files back; another ground truth's row (V1_01's original) under its row's
+            folder = slug(seq.name if label in averaged else label)
+            write_trajectories(out / "trajectories" / folder, seq, r["estimates"])
         external_errors = {}
         for name, est in externals[label].items():
             mask = est.mask(seq)
