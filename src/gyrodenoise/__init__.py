@@ -1,6 +1,6 @@
 """gyrodenoise: learn to denoise a low-cost IMU gyroscope; open-loop attitude estimation.
 
-The Python API in one place (README, "Python API"); each name lives in the module given here and is imported from
+The Python API in one place (docs/python-api.md); each name lives in the module given here and is imported from
 it on first use, so `import gyrodenoise` stays light:
 
     load_model, available_models   a shipped model by name, a model file or a run folder -> (model, metadata)

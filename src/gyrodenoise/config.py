@@ -73,7 +73,10 @@ def misspelt_key_message(config_name: str, overrides: Sequence[str]) -> str | No
         return None
     keys = _dotted_keys(cfg)
     if str(key) == "model._target_":  # a user's own class: another model kind, not a key of the denoiser's
-        return "model._target_ names a user's own network: give model=custom model._target_=PACKAGE.CLASS (README)"
+        return (
+            "model._target_ names a user's own network: give model=custom model._target_=PACKAGE.CLASS "
+            "(docs/training.md, 'Your own network')"
+        )
     if close := _close_keys(str(key), keys):
         return f"{key} is not a key of the '{config_name}' config: did you mean {' or '.join(close)}?"
     parent = key.rpartition(".")[0]

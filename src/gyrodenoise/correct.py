@@ -364,7 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     if summary["model_trained_on"]:
         print(
             f"note: {meta['name']} learned the errors of {summary['model_trained_on']}; it is meant for recordings "
-            "of that IMU model (for another IMU, train a model on its own data: README, train on your own ASL folders)",
+            "of that IMU model (for another IMU, train a model on its own data: docs/own-data.md, "
+            "'Train on your own ASL folders')",
             file=sys.stderr,
         )
     if args.strict and model_warnings:  # a script can tell a correction the model itself distrusts

@@ -3,7 +3,7 @@
 Committed reports are read on other machines, so an absolute path such as /home/me/repo/outputs/... says
 nothing there (and leaks the folder layout). Shipped models are named by their shipped name (see
 gyrodenoise.pretrained); other paths are written relative to the working directory (the repository root
-for the commands in the README) when they lie inside it or beside it, else under '~' when in the home
+for the commands in the README and docs/) when they lie inside it or beside it, else under '~' when in the home
 folder, else as given.
 """
 

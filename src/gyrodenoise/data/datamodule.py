@@ -328,7 +328,7 @@ class ImuDataModule(L.LightningDataModule):
             if nominal is not None:
                 counts = (
                     " The settings that count samples are set for 200 Hz: scale dataset.window, loss.increments and "
-                    "model.dilations with the rate (README, 'train on your own ASL folders')."
+                    "model.dilations with the rate (docs/own-data.md, 'Rates other than 200 Hz')."
                     if abs(measured / 200.0 - 1.0) > NOMINAL_RATE_TOL
                     else ""
                 )

@@ -18,7 +18,7 @@ KINDS = ("denoiser", "calibrated", "ensemble", "custom")
 CUSTOM_CONTRACT = (
     "a custom model is a subclass of gyrodenoise.models.GyroCorrection whose correction(imu) maps raw IMU (B, N, 6) "
     "to a causal gyro correction (B, N, 3) in rad/s (output n from samples <= n) and that sets "
-    "self.receptive_field, the number of past samples an output depends on (README, 'Your own network')"
+    "self.receptive_field, the number of past samples an output depends on (docs/training.md, 'Your own network')"
 )
 
 
