@@ -22,6 +22,7 @@ IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, ne
 # the end of the training flights); val_tail: the end of the training flights in a cv_fold run
 METRICS = {"val": "val/aoe_deg", "test": "test/aoe_deg", "val_tail": "val_tail/aoe_deg"}
 MISSING = "-"  # the value of a key a run neither overrides nor has in its config
+CV_SUMMARY = "cross_validation"  # gyrodenoise.cross_validation's output in a sweep folder (.md/.json): not a run
 
 
 @dataclass
@@ -250,7 +251,7 @@ def find_runs(roots: Iterable[Path]) -> tuple[list[Run], list[Path]]:
         for path in sorted(root.rglob("*.json")):
             inside_run = any(parent in run_dirs for parent in path.parents)
             hidden = any(part.startswith(".") for part in path.relative_to(root).parts)  # temp files, .hydra
-            if not inside_run and not hidden:
+            if not inside_run and not hidden and path.stem != CV_SUMMARY:
                 runs.append(load_summary_file(path))
     return runs, unfinished
 

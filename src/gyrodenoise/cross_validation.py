@@ -1,0 +1,252 @@
+"""A recipe's cross-validation figure in one command: the selection protocol of reports/accuracy.md.
+
+    python -m gyrodenoise.train -m experiment=cross_validation dataset=euroc model.dropout=0.2   # 6 folds
+    python -m gyrodenoise.train -m experiment=cross_validation dataset=tumvi dataset.cv_fold=0,1,2 test=false
+    python -m gyrodenoise.cross_validation SWEEP_DIR [--reference OTHER_DIR] [--where KEY=VALUE] [--out PREFIX]
+
+Fold k holds training flight k out and validates on it whole (`dataset.cv_fold=k`). A fold's figure is the mean
+held-out AOE of its runs (several seeds per fold: `seed=0,1,2`); the recipe's figure is the mean over the folds.
+Every run also fitted the 12-parameter calibrated model on the same data: the table sets the network against it fold
+by fold (does the denoiser beat calibration on flights it did not see?), and `--reference` sets the recipe against
+another recipe's runs (e.g. the project's default, or the committed runs in reports/accuracy_runs/), paired by fold.
+Differences come with a 95% t-interval over the folds: with six folds and a fold-to-fold spread of ~1 deg only
+effects of ~1.4 deg and more are resolved (reports/accuracy.md).
+Writes PREFIX.md and PREFIX.json (default: SWEEP_DIR/cross_validation); experiment=cross_validation writes them
+into its sweep folder when the last run has finished.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, parse_where, same_value
+from gyrodenoise.ablation_stats import PairedDiff
+from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.tables import markdown_table
+
+FOLD_KEY = "dataset.cv_fold"
+
+
+@dataclass
+class Fold:
+    """The runs of one held-out flight: held-out AOE (deg) of the network, of the calibrated model fitted on the
+    same data, and of the raw IMU, one value per run (nan where a run did not record it)."""
+
+    index: int
+    held_out: str
+    seeds: list[str] = field(default_factory=list)
+    network: list[float] = field(default_factory=list)
+    calibrated: list[float] = field(default_factory=list)
+    raw: list[float] = field(default_factory=list)
+
+    def mean(self, what: str) -> float:
+        xs = [x for x in getattr(self, what) if math.isfinite(x)]
+        return statistics.fmean(xs) if xs else math.nan
+
+
+@dataclass
+class CrossValidation:
+    dataset: str
+    flights: list[str]  # the training flights, in fold order
+    folds: dict[int, Fold]
+    skipped: list[str]  # runs left out, each with its reason
+
+    @property
+    def missing(self) -> list[int]:
+        return [k for k in range(len(self.flights)) if k not in self.folds]
+
+    def figure(self, what: str = "network") -> float:
+        """The protocol figure: the mean over the folds present of each fold's mean."""
+        xs = [f.mean(what) for f in self.folds.values()]
+        xs = [x for x in xs if math.isfinite(x)]
+        return statistics.fmean(xs) if xs else math.nan
+
+    def per_fold(self, what: str = "network") -> dict[str, float]:
+        return {str(k): f.mean(what) for k, f in sorted(self.folds.items())}
+
+
+def _number(table: object, key: str) -> float:
+    v = table.get(key) if isinstance(table, dict) else None
+    return float(v) if isinstance(v, int | float) else math.nan
+
+
+def collect(runs: Sequence[Run]) -> CrossValidation:
+    """Group runs by held-out flight. Runs of another dataset or training-flight list than the first, or without
+    dataset.cv_fold, are left out with the reason (never silently)."""
+    if not runs:
+        raise ValueError("no finished run (summary.json) to collect")
+    folds: dict[int, Fold] = {}
+    skipped: list[str] = []
+    dataset = flights = None
+    for run in runs:
+        ds = run.config.get("dataset") or {}
+        fold = ds.get("cv_fold")
+        if not isinstance(fold, int):
+            skipped.append(f"{run.path}: no dataset.cv_fold (not a cross-validation run)")
+            continue
+        if flights is None:
+            dataset, flights = ds.get("name", "?"), list(ds.get("train_seqs") or [])
+        if ds.get("name", "?") != dataset or list(ds.get("train_seqs") or []) != flights:
+            skipped.append(f"{run.path}: another dataset or list of training flights than {dataset} {flights}")
+            continue
+        f = folds.setdefault(fold, Fold(fold, flights[fold] if fold < len(flights) else f"flight {fold}"))
+        f.seeds.append(str(run.seed))
+        f.network.append(_number(run.summary.get("val"), "val/aoe_deg"))
+        f.raw.append(_number(run.summary.get("val"), "val/raw_imu_aoe_deg"))
+        f.calibrated.append(_number(run.summary.get("calibrated_baseline"), "calibrated_val_aoe_deg"))
+    if flights is None:
+        raise ValueError(
+            f"none of the {len(runs)} runs is a cross-validation run (dataset.cv_fold): "
+            "train them with experiment=cross_validation or dataset.cv_fold=K"
+        )
+    return CrossValidation(dataset, flights, dict(sorted(folds.items())), skipped)
+
+
+def paired_by_fold(a: dict[str, float], b: dict[str, float]) -> PairedDiff:
+    """a - b over the folds both have (each a fold's mean)."""
+    keys = [k for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
+    return PairedDiff(tuple(keys), tuple(a[k] - b[k] for k in keys))
+
+
+def _cell(x: float) -> str:
+    return f"{x:.2f}" if math.isfinite(x) else "-"
+
+
+def _interval(d: PairedDiff) -> str:
+    if d.n == 0:
+        return "no fold in common"
+    lo, hi = d.t_ci
+    ci = f" [{lo:+.2f}, {hi:+.2f}]" if math.isfinite(lo) else ""
+    return f"{d.mean:+.2f} deg{ci} over {d.n} folds: {d.describe()}"
+
+
+def report(cv: CrossValidation, reference: CrossValidation | None = None, source: str = "") -> tuple[str, dict]:
+    """Markdown and JSON of a cross-validation (and of its comparison with a reference recipe's)."""
+    vs_cal = paired_by_fold(cv.per_fold("network"), cv.per_fold("calibrated"))
+    header = ["fold: held-out flight", "runs (seeds)", "network", "calibrated (same data)", "raw IMU"]
+    methods = ("network", "calibrated", "raw") if math.isfinite(cv.figure("raw")) else ("network", "calibrated")
+    header = header[: 2 + len(methods)]  # runs before the raw IMU's figure was logged have none
+    ref = reference.per_fold("network") if reference else {}
+    if reference:
+        header.append("reference")
+    rows = []
+    for k, f in cv.folds.items():
+        row = [f"{k}: {f.held_out}", f"{len(f.seeds)} ({', '.join(f.seeds)})"]
+        row += [_cell(f.mean(w)) for w in methods]
+        rows.append(row + ([_cell(ref.get(str(k), math.nan))] if reference else []))
+    mean_row = [f"mean over {len(cv.folds)} folds", "", *(_cell(cv.figure(w)) for w in methods)]
+    rows.append(mean_row + ([_cell(reference.figure())] if reference else []))
+    won = sum(d < 0 for d in vs_cal.diffs)
+    md = [
+        f"# Cross-validation: {cv.dataset}, leave one training flight out",
+        "",
+        *([f"Runs: {source}", ""] if source else []),
+        "Held-out-flight AOE 3D (deg), each fold the mean of its runs; the recipe's figure is the mean over the folds "
+        "(the selection protocol of reports/accuracy.md).",
+        "",
+        markdown_table(header, rows),
+        f"- **The recipe's figure: {_cell(cv.figure())} deg** over {len(cv.folds)} of {len(cv.flights)} folds"
+        + (f" (missing: {', '.join(f'{k}: {cv.flights[k]}' for k in cv.missing)})" if cv.missing else ""),
+        f"- network - calibrated: {_interval(vs_cal)}; the network wins {won} of {vs_cal.n} folds",
+    ]
+    out = {
+        "dataset": cv.dataset,
+        "flights": cv.flights,
+        "figure_deg": cv.figure(),
+        "calibrated_figure_deg": cv.figure("calibrated"),
+        "raw_imu_figure_deg": cv.figure("raw"),
+        "folds": {
+            str(k): {"held_out": f.held_out, "seeds": f.seeds, "network": f.network, "calibrated": f.calibrated}
+            for k, f in cv.folds.items()
+        },
+        "missing_folds": cv.missing,
+        "network_minus_calibrated": {"mean": vs_cal.mean, "t_ci": list(vs_cal.t_ci), "verdict": vs_cal.verdict},
+        "skipped": cv.skipped,
+    }
+    if reference:
+        d = paired_by_fold(cv.per_fold("network"), ref)
+        md.append(f"- recipe - reference ({_cell(reference.figure())} deg): {_interval(d)}")
+        out["reference_figure_deg"] = reference.figure()
+        out["recipe_minus_reference"] = {"mean": d.mean, "t_ci": list(d.t_ci), "verdict": d.verdict}
+        if reference.flights != cv.flights:
+            md.append(f"- warning: the reference's training flights are {reference.flights}, not {cv.flights}")
+    if cv.skipped:
+        md += ["", "Runs left out:", "", *(f"- {s}" for s in cv.skipped)]
+    return "\n".join(md) + "\n", out
+
+
+def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[CrossValidation, list[Path]]:
+    runs, unfinished = find_runs(dirs)
+    runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
+    if not runs:
+        matching = f" matches {list(where)}" if where else ""
+        raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matching}")
+    cv = collect(runs)
+    cv.skipped += [f"{p}: unfinished (no summary.json)" for p in unfinished]
+    return cv, unfinished
+
+
+def write(prefix: Path, md: str, data: dict) -> None:
+    write_json(prefix.parent / f"{prefix.name}.json", data)
+    write_text(prefix.parent / f"{prefix.name}.md", md)
+
+
+try:  # the Hydra hook of experiment=cross_validation
+    from hydra.experimental.callback import Callback as _HydraCallback
+except ImportError:  # pragma: no cover
+    _HydraCallback = object  # type: ignore[assignment,misc]
+
+
+class CrossValidationCallback(_HydraCallback):
+    """Hydra callback: after a multirun over folds, `<sweep dir>/cross_validation.{md,json}`."""
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        sweep = Path(config.hydra.sweep.dir)
+        try:
+            cv, _ = load([sweep])
+        except (ValueError, FileNotFoundError) as e:
+            print(f"no cross-validation summary: {e}", file=sys.stderr)
+            return
+        md, data = report(cv, source=str(sweep))
+        write(sweep / CV_SUMMARY, md, data)
+        print(md)
+        print(f"cross-validation summary: {sweep / CV_SUMMARY}.md")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m gyrodenoise.cross_validation",
+        description="A recipe's leave-one-flight-out cross-validation figure from its runs.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n\n", 1)[1],
+    )
+    ap.add_argument("dirs", nargs="+", type=Path, help="sweep folders, run folders or summary JSON files")
+    ap.add_argument("--where", action="append", default=[], metavar="KEY=VALUE", help="keep matching runs only")
+    ap.add_argument("--reference", nargs="+", type=Path, help="another recipe's runs, paired with these by fold")
+    ap.add_argument(
+        "--reference-where", action="append", default=[], metavar="KEY=VALUE", help="keep matching reference runs"
+    )
+    ap.add_argument("--out", type=Path, help=f"output prefix (default: the first folder's {CV_SUMMARY})")
+    args = ap.parse_args(argv)
+    try:
+        cv, _ = load(args.dirs, parse_where(args.where))
+        ref = load(args.reference, parse_where(args.reference_where))[0] if args.reference else None
+    except (ValueError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    md, data = report(cv, ref, source=", ".join(str(d) for d in args.dirs))
+    prefix = args.out or (args.dirs[0] if args.dirs[0].is_dir() else args.dirs[0].parent) / CV_SUMMARY
+    write(prefix, md, data)
+    print(md)
+    print(f"written: {prefix}.md, {prefix}.json")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,115 @@
+"""The cross-validation figure of a recipe (gyrodenoise.cross_validation): it reproduces a committed round of the
+selection protocol from the committed runs, names the runs it leaves out, and experiment=cross_validation writes it
+into the sweep folder."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from _asl import run_train, write_asl_sequence
+
+from gyrodenoise import cross_validation as cv
+
+REPO = Path(__file__).resolve().parents[1]
+RUNS = REPO / "reports"
+
+
+def _files(*patterns: str) -> list[Path]:
+    return sorted(p for pattern in patterns for p in RUNS.glob(pattern))
+
+
+def test_reproduces_round_2_of_the_selection_from_the_committed_runs(tmp_path):
+    """Round 2 of reports/accuracy.md (whole flights against ref, 3 seeds per fold), as benchmarks/accuracy_report.py
+    computed it into reports/accuracy/summary.json, from the same summary files through the command line."""
+    ref = _files(
+        "ablation_runs/reference/*.json", "accuracy_runs/euroc_cv/ref_f*.json", "accuracy_runs/euroc_cv2/ref_*"
+    )
+    whole = _files(
+        "ablation_runs/train_duration/whole_s*.json",
+        "accuracy_runs/euroc_cv/whole_f*.json",
+        "accuracy_runs/euroc_cv2/whole_*",
+    )
+    assert len(ref) == len(whole) == 18
+    out = tmp_path / "round2"
+    assert cv.main([*map(str, whole), "--reference", *map(str, ref), "--out", str(out)]) == 0
+    got = json.loads(out.with_suffix(".json").read_text())
+    committed = json.loads((RUNS / "accuracy" / "summary.json").read_text())["cv_round2"]
+    assert got["recipe_minus_reference"]["mean"] == pytest.approx(committed["whole_minus_ref"], abs=1e-9)
+    assert got["recipe_minus_reference"]["t_ci"] == pytest.approx(committed["t_interval_95"], abs=1e-9)
+    assert got["figure_deg"] == pytest.approx(6.23, abs=0.005) and got["reference_figure_deg"] == pytest.approx(
+        5.90, abs=0.005
+    )
+    assert [len(f["seeds"]) for f in got["folds"].values()] == [3] * 6 and got["missing_folds"] == []
+    md = out.with_suffix(".md").read_text()
+    assert "| 0: MH_01_easy | 3 (" in md and "not resolved at n=6" in md
+
+
+def _summary(path: Path, fold: int | None, val: float, cal: float, seed: int = 0) -> Path:
+    ds = {"name": "mine", "train_seqs": ["a", "b", "c"], "cv_fold": fold}
+    s = {
+        "overrides": [f"seed={seed}"] + ([f"dataset.cv_fold={fold}"] if fold is not None else []),
+        "config": {"dataset": ds, "seed": seed},
+        "val": {"val/aoe_deg": val, "val/raw_imu_aoe_deg": val + 1},
+        "test": {"test/aoe_deg": 1.0},
+        "calibrated_baseline": {"calibrated_val_aoe_deg": cal},
+    }
+    path.write_text(json.dumps(s))
+    return path
+
+
+def test_folds_left_out_and_runs_that_are_not_cross_validation_are_named(tmp_path):
+    files = [
+        _summary(tmp_path / "f0s0.json", 0, 2.0, 3.0),
+        _summary(tmp_path / "f0s1.json", 0, 4.0, 3.0, seed=1),
+        _summary(tmp_path / "f2.json", 2, 1.0, 2.0),
+        _summary(tmp_path / "plain.json", None, 9.0, 9.0),
+    ]
+    result, _ = cv.load(files)
+    assert result.figure() == pytest.approx((3.0 + 1.0) / 2) and result.figure("calibrated") == pytest.approx(2.5)
+    assert result.figure("raw") == pytest.approx(3.0) and result.missing == [1]
+    assert len(result.skipped) == 1 and "plain.json: no dataset.cv_fold" in result.skipped[0]
+    md, data = cv.report(result)
+    assert "over 2 of 3 folds (missing: 1: b)" in md and "plain.json" in md
+    assert data["network_minus_calibrated"]["mean"] == pytest.approx(-0.5)
+    with pytest.raises(ValueError, match="none of the 1 runs is a cross-validation run"):
+        cv.load([files[-1]])
+    assert cv.main([str(tmp_path / "no such folder")]) == 2
+
+
+def test_cross_validation_experiment_writes_the_figure_into_the_sweep(tmp_path):
+    """-m experiment=cross_validation over the three flights of a tiny synthetic folder: one run per held-out
+    flight, then <sweep>/cross_validation.md/.json, which the ablation collector does not take for a run."""
+    root = tmp_path / "asl"
+    for i, name in enumerate(["a", "b", "c"]):
+        write_asl_sequence(root / name, seconds=6.0, seed=i)
+    sweep = tmp_path / "multirun"
+    run_train(
+        [
+            "-m",
+            "experiment=cross_validation",
+            "dataset.cv_fold=0,1,2",
+            "dataset=asl_folder",
+            f"dataset.root={root}",
+            "dataset.train_seqs=[a,b,c]",
+            "dataset.test_seqs=[a]",
+            "dataset.train_duration_s=4",
+            "dataset.window=256",
+            "model.channels=[4,8]",
+            "model.dilations=[1,2]",
+            "trainer.max_epochs=1",
+            "trainer.accelerator=cpu",
+            "logger=none",
+            f"hydra.sweep.dir={sweep}",
+        ],
+        cwd=tmp_path,
+    )
+    data = json.loads((sweep / "cross_validation.json").read_text())
+    assert data["flights"] == ["a", "b", "c"] and data["missing_folds"] == []
+    assert [f["held_out"] for f in data["folds"].values()] == ["a", "b", "c"]
+    assert all(math.isfinite(x) for f in data["folds"].values() for x in f["network"] + f["calibrated"])
+    from gyrodenoise.ablation_runs import find_runs
+
+    assert len(find_runs([sweep])[0]) == 3
