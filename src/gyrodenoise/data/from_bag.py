@@ -4,9 +4,10 @@
     python -m gyrodenoise.data.from_bag BAG --out ROOT/NAME [--imu-topic T] [--gt-topic T | --no-gt]
 
 The IMU topic (sensor_msgs/Imu, SI units by ROS convention REP 145) becomes mav0/imu0/data.csv; a pose topic
-(geometry_msgs/PoseStamped, PoseWithCovarianceStamped, TransformStamped, nav_msgs/Odometry, or one parent-child
-pair of a tf2_msgs/TFMessage topic such as /tf: a motion-capture or ground-truth pose of the body in a world frame)
-becomes mav0/state_groundtruth_estimate0/data.csv, so that `dataset=asl_folder dataset.root=ROOT` trains on it and
+(geometry_msgs/PoseStamped, PoseWithCovarianceStamped, TransformStamped, nav_msgs/Odometry, or the pose of one frame
+in another from a tf2_msgs/TFMessage topic such as /tf, `--tf-frames PARENT CHILD`, composed along the chain of /tf
+and /tf_static links that joins them: a motion-capture or ground-truth pose of the body in a world frame) becomes
+mav0/state_groundtruth_estimate0/data.csv, so that `dataset=asl_folder dataset.root=ROOT` trains on it and
 `gyrodenoise-correct ROOT/NAME` corrects it. Stamps are the messages' header stamps (the sensors' clocks) unless
 `--stamp record` takes the time the bag recorded them. The written files are read back by the project's readers,
 and the IMU checked against the pose (units, axes, clock) before the command says it is done. Reading bags needs
@@ -30,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from gyrodenoise.data.asl_write import GT_FILE, IMU_FILE, pose_values, write_sequence
 from gyrodenoise.data.consistency import AXES_MAX_DEG, GyroUnitError, noting_data_warnings
 from gyrodenoise.data.readers import QUAT_NORM_TOL, DataFormatError, quaternion_norms
+from gyrodenoise.data.tf_chain import MAX_GAP_FACTOR, Step, compose, coverage, find_path, path_frames, resample
 from gyrodenoise.paths import portable_path
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -195,24 +197,9 @@ def _stamp_ns(header: object) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def _rows(
-    bag: Path, topic: str, msgtype: str, tf_frames: tuple[str, str] | None
-) -> tuple[list[int], list[int], list[list[float]]]:
-    """Header stamps, record times and value rows of a topic (for a TF topic: of its `tf_frames` pair)."""
+def _rows(bag: Path, topic: str, msgtype: str) -> tuple[list[int], list[int], list[list[float]]]:
+    """Header stamps, record times and value rows of an IMU or pose topic."""
     t, rec, values = [], [], []
-    if msgtype == TF_TYPE:
-        if tf_frames is None:
-            raise BagError(f"{bag}: {topic} holds transforms of several frames: choose a pair, {_tf_hint(bag, topic)}")
-        want = tuple(_frame(f) for f in tf_frames)
-        for t_record, m in _messages(bag, topic):
-            for tf in m.transforms:
-                if (_frame(tf.header.frame_id), _frame(tf.child_frame_id)) == want:
-                    t.append(_stamp_ns(tf.header))
-                    rec.append(t_record)
-                    values.append(_pose_row(_TransformAsPose(tf)))
-        if not values:
-            raise BagError(f"{bag}: {topic} has no transform {want[0]} -> {want[1]}; {_tf_hint(bag, topic)}")
-        return t, rec, values
     row = _imu_row if msgtype == IMU_TYPE else (lambda m, pose_of=POSE_TYPES[msgtype]: _pose_row(pose_of(m)))
     for t_record, m in _messages(bag, topic):
         t.append(_stamp_ns(m.header))
@@ -227,10 +214,17 @@ def _tf_hint(bag: Path, topic: str) -> str:
     return f"--tf-frames PARENT CHILD (pairs there, with their transforms: {listed or 'none'})"
 
 
-def read_stream(bag: Path, topic: str, msgtype: str, stamp: str, tf_frames: tuple[str, str] | None = None) -> Stream:
-    """A topic's stamps (int ns: header stamps, or the bag's record times) and values, sorted by stamp. Messages
-    recorded twice (same stamp, same values) are dropped with a note; other repeated stamps are refused."""
-    t, rec, values = _rows(bag, topic, msgtype, tf_frames)
+def read_stream(bag: Path, topic: str, msgtype: str, stamp: str) -> Stream:
+    """An IMU or pose topic's stamps (int ns: header stamps, or the bag's record times) and values, sorted by stamp
+    (see as_stream). A tf2_msgs/TFMessage topic is read by read_tf_chain."""
+    if msgtype == TF_TYPE:
+        raise BagError(f"{bag}: {topic} holds transforms of several frames: choose a pair, {_tf_hint(bag, topic)}")
+    return as_stream(bag, topic, *_rows(bag, topic, msgtype), stamp)
+
+
+def as_stream(bag: Path, topic: str, t: list[int], rec: list[int], values: list[list[float]], stamp: str) -> Stream:
+    """Rows of one topic (or one tf link, named by `topic`) as a Stream sorted by stamp. Messages recorded twice
+    (same stamp, same values) are dropped with a note; other repeated stamps are refused."""
     if not values:
         raise BagError(f"{bag}: topic {topic} has no messages")
     t_ns = np.asarray(rec if stamp == "record" else t, dtype=np.int64)
@@ -273,16 +267,202 @@ def read_stream(bag: Path, topic: str, msgtype: str, stamp: str, tf_frames: tupl
     return s
 
 
-def body_to_imu(gt: Stream, imu_in_body: Rotation) -> np.ndarray:
-    """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu."""
-    q = gt.values[:, 3:]
+def is_static_tf(topic: str) -> bool:
+    """A latched topic of constant transforms: /tf_static (or a namespaced .../tf_static)."""
+    return topic.rstrip("/").rsplit("/", 1)[-1] == "tf_static"
+
+
+Rows = tuple[list[int], list[int], list[list[float]]]  # header stamps, record times, values (x y z qx qy qz qw)
+
+
+def _tf_rows(bag: Path, topic: str) -> dict[tuple[str, str], Rows]:
+    """{(parent, child): rows} of every transform on a tf2_msgs/TFMessage topic."""
+    rows: dict[tuple[str, str], Rows] = {}
+    for t_record, m in _messages(bag, topic):
+        for tf in m.transforms:
+            t, rec, values = rows.setdefault((_frame(tf.header.frame_id), _frame(tf.child_frame_id)), ([], [], []))
+            t.append(_stamp_ns(tf.header))
+            rec.append(t_record)
+            values.append(_pose_row(_TransformAsPose(tf)))
+    return rows
+
+
+@dataclass
+class TfLinks:
+    """The links of a bag's frame tree: moving ones (the ground-truth topic's rows) and constant ones (tf_static's
+    last value), with the topic and transform count of each."""
+
+    moving: dict[tuple[str, str], Rows]
+    static: dict[tuple[str, str], np.ndarray]
+    source: dict[tuple[str, str], tuple[str, int]]
+    notes: list[str] = field(default_factory=list)
+
+
+def read_tf_links(bag: Path, topic: str, static_topics: list[str]) -> TfLinks:
+    """The links on `topic` (moving; none if it is itself a tf_static topic) and on `static_topics` (constant)."""
+    moving = {} if is_static_tf(topic) else _tf_rows(bag, topic)
+    links = TfLinks(moving, {}, {pair: (topic, len(r[2])) for pair, r in moving.items()})
+    for st in static_topics:
+        for pair, (_, _, values) in _tf_rows(bag, st).items():
+            name = f"{pair[0]} -> {pair[1]}"
+            if pair in moving:
+                links.notes.append(f"{name} is on both {topic} and {st}: the moving transforms of {topic} are used")
+                continue
+            v = np.asarray(values, dtype=np.float64)
+            if not np.isfinite(v).all():
+                raise BagError(f"{bag}: {st}: {name} holds NaN/inf values; remove that transform from the bag")
+            if pair in links.static:  # the same pair on two static topics: one more value, the later topic's wins
+                v = np.vstack([links.static[pair][None], v])
+            if np.abs(v - v[-1]).max() > 1e-12:
+                links.notes.append(f"{st}: {name} was published {len(v)} times with different values; the last is used")
+            links.static[pair] = v[-1]
+            links.source[pair] = (st, len(v))
+    return links
+
+
+def _no_chain(bag: Path, topics_read: list[str], start: str, goal: str, links: TfLinks) -> str:
+    """One line: no path between the frames, with the frames and pairs seen, to choose --tf-frames from."""
+    pairs = sorted(links.source.items(), key=lambda kv: (kv[0] in links.static, -kv[1][1], kv[0]))
+    frames = sorted({f for pair in links.source for f in pair})
+    unseen = [f for f in (start, goal) if f not in frames]
+    listed = ", ".join(
+        f"{p} -> {c} ({t}, {'static' if (p, c) in links.static else f'{n} transforms'})" for (p, c), (t, n) in pairs
+    )
+    return (
+        f"{bag}: no chain of transforms joins {start} and {goal} on {' and '.join(topics_read)}"
+        + (f" ({' and '.join(unseen)} {'is' if len(unseen) == 1 else 'are'} on none of them)" if unseen else "")
+        + f"; frames seen: {', '.join(frames) or 'none'}; parent -> child pairs: {listed or 'none'}. Choose "
+        "--tf-frames PARENT CHILD among these frames (python -m gyrodenoise.data.from_bag BAG --list)"
+    )
+
+
+def _covered(streams: dict[tuple[str, str], Stream], ref: Step, at: np.ndarray) -> tuple[np.ndarray, list[str], dict]:
+    """Which stamps of the reference link every other moving link covers; notes and counts of those dropped."""
+    outside_any, gap_any, notes = np.zeros(len(at), bool), np.zeros(len(at), bool), []
+    for pair, s in streams.items():
+        if pair == ref.pair:
+            continue
+        outside, in_gap = coverage(s.t_ns, at)
+        name = f"{pair[0]} -> {pair[1]}"
+        if n := int(outside.sum()):
+            notes.append(
+                f"{n} of {len(at)} stamps of {ref} lie outside the time {name} covers ({s.t_ns[0]} to {s.t_ns[-1]} "
+                "ns) and were dropped"
+            )
+        if n := int(in_gap.sum()):
+            notes.append(
+                f"{n} of {len(at)} stamps of {ref} fall in gaps of {name} longer than {MAX_GAP_FACTOR:g}x its median "
+                "period and were dropped (interpolation would invent the motion there)"
+            )
+        outside_any |= outside
+        gap_any |= in_gap
+    counts = {
+        "dropped_outside_coverage": int(outside_any.sum()),
+        "dropped_in_gaps": int((gap_any & ~outside_any).sum()),
+    }
+    return ~(outside_any | gap_any), notes, counts
+
+
+def _link_at(
+    step: Step, links: TfLinks, streams: dict[tuple[str, str], Stream], ref: Step, at: np.ndarray
+) -> tuple[Rotation, np.ndarray]:
+    """One link of the path as (R, t): a constant, the reference link's own samples, or another link at `at`."""
+    if step.pair in links.static:
+        v = links.static[step.pair]
+        return _unit_rotations(v[None, 3:], np.zeros(1, np.int64), f"{links.source[step.pair][0]} {step}")[0], v[:3]
+    s = streams[step.pair]
+    rot = _unit_rotations(s.values[:, 3:], s.t_ns, s.topic)
+    if step.pair == ref.pair:
+        keep = np.isin(s.t_ns, at)
+        return rot[keep], s.values[keep, :3]
+    return resample(s.t_ns, rot, s.values[:, :3], at)
+
+
+def read_tf_chain(
+    bag: Path, topic: str, tf_frames: tuple[str, str] | None, stamp: str, static_topics: list[str]
+) -> tuple[Stream, dict]:
+    """The pose of frame CHILD in frame PARENT (`tf_frames`) through the chain of links that joins them on `topic`
+    (moving) and `static_topics` (constant), a link used against its direction inverted. Moving links other than the
+    one with the most transforms (the first of those) are interpolated at its stamps; stamps that another moving link
+    does not cover are dropped, with a note. Returns the Stream and the chain's record for bag_import.json."""
+    if tf_frames is None:
+        raise BagError(f"{bag}: {topic} holds transforms of several frames: choose a pair, {_tf_hint(bag, topic)}")
+    start, goal = (_frame(f) for f in tf_frames)
+    if start == goal:
+        raise BagError(f"--tf-frames {start} {goal}: the same frame twice; give the world frame, then the body's")
+    links = read_tf_links(bag, topic, static_topics)
+    path = find_path([*links.moving, *links.static], start, goal)
+    topics_read = list(dict.fromkeys([topic, *static_topics]))
+    if path is None:
+        raise BagError(_no_chain(bag, topics_read, start, goal, links))
+    frames = path_frames(path, start)
+    moving = [s for s in path if s.pair in links.moving]
+    if not moving:
+        raise BagError(
+            f"{bag}: {start} -> {goal} is joined by static transforms only ({' -> '.join(frames)}, on "
+            f"{' and '.join(topics_read)}): no motion to use as ground truth; choose frames joined by a moving link of "
+            "/tf, such as the world and the body that a motion-capture system tracks (see --list)"
+        )
+    streams = {s.pair: as_stream(bag, f"{topic} {s}", *links.moving[s.pair], stamp) for s in moving}
+    ref = max(moving, key=lambda s: len(streams[s.pair].t_ns))  # max() keeps the first of equals
+    keep, notes, counts = _covered(streams, ref, streams[ref.pair].t_ns)
+    at = streams[ref.pair].t_ns[keep]
+    if not len(at):
+        spans = ", ".join(f"{p} -> {c} {s.t_ns[0]} to {s.t_ns[-1]} ns" for (p, c), s in streams.items())
+        raise BagError(
+            f"{bag}: the moving links of {start} -> {goal} never cover the same instants ({spans}): no pose can be "
+            "composed; check that they were recorded together, and --stamp"
+        )
+    rot, trans = compose([_link_at(s, links, streams, ref, at) for s in path], [s.inverted for s in path])
+    out = Stream(topic, at, np.column_stack([trans, rot.as_quat()]))
+    out.notes = [n for s in streams.values() for n in s.notes] + [f"{topic} {start} -> {goal}: {n}" for n in notes]
+    out.notes += links.notes
+    chain = {
+        "frames": frames,
+        "links": [
+            {
+                "parent": s.parent,
+                "child": s.child,
+                "static": s.pair in links.static,
+                "inverted": s.inverted,
+                "topic": links.source[s.pair][0],
+                "transforms": links.source[s.pair][1],
+            }
+            for s in path
+        ],
+        "stamps_from": str(ref),
+        **counts,
+    }
+    return out, chain
+
+
+def describe_chain(chain: dict) -> str:
+    """The chain in words for the printed summary: frames, which links are static or inverted, whose stamps."""
+    static = [f"{k['parent']} -> {k['child']}" for k in chain["links"] if k["static"]]
+    inverted = [f"{k['parent']} -> {k['child']}" for k in chain["links"] if k["inverted"]]
+    parts = [" -> ".join(chain["frames"])]
+    parts += [f"static: {', '.join(static)}"] if static else []
+    parts += [f"inverted: {', '.join(inverted)}"] if inverted else []
+    parts.append(f"stamps of {chain['stamps_from']}")
+    dropped = chain["dropped_outside_coverage"] + chain["dropped_in_gaps"]
+    parts += [f"{dropped} stamps dropped where another link had no data"] if dropped else []
+    return "; ".join(parts)
+
+
+def _unit_rotations(q: np.ndarray, t_ns: np.ndarray, what: str) -> Rotation:
+    """Quaternions x, y, z, w as Rotations; a row far from unit length is an error naming `what` and its stamp."""
     norm, k, count = quaternion_norms(q)
     if k is not None:
         raise BagError(
-            f"{gt.topic}: {count} orientations are not unit quaternions (|q| = {norm[k]:.3g} at {gt.t_ns[k]} ns; "
+            f"{what}: {count} orientations are not unit quaternions (|q| = {norm[k]:.3g} at {t_ns[k]} ns; "
             "a zero quaternion means no pose): remove those messages or record the ground truth without them"
         )
-    rot = Rotation.from_quat(q / norm[:, None]) * imu_in_body
+    return Rotation.from_quat(q / norm[:, None])
+
+
+def body_to_imu(gt: Stream, imu_in_body: Rotation) -> np.ndarray:
+    """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu."""
+    rot = _unit_rotations(gt.values[:, 3:], gt.t_ns, gt.topic) * imu_in_body
     return pose_values(gt.values[:, :3], rot.as_quat())
 
 
@@ -335,6 +515,42 @@ def check_out(bag: Path, out: Path, overwrite: bool) -> None:
         raise FileExistsError(f"{out} holds an earlier import; choose another --out or pass --overwrite")
 
 
+def _tf_options(
+    bag: Path, found: list[tuple[str, str, int]], gt_topic: str | None, no_gt: bool, tf_frames: tuple[str, str] | None
+) -> str | None:
+    """The ground-truth topic --tf-frames reads: --gt-topic, else the bag's only topic of moving transforms."""
+    if tf_frames is None:
+        return gt_topic
+    if no_gt:
+        raise BagError("--tf-frames chooses a ground truth and --no-gt writes none: give one of them")
+    types = {t: ty for t, ty, _ in found}
+    if gt_topic is not None:
+        if gt_topic in types and types[gt_topic] != TF_TYPE:
+            raise BagError(
+                f"--tf-frames goes with a {TF_TYPE} --gt-topic such as /tf; {gt_topic} is a {types[gt_topic]}: drop "
+                "--tf-frames to read it as the pose"
+            )
+        return gt_topic
+    tf = [t for t, ty, _ in found if ty == TF_TYPE and not is_static_tf(t)]
+    if len(tf) != 1:
+        what = f"several ({', '.join(tf)}): name one with --gt-topic" if tf else "none (see --list)"
+        raise BagError(
+            f"{bag}: --tf-frames reads a {TF_TYPE} topic of moving transforms such as /tf; the bag has {what}"
+        )
+    return tf[0]
+
+
+def _read_gt(
+    bag: Path, found: list[tuple[str, str, int]], gt_topic: str, stamp: str, tf_frames: tuple[str, str] | None
+) -> tuple[Stream, dict | None]:
+    """The ground-truth stream, and for a transform topic the chain's record (None for a pose topic)."""
+    types = {t: ty for t, ty, _ in found}
+    if types[gt_topic] != TF_TYPE:
+        return read_stream(bag, gt_topic, types[gt_topic], stamp), None
+    static_topics = [t for t, ty, _ in found if ty == TF_TYPE and is_static_tf(t)]
+    return read_tf_chain(bag, gt_topic, tf_frames, stamp, static_topics)
+
+
 def import_bag(
     bag: str | Path,
     out: str | Path,
@@ -357,11 +573,12 @@ def import_bag(
         raise BagError(f"--gyro-unit {gyro_unit}: use one of {', '.join(GYRO_UNITS)}")
     check_out(bag, out, overwrite)
     found = topics(bag)
+    gt_topic = _tf_options(bag, found, gt_topic, no_gt, tf_frames)
     imu_topic, gt_topic = choose_topics(bag, found, imu_topic, gt_topic, no_gt)
     types = {t: ty for t, ty, _ in found}
     imu = read_stream(bag, imu_topic, IMU_TYPE, stamp)
     imu.values[:, :3] *= GYRO_UNITS[gyro_unit]
-    gt = read_stream(bag, gt_topic, types[gt_topic], stamp, tf_frames) if gt_topic else None
+    gt, chain = _read_gt(bag, found, gt_topic, stamp, tf_frames) if gt_topic else (None, None)
     imu_in_body = Rotation.from_quat(imu_in_body_xyzw)
     summary = {
         "bag": portable_path(bag),
@@ -369,7 +586,8 @@ def import_bag(
         "gyro_unit_in_bag": gyro_unit,
         "gt_topic": gt_topic,
         "gt_type": types.get(gt_topic),
-        "tf_frames": list(tf_frames) if gt_topic and types[gt_topic] == TF_TYPE else None,
+        "tf_frames": list(tf_frames) if chain else None,
+        "tf_chain": chain,
         "stamp": stamp,
         "imu_messages": len(imu.t_ns),
         "imu_rate_hz": float(1e9 / np.median(np.diff(imu.t_ns))) if len(imu.t_ns) > 1 else None,
@@ -379,7 +597,7 @@ def import_bag(
         "notes": imu.notes + (gt.notes if gt else []),
     }
     if gt is None:
-        tf = [t for t, ty, _ in found if ty == TF_TYPE]
+        tf = [t for t, ty, _ in found if ty == TF_TYPE and not is_static_tf(t)]
         use_tf = (
             f"; {', '.join(tf)} holds transforms: --gt-topic {tf[0]} --tf-frames PARENT CHILD (see --list)"
             if tf
@@ -415,12 +633,20 @@ def _quat(text: list[str]) -> tuple[float, float, float, float]:
 
 
 def _print_list(bag: Path) -> None:
+    any_tf = False
     for t, ty, n in topics(bag):
+        static = ty == TF_TYPE and is_static_tf(t)
         kind = "IMU" if ty == IMU_TYPE else "pose" if ty in POSE_TYPES else "transforms" if ty == TF_TYPE else ""
-        print(f"{t}\t{ty}\t{n}\t{kind}")
+        print(f"{t}\t{ty}\t{n}\t{'static ' if static else ''}{kind}")
         if ty == TF_TYPE:
+            any_tf = True
             for (parent, child), k in sorted(tf_pairs(bag, t).items()):
-                print(f"\t--tf-frames {parent} {child}\t{k}")
+                print(f"\t{parent} -> {child}\t{k}\tstatic" if static else f"\t--tf-frames {parent} {child}\t{k}")
+    if any_tf:
+        print(
+            "--tf-frames PARENT CHILD also takes two frames joined by a chain of these links (static ones composed "
+            "in, a link used against its direction inverted), if at least one link moves"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -432,12 +658,20 @@ def main(argv: list[str] | None = None) -> int:
         "dataset.root=ROOT 'dataset.train_seqs=[NAME,...]' ...",
     )
     ap.add_argument("bag", type=Path, help="a ROS 1 .bag file, a ROS 2 bag folder (metadata.yaml), or a .mcap file")
-    ap.add_argument("--list", action="store_true", help="list the topics (type, messages; /tf: its frame pairs)")
+    ap.add_argument(
+        "--list", action="store_true", help="list the topics (type, messages; /tf and /tf_static: their frame pairs)"
+    )
     ap.add_argument("--out", type=Path, help="the sequence folder to write: ROOT/NAME (new, or an earlier import)")
     ap.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default: the only one)")
     ap.add_argument("--gt-topic", help="pose topic of the ground truth (default: the only one, if any)")
     ap.add_argument(
-        "--tf-frames", nargs=2, metavar=("PARENT", "CHILD"), help="with a tf2_msgs/TFMessage --gt-topic (/tf): the pair"
+        "--tf-frames",
+        nargs=2,
+        metavar=("PARENT", "CHILD"),
+        help="ground truth from transforms (--gt-topic, default the bag's /tf): the pose of CHILD in PARENT, composed "
+        "along the chain of /tf and /tf_static links that joins them (a link used backwards is inverted; moving "
+        "links are interpolated at the stamps of the one with the most transforms, stamps another does not cover "
+        "are dropped with a note)",
     )
     ap.add_argument("--no-gt", action="store_true", help="write the IMU alone, even if the bag has a pose topic")
     ap.add_argument(
@@ -484,6 +718,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rate = f", {s['imu_rate_hz']:.1f} Hz" if s["imu_rate_hz"] else ""
     gt = f"; {s['gt_messages']} poses from {s['gt_topic']}" if s["gt_topic"] else ""
+    if (chain := s["tf_chain"]) and (len(chain["links"]) > 1 or chain["links"][0]["inverted"]):
+        gt += f" {chain['frames'][0]} -> {chain['frames'][-1]} (chain {describe_chain(chain)})"
     print(
         f"wrote {s['output']}: {s['imu_messages']} IMU samples from {s['imu_topic']}{rate}{gt} (stamps: {s['stamp']})"
     )
