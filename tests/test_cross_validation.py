@@ -79,33 +79,32 @@ def test_folds_left_out_and_runs_that_are_not_cross_validation_are_named(tmp_pat
     assert cv.main([str(tmp_path / "no such folder")]) == 2
 
 
-def test_cross_validation_experiment_writes_the_figure_into_the_sweep(tmp_path):
-    """-m experiment=cross_validation over the three flights of a tiny synthetic folder: one run per held-out
-    flight, then <sweep>/cross_validation.md/.json, which the ablation collector does not take for a run."""
+def _tiny(tmp_path: Path) -> list[str]:
+    """Three 6-s synthetic flights and a network small enough to train in a second."""
     root = tmp_path / "asl"
     for i, name in enumerate(["a", "b", "c"]):
         write_asl_sequence(root / name, seconds=6.0, seed=i)
+    return [
+        "dataset=asl_folder",
+        f"dataset.root={root}",
+        "dataset.train_seqs=[a,b,c]",
+        "dataset.test_seqs=[a]",
+        "dataset.train_duration_s=4",
+        "dataset.window=256",
+        "model.channels=[4,8]",
+        "model.dilations=[1,2]",
+        "trainer.max_epochs=1",
+        "trainer.accelerator=cpu",
+        "logger=none",
+    ]
+
+
+def test_cross_validation_experiment_writes_the_figure_into_the_sweep(tmp_path):
+    """-m experiment=cross_validation over the three flights of a tiny synthetic folder: one run per held-out
+    flight, then <sweep>/cross_validation.md/.json, which the ablation collector does not take for a run."""
     sweep = tmp_path / "multirun"
-    run_train(
-        [
-            "-m",
-            "experiment=cross_validation",
-            "dataset.cv_fold=0,1,2",
-            "dataset=asl_folder",
-            f"dataset.root={root}",
-            "dataset.train_seqs=[a,b,c]",
-            "dataset.test_seqs=[a]",
-            "dataset.train_duration_s=4",
-            "dataset.window=256",
-            "model.channels=[4,8]",
-            "model.dilations=[1,2]",
-            "trainer.max_epochs=1",
-            "trainer.accelerator=cpu",
-            "logger=none",
-            f"hydra.sweep.dir={sweep}",
-        ],
-        cwd=tmp_path,
-    )
+    args = ["-m", "experiment=cross_validation", "dataset.cv_fold=0,1,2", *_tiny(tmp_path), f"hydra.sweep.dir={sweep}"]
+    run_train(args, cwd=tmp_path)
     data = json.loads((sweep / "cross_validation.json").read_text())
     assert data["flights"] == ["a", "b", "c"] and data["missing_folds"] == []
     assert [f["held_out"] for f in data["folds"].values()] == ["a", "b", "c"]
@@ -113,3 +112,27 @@ def test_cross_validation_experiment_writes_the_figure_into_the_sweep(tmp_path):
     from gyrodenoise.ablation_runs import find_runs
 
     assert len(find_runs([sweep])[0]) == 3
+
+
+def test_all_folds_in_one_run_return_the_figure_and_resume(tmp_path):
+    """dataset.cv_fold=all: the folds in turn in fold<k>/ of one run, whose summary's val/aoe_deg (what an Optuna
+    sweep minimises) is the mean over the folds; run again in its folder it keeps the finished folds."""
+    run_dir = tmp_path / "run"
+    args = ["dataset.cv_fold=all", *_tiny(tmp_path), f"hydra.run.dir={run_dir}"]
+    run_train(args, cwd=tmp_path)
+    top = json.loads((run_dir / "summary.json").read_text())
+    folds = [json.loads((run_dir / f"fold{k}" / "summary.json").read_text()) for k in range(3)]
+    assert [f["config"]["dataset"]["cv_fold"] for f in folds] == [0, 1, 2]
+    assert all("dataset.cv_fold=all" not in f["overrides"] for f in folds)
+    assert top["val"]["val/aoe_deg"] == pytest.approx(sum(f["val"]["val/aoe_deg"] for f in folds) / 3)
+    assert top["cross_validation"]["figure_deg"] == top["val"]["val/aoe_deg"]
+    again = run_train(args, cwd=tmp_path)
+    assert again.stdout.count("finished before, kept") == 3
+    assert json.loads((run_dir / "summary.json").read_text())["val"] == top["val"]
+    # the collector reads the run folder as its folds
+    assert cv.main([str(run_dir), "--out", str(tmp_path / "again")]) == 0
+    assert json.loads((tmp_path / "again.json").read_text())["figure_deg"] == pytest.approx(top["val"]["val/aoe_deg"])
+    with pytest.raises(ValueError, match="dataset.cv_fold=all trains every fold"):
+        from gyrodenoise.data.datamodule import ImuDataModule
+
+        ImuDataModule("x", "/nowhere", ["a", "b"], [], cv_fold="all")

@@ -3,6 +3,8 @@
     python -m gyrodenoise.train -m experiment=cross_validation dataset=euroc model.dropout=0.2   # 6 folds
     python -m gyrodenoise.train -m experiment=cross_validation dataset=tumvi dataset.cv_fold=0,1,2 test=false
     python -m gyrodenoise.cross_validation SWEEP_DIR [--reference OTHER_DIR] [--where KEY=VALUE] [--out PREFIX]
+    python -m gyrodenoise.train dataset=euroc dataset.cv_fold=all          # the folds one after another, one folder
+    python -m gyrodenoise.train hparams_search=euroc_optuna dataset.cv_fold=all   # a search on the protocol's figure
 
 Fold k holds training flight k out and validates on it whole (`dataset.cv_fold=k`). A fold's figure is the mean
 held-out AOE of its runs (several seeds per fold: `seed=0,1,2`); the recipe's figure is the mean over the folds.
@@ -12,22 +14,28 @@ another recipe's runs (e.g. the project's default, or the committed runs in repo
 Differences come with a 95% t-interval over the folds: with six folds and a fold-to-fold spread of ~1 deg only
 effects of ~1.4 deg and more are resolved (reports/accuracy.md).
 Writes PREFIX.md and PREFIX.json (default: SWEEP_DIR/cross_validation); experiment=cross_validation writes them
-into its sweep folder when the last run has finished.
+into its sweep folder when the last run has finished. `dataset.cv_fold=all` trains the folds in turn inside one run
+(fold<k>/ each; a fold finished before is kept, so a requeued run goes on) and returns the figure as the run's
+val/aoe_deg: what an Optuna search minimises.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, parse_where, same_value
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.tables import markdown_table
 
 FOLD_KEY = "dataset.cv_fold"
@@ -118,12 +126,13 @@ def _cell(x: float) -> str:
     return f"{x:.2f}" if math.isfinite(x) else "-"
 
 
-def _interval(d: PairedDiff) -> str:
+def _interval(d: PairedDiff, first: str) -> str:
     if d.n == 0:
         return "no fold in common"
     lo, hi = d.t_ci
-    ci = f" [{lo:+.2f}, {hi:+.2f}]" if math.isfinite(lo) else ""
-    return f"{d.mean:+.2f} deg{ci} over {d.n} folds: {d.describe()}"
+    ci = f" [{lo:+.2f}, {hi:+.2f}] (95% t-interval)" if math.isfinite(lo) else ""
+    verdict = f"the {first} is {d.verdict} (resolved)" if d.direction else d.describe()
+    return f"{d.mean:+.2f} deg{ci} over {d.n} folds: {verdict}"
 
 
 def report(cv: CrossValidation, reference: CrossValidation | None = None, source: str = "") -> tuple[str, dict]:
@@ -153,7 +162,7 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
         markdown_table(header, rows),
         f"- **The recipe's figure: {_cell(cv.figure())} deg** over {len(cv.folds)} of {len(cv.flights)} folds"
         + (f" (missing: {', '.join(f'{k}: {cv.flights[k]}' for k in cv.missing)})" if cv.missing else ""),
-        f"- network - calibrated: {_interval(vs_cal)}; the network wins {won} of {vs_cal.n} folds",
+        f"- network - calibrated: {_interval(vs_cal, 'network')}; the network wins {won} of {vs_cal.n} folds",
     ]
     out = {
         "dataset": cv.dataset,
@@ -171,7 +180,7 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
     }
     if reference:
         d = paired_by_fold(cv.per_fold("network"), ref)
-        md.append(f"- recipe - reference ({_cell(reference.figure())} deg): {_interval(d)}")
+        md.append(f"- recipe - reference ({_cell(reference.figure())} deg): {_interval(d, 'recipe')}")
         out["reference_figure_deg"] = reference.figure()
         out["recipe_minus_reference"] = {"mean": d.mean, "t_ci": list(d.t_ci), "verdict": d.verdict}
         if reference.flights != cv.flights:
@@ -181,9 +190,23 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
     return "\n".join(md) + "\n", out
 
 
+def _read_run(path: Path) -> Run:
+    summary = json.loads(path.read_text())
+    return Run(path, {}, summary.get("config") or {}, summary)
+
+
+def _folds_inside(run: Run) -> list[Run]:
+    """A dataset.cv_fold=all run stands for the fold runs in its fold<k>/ folders."""
+    if (run.config.get("dataset") or {}).get("cv_fold") != ALL_FOLDS:
+        return [run]
+    folder = run.path if run.path.is_dir() else run.path.parent
+    return [_read_run(p) for p in sorted(folder.glob("fold*/summary.json"))]
+
+
 def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[CrossValidation, list[Path]]:
     runs, unfinished = find_runs(dirs)
     runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
+    runs = [fold for r in runs for fold in _folds_inside(r)]
     if not runs:
         matching = f" matches {list(where)}" if where else ""
         raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matching}")
@@ -195,6 +218,57 @@ def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[C
 def write(prefix: Path, md: str, data: dict) -> None:
     write_json(prefix.parent / f"{prefix.name}.json", data)
     write_text(prefix.parent / f"{prefix.name}.md", md)
+
+
+ALL_FOLDS = "all"
+
+
+def wants_all_folds(cfg: DictConfig) -> bool:
+    return OmegaConf.select(cfg, "dataset.cv_fold") == ALL_FOLDS
+
+
+def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictConfig, Path], dict]) -> dict:
+    """`dataset.cv_fold=all`: `train_one(cfg_k, out_dir/fold<k>)` for every fold k, then the summary of the folds
+    in out_dir; returns a run summary whose val/aoe_deg is the recipe's figure."""
+    flights = list(cfg.dataset.train_seqs)
+    if len(flights) < 2:
+        raise ConfigError(f"dataset.cv_fold=all needs two training flights or more, got {flights}")
+    runs = []
+    for k in range(len(flights)):
+        folder = out_dir / f"fold{k}"
+        if (folder / "model.pt").is_file() and (folder / "summary.json").is_file():
+            print(f"fold {k} ({flights[k]} held out): finished before, kept ({folder})")
+            runs.append(_read_run(folder / "summary.json"))
+            continue
+        cfg_k = cfg.copy()
+        with open_dict(cfg_k):
+            cfg_k.dataset.cv_fold = k
+            cfg_k.paths.output_dir = str(folder)
+        print(f"\n=== fold {k} of {len(flights)}: {flights[k]} held out ({folder}) ===")
+        summary = train_one(cfg_k, folder)
+        # the fold's record names its own fold, not the command line's 'all'
+        summary["overrides"] = [f"dataset.cv_fold={k}" if o.lstrip("+").startswith("dataset.cv_fold=") else o
+                                for o in summary.get("overrides", [])]  # fmt: skip
+        write_json(folder / "summary.json", summary)
+        runs.append(Run(folder / "summary.json", {}, summary["config"], summary))
+    result = collect(runs)
+    md, data = report(result, source=str(out_dir))
+    write(out_dir / CV_SUMMARY, md, data)
+    print(f"\n{md}cross-validation summary: {out_dir / CV_SUMMARY}.md")
+    first = runs[0].summary
+    summary = {  # the run's own record: what the ablation collector and an Optuna sweep read
+        **{k: first.get(k) for k in ("command", "overrides", "seed", "dataset", "model", "machine", "code_version")},
+        "overrides": [o for o in first.get("overrides", []) if not o.lstrip("+").startswith("dataset.cv_fold=")]
+        + [f"dataset.cv_fold={ALL_FOLDS}"],
+        "config": {**first["config"], "dataset": {**first["config"]["dataset"], "cv_fold": ALL_FOLDS}},
+        "output_dir": str(out_dir),
+        "train_wall_time_s": sum(r.summary.get("train_wall_time_s") or 0.0 for r in runs),
+        "val": {"val/aoe_deg": result.figure()},
+        "test": {},
+        "cross_validation": data,
+    }
+    write_json(out_dir / "summary.json", summary)
+    return summary
 
 
 try:  # the Hydra hook of experiment=cross_validation

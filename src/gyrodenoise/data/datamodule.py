@@ -131,7 +131,7 @@ class ImuDataModule(L.LightningDataModule):
         max_gap_factor: float = 3.0,
         cache_dir: str | None = None,
         sensor: Mapping | None = None,
-        cv_fold: int | None = None,
+        cv_fold: int | str | None = None,  # 'all': refused here (a training mode of gyrodenoise.train)
     ) -> None:
         super().__init__()
         self.name, self.root = name, str(root)
@@ -142,7 +142,12 @@ class ImuDataModule(L.LightningDataModule):
         if cv_fold is not None:
             if val_seqs is not None:
                 raise ValueError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
-            if not 0 <= cv_fold < len(self.train_names):
+            if cv_fold == "all":
+                raise ValueError(
+                    "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
+                    f"give one fold, 0..{len(self.train_names) - 1}"
+                )
+            if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
                 raise ValueError(
                     f"dataset.cv_fold={cv_fold}: choose 0..{len(self.train_names) - 1} (one per training sequence "
                     f"{self.train_names})"
