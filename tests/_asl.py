@@ -53,6 +53,18 @@ def write_asl_sequence(folder: Path, seconds: float, seed: int, rate_hz: float =
             fh.write(f"{t_ns[k]}," + ",".join(f"{v:.9f}" for v in vals) + "\n")
 
 
+# a network and a schedule small enough to train on 6-s synthetic sequences in about a second
+TINY_TRAINING = [
+    "dataset.train_duration_s=4",
+    "dataset.window=256",
+    "model.channels=[4,8]",
+    "model.dilations=[1,2]",
+    "trainer.max_epochs=1",
+    "trainer.accelerator=cpu",
+    "logger=none",
+]
+
+
 def run_train(args: list[str], cwd: Path, timeout: int = 240) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run(

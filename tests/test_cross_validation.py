@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
-from _asl import run_train, write_asl_sequence
+from _asl import TINY_TRAINING, run_train, write_asl_sequence
 
 from gyrodenoise import cross_validation as cv
 
@@ -89,13 +89,7 @@ def _tiny(tmp_path: Path) -> list[str]:
         f"dataset.root={root}",
         "dataset.train_seqs=[a,b,c]",
         "dataset.test_seqs=[a]",
-        "dataset.train_duration_s=4",
-        "dataset.window=256",
-        "model.channels=[4,8]",
-        "model.dilations=[1,2]",
-        "trainer.max_epochs=1",
-        "trainer.accelerator=cpu",
-        "logger=none",
+        *TINY_TRAINING,
     ]
 
 

@@ -213,7 +213,7 @@ def test_scale_cli_calibrates_the_spread_and_keeps_the_mean(tmp_path, capsys):
 @pytest.mark.slow
 def test_experiment_ensemble_trains_members_and_builds(tmp_path):
     """`-m experiment=ensemble` with 2 seeds on tiny synthetic data ends with <sweep>/ensemble.pt."""
-    from _asl import write_asl_sequence
+    from _asl import TINY_TRAINING, write_asl_sequence
 
     root = tmp_path / "asl"
     for i, name in enumerate(["seq_a", "seq_b"]):
@@ -228,13 +228,7 @@ def test_experiment_ensemble_trains_members_and_builds(tmp_path):
             f"dataset.root={root}",
             "dataset.train_seqs=[seq_a]",
             "dataset.test_seqs=[seq_b]",
-            "dataset.train_duration_s=4",
-            "dataset.window=256",
-            "model.channels=[4,8]",
-            "model.dilations=[1,2]",
-            "trainer.max_epochs=1",
-            "trainer.accelerator=cpu",
-            "logger=none",
+            *TINY_TRAINING,
             f"hydra.sweep.dir={sweep}",
         ],
         cwd=tmp_path,
