@@ -36,6 +36,7 @@ from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, parse_where, s
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import ConfigError
+from gyrodenoise.paths import portable_tree
 from gyrodenoise.tables import markdown_table
 
 FOLD_KEY = "dataset.cv_fold"
@@ -69,6 +70,12 @@ class CrossValidation:
     def missing(self) -> list[int]:
         return [k for k in range(len(self.flights)) if k not in self.folds]
 
+    @property
+    def unscored(self) -> list[int]:
+        """Folds with runs but no finite network figure (every run's val/aoe_deg NaN or absent): left out of the
+        figure, which is then not the protocol's figure over every fold."""
+        return [k for k, f in self.folds.items() if not math.isfinite(f.mean("network"))]
+
     def figure(self, what: str = "network") -> float:
         """The protocol figure: the mean over the folds present of each fold's mean."""
         xs = [f.mean(what) for f in self.folds.values()]
@@ -91,6 +98,7 @@ def collect(runs: Sequence[Run]) -> CrossValidation:
         raise ValueError("no finished run (summary.json) to collect")
     folds: dict[int, Fold] = {}
     skipped: list[str] = []
+    seen: dict[tuple[int, object], Path] = {}  # (fold, seed) -> the run counted for it
     dataset = flights = None
     for run in runs:
         ds = run.config.get("dataset") or {}
@@ -103,6 +111,16 @@ def collect(runs: Sequence[Run]) -> CrossValidation:
         if ds.get("name", "?") != dataset or list(ds.get("train_seqs") or []) != flights:
             skipped.append(f"{run.path}: another dataset or list of training flights than {dataset} {flights}")
             continue
+        # the same run reached twice (a folder and a file in it), a copy, or another recipe's run of that fold and
+        # seed: counted once (a run without a seed is told apart by its path)
+        key = (fold, str(run.seed) if run.seed is not None else str(Path(run.path).resolve()))
+        if key in seen:
+            skipped.append(
+                f"{run.path}: fold {fold}, seed {run.seed} again (counted: {seen[key]}); a duplicate, or another "
+                "recipe's run: choose the runs with --where"
+            )
+            continue
+        seen[key] = run.path
         f = folds.setdefault(fold, Fold(fold, flights[fold] if fold < len(flights) else f"flight {fold}"))
         f.seeds.append(str(run.seed))
         f.network.append(_number(run.summary.get("val"), "val/aoe_deg"))
@@ -141,7 +159,7 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
     header = ["fold: held-out flight", "runs (seeds)", "network", "calibrated (same data)", "raw IMU"]
     methods = ("network", "calibrated", "raw") if math.isfinite(cv.figure("raw")) else ("network", "calibrated")
     header = header[: 2 + len(methods)]  # runs before the raw IMU's figure was logged have none
-    ref = reference.per_fold("network") if reference else {}
+    ref = by_held_out_flight(cv, reference) if reference else {}
     if reference:
         header.append("reference")
     rows = []
@@ -149,7 +167,8 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
         row = [f"{k}: {f.held_out}", f"{len(f.seeds)} ({', '.join(f.seeds)})"]
         row += [_cell(f.mean(w)) for w in methods]
         rows.append(row + ([_cell(ref.get(str(k), math.nan))] if reference else []))
-    mean_row = [f"mean over {len(cv.folds)} folds", "", *(_cell(cv.figure(w)) for w in methods)]
+    scored = len(cv.folds) - len(cv.unscored)
+    mean_row = [f"mean over {scored} folds", "", *(_cell(cv.figure(w)) for w in methods)]
     rows.append(mean_row + ([_cell(reference.figure())] if reference else []))
     won = sum(d < 0 for d in vs_cal.diffs)
     md = [
@@ -160,8 +179,13 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
         "(the selection protocol of reports/accuracy.md).",
         "",
         markdown_table(header, rows),
-        f"- **The recipe's figure: {_cell(cv.figure())} deg** over {len(cv.folds)} of {len(cv.flights)} folds"
-        + (f" (missing: {', '.join(f'{k}: {cv.flights[k]}' for k in cv.missing)})" if cv.missing else ""),
+        f"- **The recipe's figure: {_cell(cv.figure())} deg** over {scored} of {len(cv.flights)} folds"
+        + (f" (missing: {', '.join(f'{k}: {cv.flights[k]}' for k in cv.missing)})" if cv.missing else "")
+        + (
+            f" (no network figure in their runs: {', '.join(f'{k}: {cv.folds[k].held_out}' for k in cv.unscored)})"
+            if cv.unscored
+            else ""
+        ),
         f"- network - calibrated: {_interval(vs_cal, 'network')}; the network wins {won} of {vs_cal.n} folds",
     ]
     out = {
@@ -175,19 +199,30 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
             for k, f in cv.folds.items()
         },
         "missing_folds": cv.missing,
+        "unscored_folds": cv.unscored,
         "network_minus_calibrated": {"mean": vs_cal.mean, "t_ci": list(vs_cal.t_ci), "verdict": vs_cal.verdict},
         "skipped": cv.skipped,
     }
     if reference:
-        d = paired_by_fold(cv.per_fold("network"), ref)
+        d = paired_by_fold(cv.per_fold("network"), ref)  # by held-out flight, whatever the reference's fold order
         md.append(f"- recipe - reference ({_cell(reference.figure())} deg): {_interval(d, 'recipe')}")
         out["reference_figure_deg"] = reference.figure()
         out["recipe_minus_reference"] = {"mean": d.mean, "t_ci": list(d.t_ci), "verdict": d.verdict}
         if reference.flights != cv.flights:
-            md.append(f"- warning: the reference's training flights are {reference.flights}, not {cv.flights}")
+            md.append(
+                f"- warning: the reference's training flights are {reference.flights}, not {cv.flights} (folds "
+                "paired by held-out flight)"
+            )
     if cv.skipped:
         md += ["", "Runs left out:", "", *(f"- {s}" for s in cv.skipped)]
     return "\n".join(md) + "\n", out
+
+
+def by_held_out_flight(cv: CrossValidation, reference: CrossValidation) -> dict[str, float]:
+    """The reference's fold means keyed by `cv`'s fold index of the same held-out flight (a reference that lists
+    the training flights in another order, or other flights, pairs only where the held-out flight is the same)."""
+    ref = {f.held_out: f.mean("network") for f in reference.folds.values()}
+    return {str(k): ref[f.held_out] for k, f in cv.folds.items() if f.held_out in ref}
 
 
 def _read_run(path: Path) -> Run:
@@ -224,7 +259,45 @@ ALL_FOLDS = "all"
 
 
 def wants_all_folds(cfg: DictConfig) -> bool:
+    """Whether the config asks for every fold in one run (`dataset.cv_fold=all`)."""
     return OmegaConf.select(cfg, "dataset.cv_fold") == ALL_FOLDS
+
+
+# settings that may differ between a fold kept from before and this run without changing what the fold trained:
+# where the run writes and resumes from, threads, logging, and the scoring after the fit
+RUN_ONLY_KEYS = {
+    "paths",
+    "ckpt_path",
+    "auto_resume",
+    "threads",
+    "retain_freed_memory",
+    "task_name",
+    "logger",
+    "test",
+    "test_other_rule",
+    "dataset.cv_fold",
+    "dataset.cache_dir",
+}
+
+
+def _differences(kept: object, now: object, prefix: str = "") -> list[str]:
+    """Keys of both configs whose values differ (a key that only one has is not counted: another code version)."""
+    if prefix.rstrip(".") in RUN_ONLY_KEYS:
+        return []
+    if isinstance(kept, dict) and isinstance(now, dict):
+        return [d for k in kept if k in now for d in _differences(kept[k], now[k], f"{prefix}{k}.")]
+    return [] if kept == now else [f"{prefix.rstrip('.')}: {kept!r} then, {now!r} now"]
+
+
+def _check_kept_fold(folder: Path, kept: dict, cfg_k: DictConfig) -> None:
+    """A fold finished before is kept only if it trained what this run would train."""
+    now = portable_tree(OmegaConf.to_container(cfg_k, resolve=True))
+    if diffs := _differences(kept.get("config") or {}, now):
+        raise ConfigError(
+            f"{folder} holds a fold finished with other settings ({'; '.join(diffs[:5])}"
+            f"{f'; {len(diffs) - 5} more' if len(diffs) > 5 else ''}): dataset.cv_fold=all would mix two recipes. "
+            "Give this run another output folder, or remove that run's folder to train it afresh"
+        )
 
 
 def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictConfig, Path], dict]) -> dict:
@@ -233,17 +306,25 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
     flights = list(cfg.dataset.train_seqs)
     if len(flights) < 2:
         raise ConfigError(f"dataset.cv_fold=all needs two training flights or more, got {flights}")
+    if cfg.get("ckpt_path"):
+        raise ConfigError(
+            f"ckpt_path={cfg.ckpt_path} with dataset.cv_fold=all would start every fold from one checkpoint: rerun "
+            "in the same folder without it (auto_resume goes on from the unfinished fold's own checkpoint), or "
+            "resume that fold alone with dataset.cv_fold=K"
+        )
     runs = []
     for k in range(len(flights)):
         folder = out_dir / f"fold{k}"
-        if (folder / "model.pt").is_file() and (folder / "summary.json").is_file():
-            print(f"fold {k} ({flights[k]} held out): finished before, kept ({folder})")
-            runs.append(_read_run(folder / "summary.json"))
-            continue
         cfg_k = cfg.copy()
         with open_dict(cfg_k):
             cfg_k.dataset.cv_fold = k
             cfg_k.paths.output_dir = str(folder)
+        if (folder / "model.pt").is_file() and (folder / "summary.json").is_file():
+            kept = _read_run(folder / "summary.json")
+            _check_kept_fold(folder, kept.summary, cfg_k)
+            print(f"fold {k} ({flights[k]} held out): finished before, kept ({folder})")
+            runs.append(kept)
+            continue
         print(f"\n=== fold {k} of {len(flights)}: {flights[k]} held out ({folder}) ===")
         summary = train_one(cfg_k, folder)
         # the fold's record names its own fold, not the command line's 'all'
@@ -252,6 +333,9 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
         write_json(folder / "summary.json", summary)
         runs.append(Run(folder / "summary.json", {}, summary["config"], summary))
     result = collect(runs)
+    # the protocol's figure is over every fold: a fold without one (NaN) makes it NaN, which an Optuna sweep records
+    # as a failed trial, rather than a mean over the easier folds
+    figure = result.figure() if not (result.missing or result.unscored) else math.nan
     md, data = report(result, source=str(out_dir))
     write(out_dir / CV_SUMMARY, md, data)
     print(f"\n{md}cross-validation summary: {out_dir / CV_SUMMARY}.md")
@@ -263,7 +347,7 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
         "config": {**first["config"], "dataset": {**first["config"]["dataset"], "cv_fold": ALL_FOLDS}},
         "output_dir": str(out_dir),
         "train_wall_time_s": sum(r.summary.get("train_wall_time_s") or 0.0 for r in runs),
-        "val": {"val/aoe_deg": result.figure()},
+        "val": {"val/aoe_deg": figure},
         "test": {},
         "cross_validation": data,
     }
