@@ -184,7 +184,8 @@ def load_summary_file(path: Path) -> Run:
     """A committed summary JSON (what gyrodenoise.train writes as summary.json, copied anywhere).
 
     Needs `overrides` (list of KEY=VALUE strings; `queue.overrides` of benchmarks/run_queue.py is
-    accepted too), `val` and `test` (dicts of metrics with val/aoe_deg and test/aoe_deg) and a seed
+    accepted too), `val` and `test` (dicts of metrics with val/aoe_deg and test/aoe_deg; `test` may be {}, a run
+    with test=false) and a seed
     (`seed`, a seed= override or config.seed); `config` (the resolved config) is optional but needed to
     tell settings apart by keys a run does not override.
     """
@@ -205,6 +206,8 @@ def load_summary_file(path: Path) -> Run:
         raise ValueError(f"{path}: field 'config' must be a JSON object (the resolved Hydra config)")
     for split in ("val", "test"):
         table = summary.get(split)
+        if split == "test" and table == {}:  # a run with test=false (e.g. a cross-validation fold): no test figure
+            continue
         if not isinstance(table, dict) or not isinstance(table.get(METRICS[split]), int | float):
             raise ValueError(f"{path}: field '{split}' must be an object with a number '{METRICS[split]}'")
     overrides, spelled = _read_overrides(lines)

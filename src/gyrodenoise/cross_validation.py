@@ -24,15 +24,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import statistics
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, parse_where, same_value
+from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, mean_sd_n, parse_where, same_value, with_ext
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.cli_errors import ConfigError
@@ -55,8 +55,7 @@ class Fold:
     raw: list[float] = field(default_factory=list)
 
     def mean(self, what: str) -> float:
-        xs = [x for x in getattr(self, what) if math.isfinite(x)]
-        return statistics.fmean(xs) if xs else math.nan
+        return mean_sd_n(getattr(self, what))[0]
 
 
 @dataclass
@@ -78,9 +77,7 @@ class CrossValidation:
 
     def figure(self, what: str = "network") -> float:
         """The protocol figure: the mean over the folds present of each fold's mean."""
-        xs = [f.mean(what) for f in self.folds.values()]
-        xs = [x for x in xs if math.isfinite(x)]
-        return statistics.fmean(xs) if xs else math.nan
+        return mean_sd_n(f.mean(what) for f in self.folds.values())[0]
 
     def per_fold(self, what: str = "network") -> dict[str, float]:
         return {str(k): f.mean(what) for k, f in sorted(self.folds.items())}
@@ -251,8 +248,8 @@ def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[C
 
 
 def write(prefix: Path, md: str, data: dict) -> None:
-    write_json(prefix.parent / f"{prefix.name}.json", data)
-    write_text(prefix.parent / f"{prefix.name}.md", md)
+    write_json(with_ext(prefix, ".json"), data)
+    write_text(with_ext(prefix, ".md"), md)
 
 
 ALL_FOLDS = "all"
@@ -364,7 +361,7 @@ except ImportError:  # pragma: no cover
 class CrossValidationCallback(_HydraCallback):
     """Hydra callback: after a multirun over folds, `<sweep dir>/cross_validation.{md,json}`."""
 
-    def on_multirun_end(self, config, **kwargs) -> None:
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep = Path(config.hydra.sweep.dir)
         try:
             cv, _ = load([sweep])
