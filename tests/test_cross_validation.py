@@ -130,3 +130,15 @@ def test_all_folds_in_one_run_return_the_figure_and_resume(tmp_path):
         from gyrodenoise.data.datamodule import ImuDataModule
 
         ImuDataModule("x", "/nowhere", ["a", "b"], [], cv_fold="all")
+
+
+def test_a_stray_run_of_other_flights_does_not_set_the_flights(tmp_path):
+    """The flights are those of most runs: a stray run that sorts first is the one left out, not the others."""
+    stray = _summary(tmp_path / "0_stray.json", 0, 5.0, 5.0)
+    data = json.loads(stray.read_text())
+    data["config"]["dataset"]["train_seqs"] = ["x", "y"]
+    stray.write_text(json.dumps(data))
+    files = [stray, _summary(tmp_path / "f0.json", 0, 2.0, 3.0), _summary(tmp_path / "f1.json", 1, 1.0, 2.0)]
+    result, _ = cv.load(files)
+    assert result.flights == ["a", "b", "c"] and result.figure() == pytest.approx(1.5)
+    assert len(result.skipped) == 1 and "0_stray.json: another dataset or list of training flights" in result.skipped[0]

@@ -25,6 +25,7 @@ import argparse
 import json
 import math
 import sys
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,24 +89,37 @@ def _number(table: object, key: str) -> float:
     return float(v) if isinstance(v, int | float) else math.nan
 
 
+def _data_of(run: Run) -> tuple[str, tuple[str, ...]] | None:
+    """(dataset name, training flights) of a cross-validation run, None for another run."""
+    ds = run.config.get("dataset") or {}
+    if not isinstance(ds.get("cv_fold"), int):
+        return None
+    return ds.get("name", "?"), tuple(ds.get("train_seqs") or [])
+
+
 def collect(runs: Sequence[Run]) -> CrossValidation:
-    """Group runs by held-out flight. Runs of another dataset or training-flight list than the first, or without
+    """Group runs by held-out flight. Runs of another dataset or training-flight list than most runs', or without
     dataset.cv_fold, are left out with the reason (never silently)."""
     if not runs:
         raise ValueError("no finished run (summary.json) to collect")
     folds: dict[int, Fold] = {}
     skipped: list[str] = []
     seen: dict[tuple[int, object], Path] = {}  # (fold, seed) -> the run counted for it
-    dataset = flights = None
+    data_of = {id(r): _data_of(r) for r in runs}
+    kinds = Counter(d for d in data_of.values() if d)
+    if not kinds:
+        raise ValueError(
+            f"none of the {len(runs)} runs is a cross-validation run (dataset.cv_fold): "
+            "train them with experiment=cross_validation or dataset.cv_fold=K"
+        )
+    # the dataset and flight list of most runs (not of whichever run sorts first, which may be a stray one)
+    dataset, flights = kinds.most_common(1)[0][0]
     for run in runs:
-        ds = run.config.get("dataset") or {}
-        fold = ds.get("cv_fold")
-        if not isinstance(fold, int):
+        fold = (run.config.get("dataset") or {}).get("cv_fold")
+        if data_of[id(run)] is None:
             skipped.append(f"{run.path}: no dataset.cv_fold (not a cross-validation run)")
             continue
-        if flights is None:
-            dataset, flights = ds.get("name", "?"), list(ds.get("train_seqs") or [])
-        if ds.get("name", "?") != dataset or list(ds.get("train_seqs") or []) != flights:
+        if data_of[id(run)] != (dataset, flights):
             skipped.append(f"{run.path}: another dataset or list of training flights than {dataset} {flights}")
             continue
         # the same run reached twice (a folder and a file in it), a copy, or another recipe's run of that fold and
@@ -123,12 +137,7 @@ def collect(runs: Sequence[Run]) -> CrossValidation:
         f.network.append(_number(run.summary.get("val"), "val/aoe_deg"))
         f.raw.append(_number(run.summary.get("val"), "val/raw_imu_aoe_deg"))
         f.calibrated.append(_number(run.summary.get("calibrated_baseline"), "calibrated_val_aoe_deg"))
-    if flights is None:
-        raise ValueError(
-            f"none of the {len(runs)} runs is a cross-validation run (dataset.cv_fold): "
-            "train them with experiment=cross_validation or dataset.cv_fold=K"
-        )
-    return CrossValidation(dataset, flights, dict(sorted(folds.items())), skipped)
+    return CrossValidation(dataset, list(flights), dict(sorted(folds.items())), skipped)
 
 
 def paired_by_fold(a: dict[str, float], b: dict[str, float]) -> PairedDiff:
