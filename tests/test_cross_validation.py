@@ -142,3 +142,27 @@ def test_a_stray_run_of_other_flights_does_not_set_the_flights(tmp_path):
     result, _ = cv.load(files)
     assert result.flights == ["a", "b", "c"] and result.figure() == pytest.approx(1.5)
     assert len(result.skipped) == 1 and "0_stray.json: another dataset or list of training flights" in result.skipped[0]
+
+
+def test_runs_of_several_recipes_get_a_table_each_and_one_side_by_side(tmp_path):
+    """A sweep over a setting and the folds (model.dropout=0.1,0.2 x 3 folds): one table per recipe, the second
+    paired with the first by fold, and the side-by-side table; asking for one recipe names them."""
+    for dropout, values in (("0.1", [2.0, 3.0, 4.0]), ("0.2", [1.0, 2.5, 3.0])):
+        for k, v in enumerate(values):
+            path = _summary(tmp_path / f"d{dropout}_f{k}.json", k, v, 5.0)
+            data = json.loads(path.read_text())
+            data["overrides"].append(f"model.dropout={dropout}")
+            path.write_text(json.dumps(data))
+    with pytest.raises(
+        ValueError, match=r"2 recipes \(model.dropout=0.1; model.dropout=0.2\): choose one with --where"
+    ):
+        cv.load([tmp_path])
+    assert cv.load([tmp_path], [("model.dropout", "0.2")])[0].figure() == pytest.approx(6.5 / 3)
+    out = tmp_path / "out" / "cv"
+    assert cv.main([str(tmp_path), "--out", str(out)]) == 0
+    second = json.loads((out.parent / "cv_2.json").read_text())
+    assert second["recipe"] == "model.dropout=0.2" and second["recipe_minus_reference"]["mean"] == pytest.approx(
+        -2.5 / 3
+    )
+    side = (out.parent / "cv.md").read_text()
+    assert "| model.dropout=0.1 | 3.00 |" in side and "| model.dropout=0.2 | 2.17 | 5.00 | -0.83 [" in side

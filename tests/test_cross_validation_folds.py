@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from omegaconf import DictConfig, OmegaConf
 
+from gyrodenoise import all_folds
 from gyrodenoise import cross_validation as cv
 from gyrodenoise.atomic import write_json
 from gyrodenoise.cli_errors import ConfigError
@@ -93,7 +94,7 @@ def _fake_training(vals: list[float], trained: list[int]):
 
 
 def test_all_folds_figure_is_nan_when_a_fold_has_none(tmp_path):
-    summary = cv.train_all_folds(_cfg(), tmp_path, _fake_training([1.0, math.nan, 2.0], []))
+    summary = all_folds.train_all_folds(_cfg(), tmp_path, _fake_training([1.0, math.nan, 2.0], []))
     assert math.isnan(summary["val"]["val/aoe_deg"])  # not 1.5, the mean of the other folds
     assert summary["cross_validation"]["unscored_folds"] == [1]
     assert json.loads((tmp_path / "fold0" / "summary.json").read_text())["overrides"] == ["dataset.cv_fold=0"]
@@ -101,19 +102,21 @@ def test_all_folds_figure_is_nan_when_a_fold_has_none(tmp_path):
 
 def test_all_folds_keeps_a_fold_only_if_it_trained_the_same_recipe(tmp_path):
     trained: list[int] = []
-    cv.train_all_folds(_cfg(), tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
+    all_folds.train_all_folds(_cfg(), tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
     (tmp_path / "fold2" / "model.pt").unlink()  # fold 2 unfinished: a requeued run trains it again
     again = _cfg()
     again.threads = 4  # another node's threads: the same recipe
-    summary = cv.train_all_folds(again, tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
+    summary = all_folds.train_all_folds(again, tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
     assert trained == [0, 1, 2, 2] and summary["val"]["val/aoe_deg"] == pytest.approx(2.0)
     with pytest.raises(ConfigError, match=r"fold0 holds a fold finished with other settings \(model.dropout: 0.1"):
-        cv.train_all_folds(_cfg(dropout=0.5), tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
+        all_folds.train_all_folds(_cfg(dropout=0.5), tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
     assert trained == [0, 1, 2, 2]
 
 
 def test_all_folds_refuses_one_checkpoint_for_every_fold(tmp_path):
     trained: list[int] = []
     with pytest.raises(ConfigError, match="would start every fold from one checkpoint"):
-        cv.train_all_folds(_cfg(ckpt_path="x/fold1/last.ckpt"), tmp_path, _fake_training([1.0, 2.0, 3.0], trained))
+        all_folds.train_all_folds(
+            _cfg(ckpt_path="x/fold1/last.ckpt"), tmp_path, _fake_training([1.0, 2.0, 3.0], trained)
+        )
     assert trained == []

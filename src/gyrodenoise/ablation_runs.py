@@ -22,7 +22,7 @@ IGNORED_KEYS = {"experiment", "hparams_search"}  # the sweep's own selectors, ne
 # the end of the training flights); val_tail: the end of the training flights in a cv_fold run
 METRICS = {"val": "val/aoe_deg", "test": "test/aoe_deg", "val_tail": "val_tail/aoe_deg"}
 MISSING = "-"  # the value of a key a run neither overrides nor has in its config
-CV_SUMMARY = "cross_validation"  # gyrodenoise.cross_validation's output in a sweep folder (.md/.json): not a run
+CV_SUMMARY = "cross_validation"  # gyrodenoise.cross_validation's outputs in a sweep folder (cross_validation*.json)
 
 
 @dataclass
@@ -169,7 +169,7 @@ def same_value(a: str, b: str) -> bool:
     return canonical(a) == canonical(b)
 
 
-def _read_overrides(lines: Iterable[object]) -> tuple[dict[str, str], dict[str, str]]:
+def read_overrides(lines: Iterable[object]) -> tuple[dict[str, str], dict[str, str]]:
     """(key -> value, key -> key as written) of task overrides; hydra.* and deletions (~key) left out."""
     overrides, spelled = {}, {}
     for line in lines:
@@ -210,7 +210,7 @@ def load_summary_file(path: Path) -> Run:
             continue
         if not isinstance(table, dict) or not isinstance(table.get(METRICS[split]), int | float):
             raise ValueError(f"{path}: field '{split}' must be an object with a number '{METRICS[split]}'")
-    overrides, spelled = _read_overrides(lines)
+    overrides, spelled = read_overrides(lines)
     run = Run(path, overrides, config, summary, spelled)
     if run.seed is None:
         raise ValueError(f"{path}: no seed (field 'seed', a seed= override or config.seed): runs pair by seed")
@@ -222,7 +222,7 @@ def load_run(run_dir: Path) -> Run:
     overrides_file = hydra_dir / "overrides.yaml"
     if not overrides_file.is_file():
         raise FileNotFoundError(f"{run_dir}: no .hydra/overrides.yaml; is this a Hydra run folder?")
-    overrides, spelled = _read_overrides(yaml.safe_load(overrides_file.read_text()) or [])
+    overrides, spelled = read_overrides(yaml.safe_load(overrides_file.read_text()) or [])
     config_file = hydra_dir / "config.yaml"
     config = (yaml.safe_load(config_file.read_text()) or {}) if config_file.is_file() else {}
     summary = json.loads((run_dir / "summary.json").read_text())
@@ -254,7 +254,7 @@ def find_runs(roots: Iterable[Path]) -> tuple[list[Run], list[Path]]:
         for path in sorted(root.rglob("*.json")):
             inside_run = any(parent in run_dirs for parent in path.parents)
             hidden = any(part.startswith(".") for part in path.relative_to(root).parts)  # temp files, .hydra
-            if not inside_run and not hidden and path.stem != CV_SUMMARY:
+            if not inside_run and not hidden and not path.stem.startswith(CV_SUMMARY):
                 runs.append(load_summary_file(path))
     return runs, unfinished
 

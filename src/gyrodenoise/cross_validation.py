@@ -14,9 +14,9 @@ another recipe's runs (e.g. the project's default, or the committed runs in repo
 Differences come with a 95% t-interval over the folds: with six folds and a fold-to-fold spread of ~1 deg only
 effects of ~1.4 deg and more are resolved (reports/accuracy.md).
 Writes PREFIX.md and PREFIX.json (default: SWEEP_DIR/cross_validation); experiment=cross_validation writes them
-into its sweep folder when the last run has finished. `dataset.cv_fold=all` trains the folds in turn inside one run
-(fold<k>/ each; a fold finished before is kept, so a requeued run goes on) and returns the figure as the run's
-val/aoe_deg: what an Optuna search minimises.
+into its sweep folder when the last run has finished. Runs of several recipes (a sweep over other settings too) get
+one table each, PREFIX_<i>, each paired with the first recipe (or the --reference), and PREFIX side by side.
+`dataset.cv_fold=all` trains the folds in turn inside one run (gyrodenoise.all_folds).
 """
 
 from __future__ import annotations
@@ -26,21 +26,31 @@ import json
 import math
 import sys
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig
 
-from gyrodenoise.ablation_runs import CV_SUMMARY, Run, find_runs, mean_sd_n, parse_where, same_value, with_ext
+from gyrodenoise.ablation_runs import (
+    CV_SUMMARY,
+    Run,
+    ablated_keys,
+    find_runs,
+    group,
+    mean_sd_n,
+    parse_where,
+    read_overrides,
+    same_value,
+    with_ext,
+)
 from gyrodenoise.ablation_stats import PairedDiff
 from gyrodenoise.atomic import write_json, write_text
-from gyrodenoise.cli_errors import ConfigError
-from gyrodenoise.paths import portable_tree
 from gyrodenoise.tables import markdown_table
 
 FOLD_KEY = "dataset.cv_fold"
+ALL_FOLDS = "all"  # dataset.cv_fold=all: every fold in turn inside one run (gyrodenoise.all_folds)
 
 
 @dataclass
@@ -159,8 +169,11 @@ def _interval(d: PairedDiff, first: str) -> str:
     return f"{d.mean:+.2f} deg{ci} over {d.n} folds: {verdict}"
 
 
-def report(cv: CrossValidation, reference: CrossValidation | None = None, source: str = "") -> tuple[str, dict]:
-    """Markdown and JSON of a cross-validation (and of its comparison with a reference recipe's)."""
+def report(
+    cv: CrossValidation, reference: CrossValidation | None = None, source: str = "", recipe: str = ""
+) -> tuple[str, dict]:
+    """Markdown and JSON of a cross-validation (and of its comparison with a reference recipe's); `recipe` names
+    the settings that tell it from the other recipes of the same runs."""
     vs_cal = paired_by_fold(cv.per_fold("network"), cv.per_fold("calibrated"))
     header = ["fold: held-out flight", "runs (seeds)", "network", "calibrated (same data)", "raw IMU"]
     methods = ("network", "calibrated", "raw") if math.isfinite(cv.figure("raw")) else ("network", "calibrated")
@@ -178,7 +191,7 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
     rows.append(mean_row + ([_cell(reference.figure())] if reference else []))
     won = sum(d < 0 for d in vs_cal.diffs)
     md = [
-        f"# Cross-validation: {cv.dataset}, leave one training flight out",
+        f"# Cross-validation: {cv.dataset}, leave one training flight out" + (f": {recipe}" if recipe else ""),
         "",
         *([f"Runs: {source}", ""] if source else []),
         "Held-out-flight AOE 3D (deg), each fold the mean of its runs; the recipe's figure is the mean over the folds "
@@ -195,6 +208,7 @@ def report(cv: CrossValidation, reference: CrossValidation | None = None, source
         f"- network - calibrated: {_interval(vs_cal, 'network')}; the network wins {won} of {vs_cal.n} folds",
     ]
     out = {
+        "recipe": recipe,
         "dataset": cv.dataset,
         "flights": cv.flights,
         "figure_deg": cv.figure(),
@@ -231,9 +245,11 @@ def by_held_out_flight(cv: CrossValidation, reference: CrossValidation) -> dict[
     return {str(k): ref[f.held_out] for k, f in cv.folds.items() if f.held_out in ref}
 
 
-def _read_run(path: Path) -> Run:
+def read_run(path: Path) -> Run:
+    """A run's summary.json as a Run (no validation of its fields: a fold of a dataset.cv_fold=all run)."""
     summary = json.loads(path.read_text())
-    return Run(path, {}, summary.get("config") or {}, summary)
+    overrides, spelled = read_overrides(summary.get("overrides") or [])
+    return Run(path, overrides, summary.get("config") or {}, summary, spelled)
 
 
 def _folds_inside(run: Run) -> list[Run]:
@@ -241,124 +257,91 @@ def _folds_inside(run: Run) -> list[Run]:
     if (run.config.get("dataset") or {}).get("cv_fold") != ALL_FOLDS:
         return [run]
     folder = run.path if run.path.is_dir() else run.path.parent
-    return [_read_run(p) for p in sorted(folder.glob("fold*/summary.json"))]
+    return [read_run(p) for p in sorted(folder.glob("fold*/summary.json"))]
 
 
-def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[CrossValidation, list[Path]]:
+def _is_group(run: Run, key: str) -> bool:
+    """Whether `key` is a config group in the run's config (dataset=..., model=...): a group choice is compared by
+    the keys under it that runs override, not as a whole (its content holds the fold)."""
+    node: object = run.config
+    for part in key.split("."):
+        node = node.get(part) if isinstance(node, dict) else None
+    return isinstance(node, dict)
+
+
+def recipes(runs: Sequence[Run]) -> list[tuple[str, list[Run]]]:
+    """The runs grouped by the overridden settings that differ between them, other than the fold and the seed
+    (e.g. a sweep over model.dropout=0.1,0.2 and the folds): (label, runs) per recipe, in first-seen order."""
+    keys = [k for k in ablated_keys(runs) if k != FOLD_KEY and not any(_is_group(r, k) for r in runs)]
+    if not keys:
+        return [("", list(runs))]
+    return [(", ".join(f"{k}={v}" for k, v in zip(keys, s.values, strict=True)), s.runs) for s in group(runs, keys)]
+
+
+def load_recipes(
+    dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()
+) -> tuple[list[tuple[str, CrossValidation]], list[Path]]:
+    """The cross-validations of the recipes found under `dirs` (runs matching every KEY=VALUE of `where`), and the
+    unfinished run folders."""
     runs, unfinished = find_runs(dirs)
     runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
     runs = [fold for r in runs for fold in _folds_inside(r)]
     if not runs:
         matching = f" matches {list(where)}" if where else ""
         raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matching}")
-    cv = collect(runs)
-    cv.skipped += [f"{p}: unfinished (no summary.json)" for p in unfinished]
-    return cv, unfinished
+    found = [(label, collect(rs)) for label, rs in recipes(runs)]
+    for _, cv in found:
+        cv.skipped += [f"{p}: unfinished (no summary.json)" for p in unfinished]
+    return found, unfinished
+
+
+def load(dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()) -> tuple[CrossValidation, list[Path]]:
+    """The cross-validation of the one recipe found under `dirs`; several recipes are an error naming them."""
+    found, unfinished = load_recipes(dirs, where)
+    if len(found) > 1:
+        labels = "; ".join(label for label, _ in found)
+        raise ValueError(f"the runs hold {len(found)} recipes ({labels}): choose one with --where KEY=VALUE")
+    return found[0][1], unfinished
+
+
+def write_recipes(
+    found: list[tuple[str, CrossValidation]], prefix: Path, source: str, reference: CrossValidation | None = None
+) -> str:
+    """PREFIX.md/.json for one recipe; for several, PREFIX_<i>.md/.json each (against `reference`, else against
+    the first recipe) and PREFIX.md/.json with their figures side by side. Returns the Markdown of PREFIX.md."""
+    if len(found) == 1:
+        md, data = report(found[0][1], reference, source, found[0][0])
+        write(prefix, md, data)
+        return md
+    base_label, base = ("reference", reference) if reference else found[0]
+    rows, index = [], []
+    for i, (label, cv) in enumerate(found, 1):
+        against = reference if reference else (None if i == 1 else base)
+        md, data = report(cv, against, source, label)
+        part = prefix.parent / f"{prefix.name}_{i}"
+        write(part, md, data)
+        d = data.get("recipe_minus_reference")
+        vs = "-" if d is None else f"{d['mean']:+.2f} [{d['t_ci'][0]:+.2f}, {d['t_ci'][1]:+.2f}]: {d['verdict']}"
+        rows.append([label, _cell(cv.figure()), _cell(cv.figure("calibrated")), vs, f"{part.name}.md"])
+        index.append({"recipe": label, "file": f"{part.name}.json", **data})
+    header = ["recipe", "figure (deg)", "calibrated (deg)", f"minus {base_label} (95% t-interval)", "table"]
+    md = "\n".join(
+        [
+            f"# Cross-validation of {len(found)} recipes: {found[0][1].dataset}",
+            "",
+            f"Runs: {source}. Each recipe's figure is its mean held-out-flight AOE over the folds; differences are "
+            "paired by held-out flight.",
+            "",
+            markdown_table(header, rows),
+        ]
+    )
+    write(prefix, md, {"recipes": index})
+    return md
 
 
 def write(prefix: Path, md: str, data: dict) -> None:
     write_json(with_ext(prefix, ".json"), data)
     write_text(with_ext(prefix, ".md"), md)
-
-
-ALL_FOLDS = "all"
-
-
-def wants_all_folds(cfg: DictConfig) -> bool:
-    """Whether the config asks for every fold in one run (`dataset.cv_fold=all`)."""
-    return OmegaConf.select(cfg, "dataset.cv_fold") == ALL_FOLDS
-
-
-# settings that may differ between a fold kept from before and this run without changing what the fold trained:
-# where the run writes and resumes from, threads, logging, and the scoring after the fit
-RUN_ONLY_KEYS = {
-    "paths",
-    "ckpt_path",
-    "auto_resume",
-    "threads",
-    "retain_freed_memory",
-    "task_name",
-    "logger",
-    "test",
-    "test_other_rule",
-    "dataset.cv_fold",
-    "dataset.cache_dir",
-}
-
-
-def _differences(kept: object, now: object, prefix: str = "") -> list[str]:
-    """Keys of both configs whose values differ (a key that only one has is not counted: another code version)."""
-    if prefix.rstrip(".") in RUN_ONLY_KEYS:
-        return []
-    if isinstance(kept, dict) and isinstance(now, dict):
-        return [d for k in kept if k in now for d in _differences(kept[k], now[k], f"{prefix}{k}.")]
-    return [] if kept == now else [f"{prefix.rstrip('.')}: {kept!r} then, {now!r} now"]
-
-
-def _check_kept_fold(folder: Path, kept: dict, cfg_k: DictConfig) -> None:
-    """A fold finished before is kept only if it trained what this run would train."""
-    now = portable_tree(OmegaConf.to_container(cfg_k, resolve=True))
-    if diffs := _differences(kept.get("config") or {}, now):
-        raise ConfigError(
-            f"{folder} holds a fold finished with other settings ({'; '.join(diffs[:5])}"
-            f"{f'; {len(diffs) - 5} more' if len(diffs) > 5 else ''}): dataset.cv_fold=all would mix two recipes. "
-            "Give this run another output folder, or remove that run's folder to train it afresh"
-        )
-
-
-def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictConfig, Path], dict]) -> dict:
-    """`dataset.cv_fold=all`: `train_one(cfg_k, out_dir/fold<k>)` for every fold k, then the summary of the folds
-    in out_dir; returns a run summary whose val/aoe_deg is the recipe's figure."""
-    flights = list(cfg.dataset.train_seqs)
-    if len(flights) < 2:
-        raise ConfigError(f"dataset.cv_fold=all needs two training flights or more, got {flights}")
-    if cfg.get("ckpt_path"):
-        raise ConfigError(
-            f"ckpt_path={cfg.ckpt_path} with dataset.cv_fold=all would start every fold from one checkpoint: rerun "
-            "in the same folder without it (auto_resume goes on from the unfinished fold's own checkpoint), or "
-            "resume that fold alone with dataset.cv_fold=K"
-        )
-    runs = []
-    for k in range(len(flights)):
-        folder = out_dir / f"fold{k}"
-        cfg_k = cfg.copy()
-        with open_dict(cfg_k):
-            cfg_k.dataset.cv_fold = k
-            cfg_k.paths.output_dir = str(folder)
-        if (folder / "model.pt").is_file() and (folder / "summary.json").is_file():
-            kept = _read_run(folder / "summary.json")
-            _check_kept_fold(folder, kept.summary, cfg_k)
-            print(f"fold {k} ({flights[k]} held out): finished before, kept ({folder})")
-            runs.append(kept)
-            continue
-        print(f"\n=== fold {k} of {len(flights)}: {flights[k]} held out ({folder}) ===")
-        summary = train_one(cfg_k, folder)
-        # the fold's record names its own fold, not the command line's 'all'
-        summary["overrides"] = [f"dataset.cv_fold={k}" if o.lstrip("+").startswith("dataset.cv_fold=") else o
-                                for o in summary.get("overrides", [])]  # fmt: skip
-        write_json(folder / "summary.json", summary)
-        runs.append(Run(folder / "summary.json", {}, summary["config"], summary))
-    result = collect(runs)
-    # the protocol's figure is over every fold: a fold without one (NaN) makes it NaN, which an Optuna sweep records
-    # as a failed trial, rather than a mean over the easier folds
-    figure = result.figure() if not (result.missing or result.unscored) else math.nan
-    md, data = report(result, source=str(out_dir))
-    write(out_dir / CV_SUMMARY, md, data)
-    print(f"\n{md}cross-validation summary: {out_dir / CV_SUMMARY}.md")
-    first = runs[0].summary
-    summary = {  # the run's own record: what the ablation collector and an Optuna sweep read
-        **{k: first.get(k) for k in ("command", "overrides", "seed", "dataset", "model", "machine", "code_version")},
-        "overrides": [o for o in first.get("overrides", []) if not o.lstrip("+").startswith("dataset.cv_fold=")]
-        + [f"dataset.cv_fold={ALL_FOLDS}"],
-        "config": {**first["config"], "dataset": {**first["config"]["dataset"], "cv_fold": ALL_FOLDS}},
-        "output_dir": str(out_dir),
-        "train_wall_time_s": sum(r.summary.get("train_wall_time_s") or 0.0 for r in runs),
-        "val": {"val/aoe_deg": figure},
-        "test": {},
-        "cross_validation": data,
-    }
-    write_json(out_dir / "summary.json", summary)
-    return summary
 
 
 try:  # the Hydra hook of experiment=cross_validation
@@ -373,13 +356,11 @@ class CrossValidationCallback(_HydraCallback):
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep = Path(config.hydra.sweep.dir)
         try:
-            cv, _ = load([sweep])
+            found, _ = load_recipes([sweep])
         except (ValueError, FileNotFoundError) as e:
             print(f"no cross-validation summary: {e}", file=sys.stderr)
             return
-        md, data = report(cv, source=str(sweep))
-        write(sweep / CV_SUMMARY, md, data)
-        print(md)
+        print(write_recipes(found, sweep / CV_SUMMARY, str(sweep)))
         print(f"cross-validation summary: {sweep / CV_SUMMARY}.md")
 
 
@@ -399,16 +380,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help=f"output prefix (default: the first folder's {CV_SUMMARY})")
     args = ap.parse_args(argv)
     try:
-        cv, _ = load(args.dirs, parse_where(args.where))
+        found, _ = load_recipes(args.dirs, parse_where(args.where))
         ref = load(args.reference, parse_where(args.reference_where))[0] if args.reference else None
     except (ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    md, data = report(cv, ref, source=", ".join(str(d) for d in args.dirs))
     prefix = args.out or (args.dirs[0] if args.dirs[0].is_dir() else args.dirs[0].parent) / CV_SUMMARY
-    write(prefix, md, data)
-    print(md)
-    print(f"written: {prefix}.md, {prefix}.json")
+    print(write_recipes(found, prefix, ", ".join(str(d) for d in args.dirs), ref))
+    print(f"written: {prefix}.md, {prefix}.json" + (f" and {prefix.name}_1..{len(found)}" if len(found) > 1 else ""))
     return 0
 
 

@@ -31,7 +31,7 @@ from lightning.pytorch.loggers import TensorBoardLogger
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from gyrodenoise import cross_validation
+from gyrodenoise import all_folds
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated, safety_meta
 from gyrodenoise.cli_errors import ConfigError, TrainingDiverged, hydra_key_hints, torch_threads, user_errors
@@ -272,8 +272,8 @@ def train(cfg: DictConfig) -> dict:
     if cfg.get("retain_freed_memory", True) and HydraConfig.initialized():
         retain_freed_memory()
     with torch_threads(cfg.get("threads")):
-        if cross_validation.wants_all_folds(cfg):  # every fold in turn: the protocol's figure as val/aoe_deg
-            return cross_validation.train_all_folds(cfg, out_dir, _train)
+        if all_folds.wants_all_folds(cfg):  # every fold in turn: the protocol's figure as val/aoe_deg
+            return all_folds.train_all_folds(cfg, out_dir, _train)
         return _train(cfg, out_dir)
 
 
