@@ -148,9 +148,11 @@ class ImuDataModule(L.LightningDataModule):
                     f"give one fold, 0..{len(self.train_names) - 1}"
                 )
             if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
+                n = len(self.train_names)
                 raise ValueError(
-                    f"dataset.cv_fold={cv_fold}: choose 0..{len(self.train_names) - 1} (one per training sequence "
-                    f"{self.train_names})"
+                    f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {self.train_names}); "
+                    f"experiment=cross_validation sweeps EuRoC's six folds: for these give "
+                    f"dataset.cv_fold={','.join(map(str, range(n)))} on its command line, or dataset.cv_fold=all"
                 )
             self.cv_holdout = self.train_names.pop(cv_fold)
         self.test_names = list(test_seqs)
