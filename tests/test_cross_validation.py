@@ -112,8 +112,9 @@ def test_all_folds_in_one_run_return_the_figure_and_resume(tmp_path):
     """dataset.cv_fold=all: the folds in turn in fold<k>/ of one run, whose summary's val/aoe_deg (what an Optuna
     sweep minimises) is the mean over the folds; run again in its folder it keeps the finished folds."""
     run_dir = tmp_path / "run"
-    args = ["dataset.cv_fold=all", *_tiny(tmp_path), f"hydra.run.dir={run_dir}"]
-    run_train(args, cwd=tmp_path)
+    # experiment=cross_validation without -m: dataset.cv_fold=all, and a note that says so
+    args = ["experiment=cross_validation", *_tiny(tmp_path), f"hydra.run.dir={run_dir}"]
+    assert "without -m this run trains every fold in turn" in run_train(args, cwd=tmp_path).stdout
     top = json.loads((run_dir / "summary.json").read_text())
     folds = [json.loads((run_dir / f"fold{k}" / "summary.json").read_text()) for k in range(3)]
     assert [f["config"]["dataset"]["cv_fold"] for f in folds] == [0, 1, 2]
@@ -166,3 +167,54 @@ def test_runs_of_several_recipes_get_a_table_each_and_one_side_by_side(tmp_path)
     )
     side = (out.parent / "cv.md").read_text()
     assert "| model.dropout=0.1 | 3.00 |" in side and "| model.dropout=0.2 | 2.17 | 5.00 | -0.83 [" in side
+
+
+def test_a_fold_list_beyond_the_flights_stops_the_sweep_before_training(tmp_path):
+    """experiment=cross_validation sweeps EuRoC's six folds: on three flights the sweep ends before any job, saying
+    which folds to give (Hydra would train folds 0-2 and fail on 3 with no table)."""
+    from omegaconf import DictConfig, OmegaConf
+
+    def config(task: list[str]) -> DictConfig:
+        return OmegaConf.create(
+            {
+                "dataset": {"name": "tumvi", "train_seqs": ["r1", "r3", "r5"]},
+                "hydra": {"overrides": {"task": task}, "sweeper": {"params": {"dataset.cv_fold": "0,1,2,3,4,5"}}},
+            }
+        )
+
+    assert "give dataset.cv_fold=0,1,2" in cv.fold_list_problem(config(["dataset=tumvi"]))
+    assert cv.fold_list_problem(config(["dataset.cv_fold=0,1,2"])) is None
+    assert cv.fold_list_problem(config(["dataset.cv_fold=range(0,3)"])) is None
+    assert "sweeps range(0,4)" in cv.fold_list_problem(config(["dataset.cv_fold=range(0,4)"]))
+    with pytest.raises(SystemExit):
+        cv.CrossValidationCallback().on_multirun_start(config(["dataset=tumvi"]))
+
+
+def test_a_reference_of_another_dataset_or_not_a_summary_is_refused(tmp_path, capsys):
+    mine = [_summary(tmp_path / f"m{k}.json", k, 1.0, 2.0) for k in range(3)]
+    other = tmp_path / "other"
+    other.mkdir()
+    for k in range(2):
+        path = _summary(other / f"o{k}.json", k, 1.0, 2.0)
+        data = json.loads(path.read_text())
+        data["config"]["dataset"] |= {"name": "tumvi", "train_seqs": ["r1", "r3"]}
+        path.write_text(json.dumps(data))
+    assert cv.main([*map(str, mine), "--reference", str(other), "--out", str(tmp_path / "x")]) == 2
+    assert "the reference's runs are of tumvi, these of mine" in capsys.readouterr().err
+    stray = tmp_path / "stray"
+    stray.mkdir()
+    (stray / "notes.json").write_text('{"a": 1}')
+    assert cv.main([str(stray)]) == 2
+    assert "notes.json: not a run summary written by gyrodenoise.train" in capsys.readouterr().err
+
+
+def test_a_launcher_or_sweeper_without_its_plugin_says_what_to_install(monkeypatch):
+    import importlib.util
+
+    from gyrodenoise.cli_errors import missing_plugin_message
+
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
+    assert "pip install 'gyrodenoise[sweep]'" in missing_plugin_message(["-m", "hydra/launcher=local"])
+    assert "hparams_search=euroc_optuna needs a Hydra plugin" in missing_plugin_message(["hparams_search=euroc_optuna"])
+    assert "[slurm]" in missing_plugin_message(["hydra/launcher=slurm"])
+    assert missing_plugin_message(["dataset=euroc"]) is None

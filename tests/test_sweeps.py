@@ -104,6 +104,8 @@ def _build(cfg) -> None:
     build_model(**OmegaConf.to_container(cfg.model, resolve=True))
     IncrementLoss(**OmegaConf.to_container(cfg.loss, resolve=True))
     if cfg.dataset._target_.endswith(".ImuDataModule"):  # constructs only: no data is read before setup()
+        if cfg.dataset.get("cv_fold") == "all":  # every fold in turn (gyrodenoise.all_folds): each is one data module
+            cfg = OmegaConf.merge(cfg, {"dataset": {"cv_fold": 0}})
         hydra.utils.instantiate(cfg.dataset)
 
 

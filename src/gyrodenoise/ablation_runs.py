@@ -196,6 +196,11 @@ def load_summary_file(path: Path) -> Run:
         raise ValueError(f"{path}: not valid JSON ({e})") from e
     if not isinstance(summary, dict):
         raise ValueError(f"{path}: a summary is a JSON object, got {type(summary).__name__}")
+    if not {"overrides", "queue", "val"} & set(summary):
+        raise ValueError(
+            f"{path}: not a run summary written by gyrodenoise.train (no 'overrides' or 'val' field): give run "
+            "folders, sweep folders or their summary.json files"
+        )
     lines = summary.get("overrides")
     if lines is None and isinstance(summary.get("queue"), dict):
         lines = summary["queue"].get("overrides")

@@ -22,7 +22,7 @@ from gyrodenoise.paths import portable_tree
 
 def wants_all_folds(cfg: DictConfig) -> bool:
     """Whether the config asks for every fold in one run (`dataset.cv_fold=all`)."""
-    return OmegaConf.select(cfg, "dataset.cv_fold") == ALL_FOLDS
+    return str(OmegaConf.select(cfg, "dataset.cv_fold")).lower() == ALL_FOLDS
 
 
 # settings that may differ between a fold kept from before and this run without changing what the fold trained:
@@ -42,9 +42,15 @@ RUN_ONLY_KEYS = {
 }
 
 
+def _run_only(key: str) -> bool:
+    # a callback's class path (a code update may swap one for a subclass of the same role: the recipe is unchanged);
+    # a callback added or removed (callbacks=ema) still differs by its own keys
+    return key in RUN_ONLY_KEYS or (key.startswith("callbacks.") and key.endswith("._target_"))
+
+
 def _differences(kept: object, now: object, prefix: str = "") -> list[str]:
     """Keys of both configs whose values differ (a key that only one has is not counted: another code version)."""
-    if prefix.rstrip(".") in RUN_ONLY_KEYS:
+    if _run_only(prefix.rstrip(".")):
         return []
     if isinstance(kept, dict) and isinstance(now, dict):
         return [d for k in kept if k in now for d in _differences(kept[k], now[k], f"{prefix}{k}.")]
@@ -58,7 +64,8 @@ def _check_kept_fold(folder: Path, kept: dict, cfg_k: DictConfig) -> None:
         raise ConfigError(
             f"{folder} holds a fold finished with other settings ({'; '.join(diffs[:5])}"
             f"{f'; {len(diffs) - 5} more' if len(diffs) > 5 else ''}): dataset.cv_fold=all would mix two recipes. "
-            "Give this run another output folder, or remove that run's folder to train it afresh"
+            f"Give this run another output folder (hydra.run.dir=...), or delete {folder} to train that fold afresh "
+            "with this run's settings"
         )
 
 

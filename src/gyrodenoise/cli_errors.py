@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import errno
 import functools
+import importlib.util
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
@@ -57,6 +58,8 @@ def user_errors() -> Iterator[None]:
     except MissingMandatoryValue as e:  # e.g. dataset=asl_folder without dataset.root
         _one_line(f"{e.full_key} has no value (it is '???' in the config): give it, e.g. {e.full_key}=...")
     except (MisconfigurationException, InstantiationException) as e:  # Hydra wraps the Trainer's own error
+        if isinstance(e.__cause__, USER_ERRORS):  # ours, raised inside a config's target (e.g. the data module)
+            _one_line(str(e.__cause__))
         if "no supported gpu backend" not in str(e).lower():
             raise
         _one_line("no supported GPU backend on this machine: leave out trainer=gpu, or set trainer.accelerator=cpu.")
@@ -92,6 +95,27 @@ def _one_line(message: str) -> None:
     raise SystemExit(2) from None
 
 
+# config choices that need a Hydra plugin of an extra: (override prefix, plugin module, extra)
+PLUGINS = (
+    ("hydra/launcher=local", "hydra_plugins.hydra_joblib_launcher", "sweep"),
+    ("hparams_search=", "hydra_plugins.hydra_optuna_sweeper", "sweep"),
+    ("hydra/launcher=slurm", "hydra_plugins.hydra_submitit_launcher", "slurm"),
+)
+
+
+def missing_plugin_message(overrides: Sequence[str]) -> str | None:
+    """What to install when a command line names a launcher or sweeper whose Hydra plugin is not installed (Hydra
+    says only "Could not load 'hydra/launcher/joblib'")."""
+    for prefix, module, extra in PLUGINS:
+        if any(o.startswith(prefix) for o in overrides) and importlib.util.find_spec(module) is None:
+            given = next(o for o in overrides if o.startswith(prefix))
+            return (
+                f"{given} needs a Hydra plugin that is not installed: pip install 'gyrodenoise[{extra}]' (from a "
+                f"checkout: pip install -e '.[{extra}]')"
+            )
+    return None
+
+
 def hydra_key_hints(config_name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Wraps a `@hydra.main` entry point: a misspelt key on its command line ends it with one line that names
     the key it was probably meant to be (`misspelt_key_message`), before Hydra's own message."""
@@ -100,7 +124,7 @@ def hydra_key_hints(config_name: str) -> Callable[[Callable[..., Any]], Callable
         @functools.wraps(hydra_main)
         def main(*args: Any, **kwargs: Any) -> Any:
             if not args and not kwargs and os.environ.get("HYDRA_FULL_ERROR") != "1":
-                if message := misspelt_key_message(config_name, sys.argv[1:]):
+                if message := missing_plugin_message(sys.argv[1:]) or misspelt_key_message(config_name, sys.argv[1:]):
                     print(f"error: {message}", file=sys.stderr)
                     raise SystemExit(2)
             return hydra_main(*args, **kwargs)

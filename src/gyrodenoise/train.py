@@ -466,7 +466,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     return summary
 
 
-def single_run_of_a_sweep_note() -> str | None:
+def single_run_of_a_sweep_note(cfg: DictConfig | None = None) -> str | None:
     """A note when the config defines a sweep (an experiment's hydra.sweeper.params) but runs without -m: one
     run of it is legitimate (the queues of benchmarks/run_queue.py run them so), but easy to do by mistake."""
     if not HydraConfig.initialized():
@@ -476,6 +476,11 @@ def single_run_of_a_sweep_note() -> str | None:
     if hc.mode != RunMode.RUN or not params:
         return None
     swept = ", ".join(f"{k} over {v}" for k, v in params.items())
+    if cfg is not None and all_folds.wants_all_folds(cfg):  # experiment=cross_validation without -m
+        return (
+            f"note: this config defines a sweep ({swept}); without -m this run trains every fold in turn "
+            "(dataset.cv_fold=all). With -m each fold is a job of its own (several at once with a parallel launcher)."
+        )
     return f"note: this config defines a sweep ({swept}); this is one run of it. Add -m to run the sweep."
 
 
@@ -483,7 +488,7 @@ def single_run_of_a_sweep_note() -> str | None:
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
     with console_to_job_log(), user_errors():
-        if note := single_run_of_a_sweep_note():
+        if note := single_run_of_a_sweep_note(cfg):
             print(note)
         summary = train(cfg)
     # the value an Optuna sweep minimises

@@ -141,15 +141,15 @@ class ImuDataModule(L.LightningDataModule):
         self.cv_fold, self.cv_holdout = cv_fold, None
         if cv_fold is not None:
             if val_seqs is not None:
-                raise ValueError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
-            if cv_fold == "all":
-                raise ValueError(
+                raise ConfigError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
+            if isinstance(cv_fold, str) and cv_fold.lower() == "all":
+                raise ConfigError(
                     "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
                     f"give one fold, 0..{len(self.train_names) - 1}"
                 )
             if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
                 n = len(self.train_names)
-                raise ValueError(
+                raise ConfigError(
                     f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {self.train_names}); "
                     f"experiment=cross_validation sweeps EuRoC's six folds: for these give "
                     f"dataset.cv_fold={','.join(map(str, range(n)))} on its command line, or dataset.cv_fold=all"
