@@ -316,7 +316,7 @@ def load_recipes(
         raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matching}")
     found = [(label, collect(rs)) for label, rs in recipes(runs)]
     for _, cv in found:
-        cv.skipped += [f"{p}: unfinished (no summary.json)" for p in unfinished]
+        cv.skipped += [f"{p}: unfinished or failed (no summary.json; its train.log says which)" for p in unfinished]
     return found, unfinished
 
 
