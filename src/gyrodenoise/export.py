@@ -12,6 +12,7 @@ corrected gyro (and std), and `state_out` to feed back with the next chunk; chun
 included, then give the batch model's outputs on the whole stream.
 
     python -m gyrodenoise.export euroc --onnx euroc.onnx [--pt2 euroc.pt2] [--stateful]
+    python -m gyrodenoise.export euroc --c OUT_DIR       # plain C99 streaming step (`gyrodenoise.c_export`)
 
 ONNX uses the torch.export-based exporter (`dynamo=True`, torch's default since 2.9), which needs
 `onnx` and `onnxscript` (pip install "gyrodenoise[export]").
@@ -29,6 +30,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from gyrodenoise import c_export
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings, quiet_library_notices
@@ -204,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     quiet_library_notices()
     ap = argparse.ArgumentParser(
         prog="python -m gyrodenoise.export",
-        description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export. "
+        description="Export a gyro correction model (normalisation and C_hat included) to ONNX / torch.export, or its "
+        "streaming step to plain C99 (--c). "
         "Input 'imu' (batch, samples, 6): gyro x, y, z [rad/s] and accelerometer x, y, z [m/s^2] at the model's "
         "training rate; output 'gyro_corrected' (and an ensemble's 'gyro_std') (batch, samples, 3) [rad/s]. "
         "The .onnx file's metadata_props record these and the training rate.",
@@ -219,13 +222,26 @@ def main(argv: list[str] | None = None) -> int:
         help="export the streaming step (inputs imu, state, reset; outputs ..., state_out): feed state_out back "
         "with the next chunk of any length and the outputs equal one call on the whole stream",
     )
-    ap.add_argument("--no-check", action="store_true", help="skip the onnxruntime parity check")
+    ap.add_argument(
+        "--c",
+        type=Path,
+        metavar="OUT_DIR",
+        help=f"write the streaming step as plain C99 ({c_export.HEADER}, {c_export.SOURCE}, {c_export.EXAMPLE}): no "
+        "runtime, no allocation, <math.h> only",
+    )
+    ap.add_argument(
+        "--no-check",
+        action="store_true",
+        help="skip the parity checks (onnxruntime; for --c, compiling the C code and running it)",
+    )
     args = ap.parse_args(argv)
-    if not (args.onnx or args.pt2):
-        ap.error("give at least one of --onnx PATH, --pt2 PATH")
+    if not (args.onnx or args.pt2 or args.c):
+        ap.error("give at least one of --onnx PATH, --pt2 PATH, --c OUT_DIR")
     for flag, target in (("--onnx", args.onnx), ("--pt2", args.pt2)):
         if target is not None and target.is_dir():  # found only after the export's work otherwise, with a raw error
             ap.error(f"{flag} {target} is a folder: give a file path, e.g. {target / ('model' + target.suffix)}")
+    if args.c is not None and args.c.exists() and not args.c.is_dir():
+        ap.error(f"--c {args.c} is a file: give a folder for the C files")
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
             model, meta = load_model(args.model)
@@ -251,10 +267,39 @@ def main(argv: list[str] | None = None) -> int:
                         "stateful export of a model it cannot step, gives this; --no-check keeps such a file"
                     )
             print(msg)
+        if args.c:
+            print(write_c(model, args.c, meta, check=not args.no_check))
     except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0
+
+
+def write_c(model: CorrectionModel, out_dir: Path, meta: dict, check: bool = True) -> str:
+    """Write the C export; with `check`, compile it and compare it with the streaming corrector (files removed and
+    ValueError when they differ by more than c_export.PARITY_TOL_RAD_S). Returns what to print."""
+    paths = c_export.export_c(model, out_dir, meta)
+    msg = f"wrote {', '.join(str(p) for p in paths)}"
+    if not check:
+        return msg
+    if (cc := c_export.find_c_compiler()) is None:
+        return msg + " (not compiled nor checked: no C compiler found: cc, gcc, clang or $CC)"
+    try:
+        err = c_export.c_parity(model, out_dir, compiler=cc)
+    except RuntimeError as e:  # the generated code fails to compile or to run: say the compiler's first error
+        lines = str(e).splitlines()
+        first = next((ln for ln in lines if "error" in ln), lines[-1])
+        raise ValueError(f"the C files do not compile or run with {cc}: {first.strip()}") from None
+    worst = max(err.values())
+    if not worst <= c_export.PARITY_TOL_RAD_S:  # NaN included
+        for p in paths:
+            p.unlink(missing_ok=True)
+        raise ValueError(
+            f"{out_dir}: the C code does not reproduce the model (max |diff| {worst:.2e} rad/s > "
+            f"{c_export.PARITY_TOL_RAD_S:g}), so its files were removed; --no-check keeps them"
+        )
+    what = " and ".join(err)
+    return msg + f" ({cc} -O2 vs StreamingCorrector on 1500 random samples: max |diff| {worst:.2e} rad/s over {what})"
 
 
 def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> float:

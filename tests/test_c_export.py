@@ -1,0 +1,217 @@
+"""Plain C export (`python -m gyrodenoise.export MODEL --c DIR`): the compiled C step equals the streaming corrector
+and the batch model, sample by sample, for every activation, an ensemble and the calibrated model.
+
+The C files are compiled with the machine's C compiler (-std=c99 -Wall -Wextra -pedantic -Werror); without one the
+tests skip, except under CI=true, where a missing compiler is a failure.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+import torch
+from _models import random_imu, random_model
+from conftest import require_data
+
+from gyrodenoise import c_export
+from gyrodenoise.export import main
+from gyrodenoise.models.build import build_model
+from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser
+from gyrodenoise.models.ensemble import EnsembleCorrection, predict_with_spread
+from gyrodenoise.pretrained import save_model
+from gyrodenoise.streaming import StreamingCorrector
+
+# rad/s. Python and C both run in float32 but sum the ~1000-term dot products in other orders, so they differ by
+# float32 rounding: ~1e-7 rad/s measured (outputs ~1 rad/s, eps 1.2e-7). A wrong weight, tap, fold or start-up
+# differs by >= 1e-3.
+ATOL = 1e-5
+SMALL = {"channels": (8, 16, 12), "kernel_size": 3, "dilations": (1, 4, 9)}
+
+# a test driver beside example_main.c: argv[1] = the sample index before which it calls gd_reset; a refused
+# sample prints "refused" (and the state must be unchanged)
+DRIVER = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "gyrodenoise_model.h"
+static gd_state st;
+int main(int argc, char **argv)
+{
+    long reset_at = argc > 1 ? atol(argv[1]) : -1, n = 0;
+    float imu[6], w[3], sd[3];
+    while (scanf("%g,%g,%g,%g,%g,%g", &imu[0], &imu[1], &imu[2], &imu[3], &imu[4], &imu[5]) == 6) {
+        if (n++ == reset_at) gd_reset(&st);
+        if (gd_step(&st, imu, w, sd) != 0) { printf("refused\n"); continue; }
+        printf("%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", w[0], w[1], w[2], sd[0], sd[1], sd[2]);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def compiler() -> str:
+    cc = c_export.find_c_compiler()
+    if cc is None:
+        msg = "no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return cc
+
+
+def compiled(model, tmp_path, compiler, meta: dict | None = None):
+    out = tmp_path / "c"
+    c_export.export_c(model, out, meta or {"name": "test"})
+    return c_export.compile_example(out, tmp_path / "gd", compiler, werror=True)
+
+
+def assert_matches_python(model, imu: np.ndarray, gyro: np.ndarray, std: np.ndarray | None) -> None:
+    """C == StreamingCorrector (one push per sample) and == the batch model on the whole stream, within ATOL."""
+    ref, ref_std = c_export.stream_reference(model, imu)
+    batch, batch_std = predict_with_spread(model, imu.astype(np.float32))
+    assert np.abs(gyro - ref).max() < ATOL
+    assert np.abs(gyro - batch).max() < ATOL
+    assert (std is None) == (ref_std is None) == (batch_std is None)
+    if std is not None:
+        assert np.abs(std - ref_std).max() < ATOL
+        assert np.abs(std - batch_std).max() < ATOL
+
+
+@pytest.mark.parametrize("act", sorted(ACTIVATIONS))
+def test_denoiser_with_batch_norm_each_activation(act, tmp_path, compiler):
+    imu = random_imu(1500, seed=5)
+    model = random_model(seed=3, act=act, **SMALL)  # random BN running statistics: folding is exercised
+    model.set_normalization(imu.mean(0), imu.std(0))
+    model.net[-1].weight.data *= 10  # corrections of ~1 rad/s: an error in a hidden unit shows in the output
+    gyro, std = c_export.run_example(compiled(model, tmp_path, compiler), imu)
+    assert np.abs(gyro - imu[:, :3]).max() > 0.1
+    assert_matches_python(model, imu, gyro, std)
+
+
+def test_two_member_ensemble_mean_and_spread(tmp_path, compiler):
+    members = [
+        random_model(seed=1, act="gelu", **SMALL),
+        random_model(seed=2, channels=(10, 6), kernel_size=5, dilations=(2, 7), act="elu", batch_norm=False),
+    ]
+    members[1].set_normalization([0.1, 0, 0, 0, 0, 9.7], [0.4, 0.5, 0.3, 1.2, 1.1, 0.9])
+    ens = EnsembleCorrection(members, spread_scale=1.7)
+    imu = random_imu(1500, seed=6)
+    gyro, std = c_export.run_example(compiled(ens, tmp_path, compiler), imu)
+    assert std is not None and std.min() > 0
+    assert_matches_python(ens, imu, gyro, std)
+
+
+@pytest.mark.parametrize("g_sensitivity", [False, True])
+def test_calibrated_model(g_sensitivity, tmp_path, compiler):
+    model = build_model("calibrated", g_sensitivity=g_sensitivity)
+    model.bias.data[:] = torch.tensor([0.01, 0.02, -0.03])
+    model.C_delta.data.normal_(std=0.01)
+    if g_sensitivity:
+        model.G.data.normal_(std=1e-3)
+    imu = random_imu(1500, seed=7)
+    exe = compiled(model, tmp_path, compiler)
+    gyro, std = c_export.run_example(exe, imu)
+    assert std is None
+    assert_matches_python(model, imu, gyro, std)
+    assert "GD_N_RINGS          0 " in (tmp_path / "c" / c_export.HEADER).read_text()
+    # the example stops at a refused sample or a malformed line, naming it
+    for text, said in (("0,0,0,0,0,0,9.8\n1,nan,0,0,0,0,9.8\n", "sample 2 (t=1)"), ("t\n0,1,2\n", "line 2:")):
+        done = subprocess.run([str(exe)], input=text, capture_output=True, text=True)
+        assert done.returncode == 1 and said in done.stderr
+
+
+def test_reset_and_refused_samples(tmp_path, compiler):
+    """gd_reset starts a new stream like StreamingCorrector.reset(); a NaN or impossible sample is refused and leaves
+    the state unchanged, as StreamingCorrector refuses it."""
+    model = random_model(seed=4, **SMALL)
+    compiled(model, tmp_path, compiler)
+    exe = c_export.compile_example(tmp_path / "c", tmp_path / "driver", compiler, werror=True)
+    driver = tmp_path / "c" / "driver.c"
+    driver.write_text(DRIVER)
+    cmd = [*compiler.split(), "-O2", "-std=c99", "-Wall", "-Werror", "-o", str(exe), str(driver)]
+    subprocess.run([*cmd, str(tmp_path / "c" / c_export.SOURCE), "-lm"], check=True)
+    imu = random_imu(300, seed=8).astype(np.float32)
+    bad = {50: np.nan, 120: 1e3}  # gyro NaN, gyro 1000 rad/s
+    lines = []
+    for n, row in enumerate(imu):
+        sample = row.copy()
+        if n in bad:
+            sample[0] = bad[n]
+        lines.append(",".join(f"{v:.9g}" for v in sample))
+        if n in bad:
+            lines.append(",".join(f"{v:.9g}" for v in row))  # then the good sample
+    done = subprocess.run([str(exe), "202"], input="\n".join(lines) + "\n", capture_output=True, text=True, check=True)
+    out = done.stdout.splitlines()
+    assert [i for i, ln in enumerate(out) if ln == "refused"] == [50, 121]
+    gyro = np.array([[float(v) for v in ln.split(",")[:3]] for ln in out if ln != "refused"])
+    sc = StreamingCorrector(model)
+    ref = [sc.push(s) for s in imu[:200]]
+    sc.reset()  # the driver resets before its input line 202 = sample 200 (two refused lines before it)
+    ref += [sc.push(s) for s in imu[200:]]
+    assert np.abs(gyro - np.array(ref)).max() < ATOL
+
+
+def test_shipped_euroc_ensemble_on_real_data(tmp_path, compiler):
+    """The shipped 8-network `euroc` through the C code on 2000 samples of EuRoC MH_02_easy."""
+    from gyrodenoise.data.readers import read_imu
+    from gyrodenoise.pretrained import available_models, load_model
+
+    if "euroc" not in available_models():
+        pytest.skip("the shipped euroc model is not installed")
+    data = read_imu(require_data("euroc", "MH_02_easy", "mav0", "imu0", "data.csv"))
+    imu = np.concatenate([data.gyro, data.acc], axis=1)[3000:5000]
+    model, meta = load_model("euroc")
+    gyro, std = c_export.run_example(compiled(model, tmp_path, compiler, meta), imu)
+    assert len(model.members) == 8 and std is not None
+    assert_matches_python(model, imu, gyro, std)
+    header = (tmp_path / "c" / c_export.HEADER).read_text()
+    assert all(s in header for s in ("Model: euroc", "ADIS16448", "Receptive field: 511", "Exported by gyrodenoise"))
+
+
+class OtherDenoiser(DilatedCNNDenoiser):
+    """A subclass: its correction could be another function; the C export must not assume it is not."""
+
+
+def test_models_without_a_c_form_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="has no C form"):
+        c_export.export_c(OtherDenoiser(**SMALL), tmp_path)
+    model = random_model(**SMALL)
+    model.net[2] = torch.nn.Hardtanh()  # an activation the model classes do not offer
+    with pytest.raises(ValueError, match="has no C form.*Hardtanh"):
+        c_export.export_c(model, tmp_path)
+    ens = EnsembleCorrection([random_model(**SMALL), OtherDenoiser(**SMALL)])
+    with pytest.raises(ValueError, match="member 1 .* has no C form"):
+        c_export.export_c(ens, tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
+def test_cli_writes_compiles_and_checks(tmp_path, capsys, compiler):
+    path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt", {"rate_hz": 200.0})
+    assert main([str(path), "--c", str(tmp_path / "out")]) == 0
+    said = capsys.readouterr().out
+    assert "gyrodenoise_model.c" in said and "max |diff|" in said
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {c_export.HEADER, c_export.SOURCE, c_export.EXAMPLE}
+    assert "#define GD_RATE_HZ          200.0 " in (tmp_path / "out" / c_export.HEADER).read_text()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SystemExit):
+        main([str(path), "--c", str(tmp_path / "file")])
+
+
+def test_cli_refusal_is_one_line(tmp_path, capsys):
+    cfg = {"name": "custom", "_target_": f"{__name__}.OtherDenoiser", **SMALL}
+    path = save_model(OtherDenoiser(**SMALL), cfg, tmp_path / "m.pt")
+    assert main([str(path), "--c", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "has no C form" in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_without_a_compiler_writes_and_says_it_did_not_check(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(c_export, "find_c_compiler", lambda: None)
+    path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")
+    assert main([str(path), "--c", str(tmp_path / "out")]) == 0
+    assert "not compiled nor checked: no C compiler found" in capsys.readouterr().out
+    assert (tmp_path / "out" / c_export.SOURCE).is_file()
