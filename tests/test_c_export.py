@@ -2,12 +2,11 @@
 and the batch model, sample by sample, for every activation, an ensemble and the calibrated model.
 
 The C files are compiled with the machine's C compiler (-std=c99 -Wall -Wextra -pedantic -Werror); without one the
-tests skip, except under CI=true, where a missing compiler is a failure.
+tests skip and say why (a compiler is a system package, not something `pip install` brings: CI does not require one).
 """
 
 from __future__ import annotations
 
-import os
 import subprocess
 
 import numpy as np
@@ -55,10 +54,7 @@ int main(int argc, char **argv)
 def compiler() -> str:
     cc = c_export.find_c_compiler()
     if cc is None:
-        msg = "no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(msg)
-        pytest.skip(msg)
+        pytest.skip("no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared")
     return cc
 
 
