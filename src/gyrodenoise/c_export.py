@@ -28,7 +28,7 @@ import numpy as np
 import gyrodenoise
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
-from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
+from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.pretrained import not_better_warning
 from gyrodenoise.provenance import git_revision
@@ -55,14 +55,12 @@ C_ACTIVATIONS = {
 def _members(model: CorrectionModel) -> list[StreamingCorrector]:
     """One float64 streaming corrector per member (its folded weights), or a one-line error for a model without a C
     form."""
+    if what := not_built_in(model):
+        raise ValueError(
+            f"{what} has no C form: the C export implements the built-in denoiser and calibrated models (and their "
+            "ensembles) only; export it to ONNX instead"
+        )
     members = list(model.members) if isinstance(model, EnsembleCorrection) else [model]
-    for k, m in enumerate(members):
-        if type(m) not in (DilatedCNNDenoiser, CalibratedImu):
-            what = f"member {k}" if isinstance(model, EnsembleCorrection) else "the model"
-            raise ValueError(
-                f"{what} ({type(m).__module__}.{type(m).__qualname__}) has no C form: the C export implements the "
-                "built-in denoiser and calibrated models (and their ensembles) only; export it to ONNX instead"
-            )
     try:
         out = [StreamingCorrector(m, dtype="float64") for m in members]
     except TypeError as e:  # a layer or activation the streaming form does not know (models.net edited)

@@ -118,16 +118,25 @@ def causality_leak(model: nn.Module, n: int | None = None, seed: int = 0) -> flo
     return float((a - b).abs().max() / max(1.0, float(a.abs().max())))
 
 
-def check_stream_form(model: nn.Module) -> None:
-    """Refuse a model (or an ensemble member) that the streaming corrector and the stateful export cannot reproduce:
-    they rebuild exactly the built-in denoiser's and calibrated model's arithmetic, so a subclass (whose `correction`
-    may be another function) or a user's own class would stream something else without an error."""
+def not_built_in(model: nn.Module) -> str | None:
+    """'the model (pkg.Class)' or 'member k (pkg.Class)' for the first model or ensemble member that is not exactly a
+    built-in denoiser or calibrated model (a subclass included: its `correction` may be another function), or None.
+    The forms that rebuild the built-in arithmetic (streaming, stateful graph, C) refuse such a model."""
     members = list(model.members) if isinstance(model, EnsembleCorrection) else [model]
     for k, m in enumerate(members):
         if type(m) not in (DilatedCNNDenoiser, CalibratedImu):
             what = f"member {k}" if isinstance(model, EnsembleCorrection) else "the model"
-            raise ValueError(
-                f"{what} ({type(m).__module__}.{type(m).__qualname__}) has no streaming form: the streaming "
-                "corrector and the stateful ONNX graph implement the built-in denoiser and calibrated models only. "
-                "Use the batch path (correct --engine batch; export without --stateful; predict_gyro on a window)"
-            )
+            return f"{what} ({type(m).__module__}.{type(m).__qualname__})"
+    return None
+
+
+def check_stream_form(model: nn.Module) -> None:
+    """Refuse a model (or an ensemble member) that the streaming corrector and the stateful export cannot reproduce:
+    they rebuild exactly the built-in denoiser's and calibrated model's arithmetic, so a subclass or a user's own
+    class would stream something else without an error."""
+    if what := not_built_in(model):
+        raise ValueError(
+            f"{what} has no streaming form: the streaming corrector and the stateful ONNX graph implement the "
+            "built-in denoiser and calibrated models only. Use the batch path (correct --engine batch; export "
+            "without --stateful; predict_gyro on a window)"
+        )
