@@ -388,3 +388,14 @@ def test_an_installed_copy_records_the_commit_its_wheel_was_built_from(tmp_path,
     head = subprocess.run(git + ["rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     monkeypatch.setattr(gyrodenoise, "__file__", str(repo / "src" / "gyrodenoise" / "__init__.py"))
     assert _code_version() == {"package": version, "commit": head, "dirty": False}
+
+
+def test_a_run_records_the_code_it_started_from(monkeypatch):
+    """code_version is read once, before the first fit of the process: a commit or an edit of src/ while a run
+    trains (minutes) is not the code it ran (a cross-validation recorded the commit made during its fourth fold)."""
+    import gyrodenoise.train as t
+
+    monkeypatch.setattr(t, "_LOADED_CODE", None)
+    answers = iter([{"commit": "start"}, {"commit": "later", "dirty": True}])
+    monkeypatch.setattr(t, "_code_version", lambda: next(answers))
+    assert t.loaded_code_version() == {"commit": "start"} == t.loaded_code_version()

@@ -263,12 +263,26 @@ def _code_version() -> dict:
     return out
 
 
+_LOADED_CODE: dict | None = None  # the code this process loaded, read once: a later commit or edit is not this run's
+
+
+def loaded_code_version() -> dict:
+    """`_code_version()` at the first training of this process (the CLI's only one): a run that takes minutes records
+    the commit it started from, not whatever the checkout holds when it ends (edits during a run marked it dirty, a
+    commit during a run gave the later commit)."""
+    global _LOADED_CODE
+    if _LOADED_CODE is None:
+        _LOADED_CODE = _code_version()
+    return _LOADED_CODE
+
+
 def train(cfg: DictConfig) -> dict:
     """Fit, select, score and save one run of a composed train config (`gyrodenoise.config.compose_config("train",
     [...])`; from Python it needs `paths.output_dir=...`). Returns the summary written to `output_dir/summary.json`
     (its `output_dir` holds `model.pt`). Called from Python it leaves torch's thread count as it found it and does
     not apply `retain_freed_memory` (the caller's process would keep its peak memory until it exits)."""
     out_dir = with_output_dir(cfg, "paths.output_dir")  # before any global setting changes
+    loaded_code_version()  # now, before the fit
     if cfg.get("retain_freed_memory", True) and HydraConfig.initialized():
         retain_freed_memory()
     with torch_threads(cfg.get("threads")):
@@ -411,7 +425,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
         "torch_threads": torch.get_num_threads(),  # the figures reproduce to the digit at the same count
-        "code_version": _code_version(),
+        "code_version": loaded_code_version(),
         "selection": cfg.select,
         "selected": selected,
         "best_checkpoint": portable_path(best_path) if best_path else "",
