@@ -218,3 +218,20 @@ def test_a_launcher_or_sweeper_without_its_plugin_says_what_to_install(monkeypat
     assert "hparams_search=euroc_optuna needs a Hydra plugin" in missing_plugin_message(["hparams_search=euroc_optuna"])
     assert "[slurm]" in missing_plugin_message(["hydra/launcher=slurm"])
     assert missing_plugin_message(["dataset=euroc"]) is None
+
+
+def test_each_job_leaves_the_table_of_the_folds_finished_so_far(tmp_path):
+    """Hydra stops a sweep at a failed job without on_multirun_end: the table after each job names what is missing."""
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    _summary(tmp_path / "f0.json", 0, 2.0, 3.0)
+    _summary(tmp_path / "f2.json", 2, 1.0, 2.0)
+    config = OmegaConf.create({"hydra": {"mode": RunMode.MULTIRUN, "sweep": {"dir": str(tmp_path)}}})
+    cv.CrossValidationCallback().on_job_end(config)
+    data = json.loads((tmp_path / "cross_validation.json").read_text())
+    assert data["missing_folds"] == [1] and data["figure_deg"] == pytest.approx(1.5)
+    config.hydra.mode = RunMode.RUN  # a plain run: nothing written
+    (tmp_path / "cross_validation.json").unlink()
+    cv.CrossValidationCallback().on_job_end(config)
+    assert not (tmp_path / "cross_validation.json").exists()

@@ -413,6 +413,20 @@ class CrossValidationCallback(_HydraCallback):
             print(f"error: {message}", file=sys.stderr)
             raise SystemExit(2)  # Hydra turns a callback's exceptions into warnings and goes on
 
+    def on_job_end(self, config: DictConfig, **kwargs: Any) -> None:
+        """After each job of the sweep, finished or failed: the table of the folds finished so far, so that a sweep
+        Hydra stops at a failed job (it then skips on_multirun_end) still leaves one, naming what is missing."""
+        from hydra.types import RunMode
+
+        if OmegaConf.select(config, "hydra.mode") != RunMode.MULTIRUN:
+            return
+        sweep = Path(config.hydra.sweep.dir)
+        try:
+            found, _ = load_recipes([sweep])
+            write_recipes(found, sweep / CV_SUMMARY, str(sweep))
+        except (ValueError, FileNotFoundError, OSError):  # nothing finished yet, or a concurrent job's half state
+            return
+
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep = Path(config.hydra.sweep.dir)
         try:
