@@ -17,7 +17,7 @@ from gyrodenoise.ablation_runs import CV_SUMMARY, Run
 from gyrodenoise.atomic import write_json
 from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.cross_validation import ALL_FOLDS, collect, read_run, report, write
-from gyrodenoise.paths import portable_tree
+from gyrodenoise.paths import portable_path, portable_tree
 
 
 def wants_all_folds(cfg: DictConfig) -> bool:
@@ -114,7 +114,7 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
         "overrides": [o for o in first.get("overrides", []) if not o.lstrip("+").startswith("dataset.cv_fold=")]
         + [f"dataset.cv_fold={ALL_FOLDS}"],
         "config": {**first["config"], "dataset": {**first["config"]["dataset"], "cv_fold": ALL_FOLDS}},
-        "output_dir": str(out_dir),
+        "output_dir": portable_path(out_dir),
         "train_wall_time_s": sum(r.summary.get("train_wall_time_s") or 0.0 for r in runs),
         "val": {"val/aoe_deg": figure},
         "test": {},
