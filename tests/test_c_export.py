@@ -150,6 +150,43 @@ def test_reset_and_refused_samples(tmp_path, compiler):
     assert np.abs(gyro - np.array(ref)).max() < ATOL
 
 
+GARBAGE_DRIVER = r"""
+#include <stdio.h>
+#include <string.h>
+#include "gyrodenoise_model.h"
+int main(void)
+{
+    gd_state st;
+    float imu[6], w[3];
+    memset(&st, 0x7f, sizeof st); /* a state never zeroed, as on the stack */
+    gd_reset(&st);                /* the header: "Call it before the first sample (or zero the state)" */
+    while (scanf("%g,%g,%g,%g,%g,%g", &imu[0], &imu[1], &imu[2], &imu[3], &imu[4], &imu[5]) == 6) {
+        if (gd_step(&st, imu, w, NULL) != 0) return 2;
+        printf("%.9g,%.9g,%.9g\n", w[0], w[1], w[2]);
+    }
+    return 0;
+}
+"""
+
+
+def test_gd_reset_of_a_never_zeroed_state(tmp_path, compiler):
+    """gd_reset alone makes a state of any bytes a fresh one (it left the ring indices as they were: an index beyond
+    the ring wrote out of bounds)."""
+    model = random_model(seed=4, **SMALL)
+    compiled(model, tmp_path, compiler)
+    (tmp_path / "c" / "garbage.c").write_text(GARBAGE_DRIVER)
+    exe = tmp_path / "garbage"
+    cmd = [*compiler.split(), "-O2", "-std=c99", "-Wall", "-Werror", "-o", str(exe), str(tmp_path / "c" / "garbage.c")]
+    subprocess.run([*cmd, str(tmp_path / "c" / c_export.SOURCE), "-lm"], check=True)
+    imu = random_imu(100, seed=8).astype(np.float32)
+    text = "".join(",".join(f"{v:.9g}" for v in row) + "\n" for row in imu)
+    done = subprocess.run([str(exe)], input=text, capture_output=True, text=True)
+    assert done.returncode == 0
+    gyro = np.array([[float(v) for v in ln.split(",")] for ln in done.stdout.splitlines()])
+    ref, _ = c_export.stream_reference(model, imu)
+    assert gyro.shape == ref.shape and np.abs(gyro - ref).max() < ATOL
+
+
 def test_shipped_euroc_ensemble_on_real_data(tmp_path, compiler):
     """The shipped 8-network `euroc` through the C code on 2000 samples of EuRoC MH_02_easy."""
     from gyrodenoise.data.readers import read_imu
@@ -194,6 +231,15 @@ def test_cli_writes_compiles_and_checks(tmp_path, capsys, compiler):
     (tmp_path / "file").write_text("x")
     with pytest.raises(SystemExit):
         main([str(path), "--c", str(tmp_path / "file")])
+
+
+def test_cli_checks_a_one_member_ensemble(tmp_path, capsys, compiler):
+    """A one-member ensemble streams a zero std and its C example writes no std columns: the check compares the gyro
+    (it failed with a TypeError)."""
+    cfg = {"name": "ensemble", "members": [{"name": "denoiser", **SMALL}]}
+    path = save_model(EnsembleCorrection([random_model(**SMALL)]), cfg, tmp_path / "m.pt")
+    assert main([str(path), "--c", str(tmp_path / "out")]) == 0
+    assert "max |diff|" in capsys.readouterr().out
 
 
 def test_cli_refusal_is_one_line(tmp_path, capsys):
