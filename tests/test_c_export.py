@@ -7,6 +7,7 @@ tests skip and say why (a compiler is a system package, not something `pip insta
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 
 import numpy as np
@@ -185,6 +186,37 @@ def test_gd_reset_of_a_never_zeroed_state(tmp_path, compiler):
     gyro = np.array([[float(v) for v in ln.split(",")] for ln in done.stdout.splitlines()])
     ref, _ = c_export.stream_reference(model, imu)
     assert gyro.shape == ref.shape and np.abs(gyro - ref).max() < ATOL
+
+
+CPP_DRIVER = r"""
+#include "gyrodenoise_model.h"
+static gd_state st;
+int main() { float imu[6] = {0, 0, 0, 0, 0, 9.8f}, w[3]; gd_reset(&st); return gd_step(&st, imu, w, nullptr); }
+"""
+
+
+def test_header_from_cpp_and_metadata_in_its_comment(tmp_path, compiler):
+    """A C++ program (PX4, ArduPilot) includes the header and links the C-compiled model (extern "C"); comment
+    markers in the metadata neither end nor open a comment (gcc -Wall -Werror: "/*" within comment)."""
+    model = random_model(seed=4, **SMALL)
+    exe = compiled(model, tmp_path, compiler, {"name": "a */ int x; /* b", "dataset": "c/*d"})
+    assert "int x;" in (tmp_path / "c" / c_export.HEADER).read_text()
+    assert c_export.run_example(exe, random_imu(5))[0].shape == (5, 3)
+    cxx = shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
+    if cxx is None:
+        pytest.skip("no C++ compiler found (c++, g++, clang++)")
+    obj, main_cpp = tmp_path / "model.o", tmp_path / "c" / "main.cpp"
+    main_cpp.write_text(CPP_DRIVER)
+    subprocess.run(
+        [*compiler.split(), "-std=c99", "-c", "-o", str(obj), str(tmp_path / "c" / c_export.SOURCE)], check=True
+    )
+    done = subprocess.run(
+        [cxx, "-Wall", "-Wextra", "-pedantic", "-Werror", "-o", str(tmp_path / "cpp"), str(main_cpp), str(obj), "-lm"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    assert subprocess.run([str(tmp_path / "cpp")]).returncode == 0
 
 
 def test_shipped_euroc_ensemble_on_real_data(tmp_path, compiler):

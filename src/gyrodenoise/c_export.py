@@ -217,6 +217,10 @@ HEADER_API = """\
 #ifndef GYRODENOISE_MODEL_H
 #define GYRODENOISE_MODEL_H
 
+#ifdef __cplusplus
+extern "C" {{ /* C++ callers link the C-compiled gyrodenoise_model.c */
+#endif
+
 {defines}
 
 /* One stream's state: sizeof(gd_state) bytes of RAM, no allocation. A zeroed (static) state is a reset one. */
@@ -238,6 +242,10 @@ void gd_reset(gd_state *s);
    Returns 0, or -1 when the sample holds a NaN/inf or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX: it would
    spoil a receptive field of outputs, so it is refused and the state is left unchanged (nothing is written). */
 int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out);
+
+#ifdef __cplusplus
+}}
+#endif
 
 #endif /* GYRODENOISE_MODEL_H */
 """
@@ -434,7 +442,8 @@ def _header(model: CorrectionModel, members: list[StreamingCorrector], meta: dic
         "Outputs equal gyrodenoise's StreamingCorrector and batch model to float32 rounding (~1e-7 rad/s).",
     ]
     lines = ["gyrodenoise gyro correction, plain C99 export", "", *_describe(model, members, meta), *usage]
-    text = "\n".join(lines).replace("*/", "* /")  # nothing from the metadata may end the comment
+    # nothing from the metadata may end the comment, nor open one inside it (gcc -Wall: "/*" within comment)
+    text = "\n".join(lines).replace("*/", "* /").replace("/*", "/ *")
     comment = "\n".join(f" * {s}".rstrip() for s in text.splitlines())
     return f"/*\n{comment}\n */\n" + HEADER_API.format(defines=_defines(sizes))
 
