@@ -283,6 +283,16 @@ def test_cli_refusal_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_cli_unwritable_folder_is_one_line(tmp_path, capsys):
+    """OUT_DIR under a file (NotADirectoryError; a read-only or unwritable folder alike) is a one-line error, not a
+    traceback."""
+    path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")
+    (tmp_path / "file").write_text("x")
+    assert main([str(path), "--c", str(tmp_path / "file" / "out"), "--no-check"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --c ") and "cannot write" in err and err.count("\n") == 1
+
+
 def test_cli_without_a_compiler_writes_and_says_it_did_not_check(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(c_export, "find_c_compiler", lambda: None)
     path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")

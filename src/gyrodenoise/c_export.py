@@ -505,7 +505,11 @@ def export_c(model: CorrectionModel, out_dir: str | Path, meta: dict | None = No
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"--c {out_dir} is a file: give a folder to write {HEADER}, {SOURCE} and {EXAMPLE} into")
-    return [write_text(out_dir / name, text) for name, text in c_sources(model, meta).items()]
+    sources = c_sources(model, meta)
+    try:
+        return [write_text(out_dir / name, text) for name, text in sources.items()]
+    except OSError as e:  # a read-only or unwritable place, a file on the way: one line, not a traceback
+        raise ValueError(f"--c {out_dir}: cannot write the C files there ({e.strerror or e})") from None
 
 
 # ---------------------------------------------------------------------------------------------- compile and compare
