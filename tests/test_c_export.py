@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -291,6 +292,22 @@ def test_cli_unwritable_folder_is_one_line(tmp_path, capsys):
     assert main([str(path), "--c", str(tmp_path / "file" / "out"), "--no-check"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: --c ") and "cannot write" in err and err.count("\n") == 1
+
+
+def test_cli_with_a_cross_compiler_in_cc_is_one_line(tmp_path, capsys, monkeypatch):
+    """$CC that builds for another machine (arm-none-eabi-gcc): the check cannot run the example; one line (it was an
+    OSError traceback: Exec format error)."""
+    fake = tmp_path / "cross-cc"
+    fake.write_text(
+        f"#!{sys.executable}\nimport sys\nexe = sys.argv[sys.argv.index('-o') + 1]\n"
+        "open(exe, 'wb').write(bytes([127, 69, 76, 70, 2, 1, 1, 0]) + b'not for this machine')\n"
+    )
+    fake.chmod(0o755)
+    monkeypatch.setenv("CC", str(fake))
+    path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")
+    assert main([str(path), "--c", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "cannot run here" in err and err.count("\n") == 1
 
 
 def test_cli_without_a_compiler_writes_and_says_it_did_not_check(tmp_path, capsys, monkeypatch):

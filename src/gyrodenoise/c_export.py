@@ -542,7 +542,10 @@ def run_example(exe: str | Path, imu: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """Feed (N, 6) samples (as float32, written exactly) to a compiled example; (gyro (N, 3), std (N, 3) or None)."""
     x = np.asarray(imu, dtype=np.float32)
     lines = "".join(f"{n}," + ",".join(f"{v:.9g}" for v in row) + "\n" for n, row in enumerate(x.tolist()))
-    done = subprocess.run([str(exe)], input="t,gx,gy,gz,ax,ay,az\n" + lines, capture_output=True, text=True)
+    try:
+        done = subprocess.run([str(exe)], input="t,gx,gy,gz,ax,ay,az\n" + lines, capture_output=True, text=True)
+    except OSError as e:  # built for another machine: $CC a cross compiler
+        raise RuntimeError(f"{exe} cannot run here: {e.strerror} (is $CC a cross compiler?)") from None
     if done.returncode != 0:
         raise RuntimeError(f"{exe} failed: {done.stderr.strip()}")
     rows = np.array([[float(v) for v in ln.split(",")] for ln in done.stdout.splitlines()[1:]])
