@@ -316,3 +316,49 @@ def test_cli_without_a_compiler_writes_and_says_it_did_not_check(tmp_path, capsy
     assert main([str(path), "--c", str(tmp_path / "out")]) == 0
     assert "not compiled nor checked: no C compiler found" in capsys.readouterr().out
     assert (tmp_path / "out" / c_export.SOURCE).is_file()
+
+
+TWO_MODELS_DRIVER = r"""
+#include <stdio.h>
+#include "a/gyrodenoise_model.h"
+#include "b/gyrodenoise_model.h"
+int main(void) {
+    static net_state s1;
+    static cal_state s2;
+    float imu[6] = {0.1f, -0.2f, 0.3f, 0.0f, 0.0f, 9.81f}, w1[3], w2[3];
+    int i;
+    for (i = 0; i < 3; ++i) {
+        if (net_step(&s1, imu, w1, NULL) != 0 || cal_step(&s2, imu, w2, NULL) != 0) return 1;
+    }
+    printf("%.9g %.9g %.9g %.9g %.9g %.9g\n", w1[0], w1[1], w1[2], w2[0], w2[1], w2[2]);
+    return NET_N_MEMBERS == 1 && CAL_N_RINGS == 0 ? 0 : 2;
+}
+"""
+
+
+def test_two_models_with_their_own_prefixes_link_into_one_program(tmp_path, compiler):
+    """--c-prefix: a network and a calibrated model (a fallback) in one binary; each answers as its own export."""
+    net = random_model(seed=7, **SMALL)
+    cal = build_model("calibrated")
+    cal.bias.data[:] = torch.tensor([0.01, 0.02, -0.03])
+    c_export.export_c(net, tmp_path / "a", {"name": "net"}, prefix="net")
+    c_export.export_c(cal, tmp_path / "b", {"name": "cal"}, prefix="cal")
+    assert "gd_" not in (tmp_path / "a" / c_export.HEADER).read_text()
+    (tmp_path / "main.c").write_text(TWO_MODELS_DRIVER)
+    objs = []
+    for part in ("a", "b"):  # each model's .c compiled on its own (same file name, another folder)
+        obj = tmp_path / f"{part}.o"
+        src = tmp_path / part / c_export.SOURCE
+        subprocess.run([*compiler.split(), "-std=c99", "-Wall", "-Werror", "-c", "-o", str(obj), str(src)], check=True)
+        objs.append(str(obj))
+    exe = tmp_path / "two"
+    cmd = [*compiler.split(), "-std=c99", "-Wall", "-Werror", "-I", str(tmp_path), "-o", str(exe)]
+    done = subprocess.run([*cmd, str(tmp_path / "main.c"), *objs, "-lm"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()
+    imu = np.tile(np.array([0.1, -0.2, 0.3, 0.0, 0.0, 9.81], dtype=np.float32), (3, 1))
+    for model, got in ((net, out[:3]), (cal, out[3:])):
+        ref, _ = c_export.stream_reference(model, imu)
+        np.testing.assert_allclose(np.array(got, dtype=float), ref[-1], atol=ATOL)
+    with pytest.raises(ValueError, match="a C identifier"):
+        c_export.export_c(net, tmp_path / "x", prefix="9lives")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -476,8 +477,26 @@ def _example(ensemble: bool) -> str:
     )
 
 
-def c_sources(model: CorrectionModel, meta: dict | None = None) -> dict[str, str]:
-    """{file name: text} of the C export (see the module docstring); ValueError for a model without a C form."""
+DEFAULT_PREFIX = "gd"
+_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def with_prefix(text: str, prefix: str) -> str:
+    """The generated code with its public names (gd_step, gd_reset, gd_state, GD_* sizes, the header guard) under
+    another prefix, so that two exported models link into one program."""
+    if prefix == DEFAULT_PREFIX:
+        return text
+    if not _IDENTIFIER.fullmatch(prefix):
+        raise ValueError(f"--c-prefix {prefix!r}: a C identifier (letters, digits, _; not starting with a digit)")
+    text = re.sub(r"\bgd_", f"{prefix}_", text)
+    text = re.sub(r"\bGD_", f"{prefix.upper()}_", text)
+    return text.replace("GYRODENOISE_MODEL_H", f"{prefix.upper()}_GYRODENOISE_MODEL_H")
+
+
+def c_sources(model: CorrectionModel, meta: dict | None = None, prefix: str = DEFAULT_PREFIX) -> dict[str, str]:
+    """{file name: text} of the C export (see the module docstring), its public names prefixed with `prefix`
+    (default gd_); ValueError for a model without a C form."""
+    with_prefix("", prefix)  # a bad prefix before any work
     meta = meta or {}
     members = _members(model)
     _, n_rings, ring_floats = _member_tables(members)
@@ -493,19 +512,23 @@ def c_sources(model: CorrectionModel, meta: dict | None = None) -> dict[str, str
         "acc_max": f"{ACC_ABS_MAX:.1f}f",
     }
     spread = float(getattr(model, "spread_scale", 1.0))
-    return {
+    files = {
         HEADER: _header(model, members, meta, sizes),
         SOURCE: _source(members, spread),
         EXAMPLE: _example(len(members) > 1),
     }
+    return {name: with_prefix(text, prefix) for name, text in files.items()}
 
 
-def export_c(model: CorrectionModel, out_dir: str | Path, meta: dict | None = None) -> list[Path]:
-    """Write the C export's three files into out_dir (created if missing); returns their paths."""
+def export_c(
+    model: CorrectionModel, out_dir: str | Path, meta: dict | None = None, prefix: str = DEFAULT_PREFIX
+) -> list[Path]:
+    """Write the C export's three files into out_dir (created if missing), public names prefixed with `prefix`;
+    returns their paths."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"--c {out_dir} is a file: give a folder to write {HEADER}, {SOURCE} and {EXAMPLE} into")
-    sources = c_sources(model, meta)
+    sources = c_sources(model, meta, prefix)
     try:
         return [write_text(out_dir / name, text) for name, text in sources.items()]
     except OSError as e:  # a read-only or unwritable place, a file on the way: one line, not a traceback

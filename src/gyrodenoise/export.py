@@ -230,6 +230,13 @@ def main(argv: list[str] | None = None) -> int:
         "runtime, no allocation, <math.h> only",
     )
     ap.add_argument(
+        "--c-prefix",
+        default=c_export.DEFAULT_PREFIX,
+        metavar="NAME",
+        help="with --c: the prefix of the C names (default gd: gd_step, gd_reset, gd_state, GD_*); another prefix per "
+        "model lets two exported models link into one program",
+    )
+    ap.add_argument(
         "--no-check",
         action="store_true",
         help="skip the parity checks (onnxruntime; for --c, compiling the C code and running it)",
@@ -268,17 +275,19 @@ def main(argv: list[str] | None = None) -> int:
                     )
             print(msg)
         if args.c:
-            print(write_c(model, args.c, meta, check=not args.no_check))
+            print(write_c(model, args.c, meta, check=not args.no_check, prefix=args.c_prefix))
     except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0
 
 
-def write_c(model: CorrectionModel, out_dir: Path, meta: dict, check: bool = True) -> str:
+def write_c(
+    model: CorrectionModel, out_dir: Path, meta: dict, check: bool = True, prefix: str = c_export.DEFAULT_PREFIX
+) -> str:
     """Write the C export; with `check`, compile it and compare it with the streaming corrector (files removed and
     ValueError when they differ by more than c_export.PARITY_TOL_RAD_S). Returns what to print."""
-    paths = c_export.export_c(model, out_dir, meta)
+    paths = c_export.export_c(model, out_dir, meta, prefix)
     msg = f"wrote {', '.join(str(p) for p in paths)}"
     if not check:
         return msg
