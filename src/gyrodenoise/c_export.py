@@ -30,7 +30,7 @@ import gyrodenoise
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.build import not_built_in
-from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, predict_with_spread
 from gyrodenoise.pretrained import not_better_warning
 from gyrodenoise.provenance import git_revision
 from gyrodenoise.streaming import StreamingCorrector
@@ -594,7 +594,9 @@ def c_parity(
     werror: bool = False,
 ) -> dict[str, float]:
     """Compile out_dir's files, run them on `imu` (default: n random IMU-like samples) and return the max |C -
-    StreamingCorrector| over the gyro ('gyro') and, for an ensemble, the std ('std'), in rad/s."""
+    StreamingCorrector| over the gyro ('gyro') and, for an ensemble, the std ('std'), and the max |C - the batch
+    model| over the gyro ('gyro_batch': the streaming corrector folds batch norm as the export does, the batch model
+    does not), in rad/s."""
     if imu is None:
         rng = np.random.default_rng(0)
         imu = np.concatenate([rng.normal(0, 0.5, (n, 3)), rng.normal(0, 1, (n, 3)) + [0, 0, 9.81]], axis=1)
@@ -602,7 +604,8 @@ def c_parity(
         exe = compile_example(out_dir, Path(tmp) / "gyrodenoise", compiler, werror)
         gyro, std = run_example(exe, imu)
     ref, ref_std = stream_reference(model, imu)
-    out = {"gyro": float(np.abs(gyro - ref).max())}
+    batch, _ = predict_with_spread(model, np.asarray(imu, dtype=np.float32))
+    out = {"gyro": float(np.abs(gyro - ref).max()), "gyro_batch": float(np.abs(gyro - batch).max())}
     if ref_std is not None:  # a one-member ensemble: the streaming std is zeros, the C example writes no std columns
         out["std"] = float(np.abs((0.0 if std is None else std) - ref_std).max())
     return out

@@ -307,8 +307,11 @@ def write_c(
             f"{out_dir}: the C code does not reproduce the model (max |diff| {worst:.2e} rad/s > "
             f"{c_export.PARITY_TOL_RAD_S:g}), so its files were removed; --no-check keeps them"
         )
-    what = " and ".join(err)
-    return msg + f" ({cc} -O2 vs StreamingCorrector on 1500 random samples: max |diff| {worst:.2e} rad/s over {what})"
+    what = ", ".join(k.replace("gyro_batch", "gyro vs the batch model") for k in err)
+    return msg + (
+        f" ({cc} -O2 vs StreamingCorrector and the batch model on 1500 random samples: max |diff| {worst:.2e} rad/s "
+        f"over {what})"
+    )
 
 
 def onnx_parity(model: CorrectionModel, path: str | Path, n: int = 1500) -> float:
