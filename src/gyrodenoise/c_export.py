@@ -16,7 +16,6 @@ All of it in float32, so the C outputs equal StreamingCorrector's and the batch 
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -26,13 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-import gyrodenoise
+from gyrodenoise import provenance
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, predict_with_spread
 from gyrodenoise.pretrained import not_better_warning
-from gyrodenoise.provenance import git_revision
 from gyrodenoise.streaming import StreamingCorrector
 
 HEADER, SOURCE, EXAMPLE = "gyrodenoise_model.h", "gyrodenoise_model.c", "example_main.c"
@@ -82,15 +80,13 @@ def _receptive_field(members: list[StreamingCorrector]) -> int:
 def code_version() -> str:
     """'gyrodenoise <version>, commit <hash>[ with local changes in src/]' (the commit of a checkout, or of the wheel an
     installed copy was built from; the version only when neither is known)."""
-    out = f"gyrodenoise {gyrodenoise.__version__}"
-    package = Path(gyrodenoise.__file__).resolve().parent
-    repo = package.parents[1]
-    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
-        return out + f", commit {rev[0]}" + (" with local changes in src/" if rev[1] else "")
-    info = package / "_build_info.json"
-    if info.is_file() and (commit := json.loads(info.read_text(encoding="utf-8")).get("commit")):
-        return out + f", commit {commit} (wheel)"
-    return out
+    v = provenance.code_version()
+    out = f"gyrodenoise {v['package']}"
+    if "commit" not in v:
+        return out
+    if v.get("built"):
+        return out + f", commit {v['commit']} (wheel)"
+    return out + f", commit {v['commit']}" + (" with local changes in src/" if v.get("dirty") else "")
 
 
 # ---------------------------------------------------------------------------------------------- C text pieces

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import subprocess
@@ -29,3 +30,22 @@ def git_revision(repo: Path, scope: str | None = None, untracked: bool = False) 
     if head.returncode != 0:
         return None
     return head.stdout.strip(), bool(dirty.stdout.strip())
+
+
+def code_version() -> dict:
+    """The package version and, run from a checkout of this repository (src/gyrodenoise), its commit and whether
+    src/ differs from it; an installed copy (`pip install .`), the commit its wheel was built from
+    (gyrodenoise/_build_info.json, written by setup.py; `"built": true`). A git repository around site-packages (a
+    .venv inside someone's project) is not this code's and is not asked."""
+    import gyrodenoise
+
+    out: dict = {"package": gyrodenoise.__version__}
+    package = Path(gyrodenoise.__file__).resolve().parent
+    repo = package.parents[1]
+    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
+        out["commit"], out["dirty"] = rev
+    elif (info := package / "_build_info.json").is_file():
+        built = json.loads(info.read_text(encoding="utf-8"))
+        if built.get("commit"):
+            out |= {"commit": built["commit"], "dirty": built.get("dirty"), "built": True}
+    return out

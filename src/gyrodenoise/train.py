@@ -12,7 +12,6 @@ validation and test metrics of the kept weights).
 
 from __future__ import annotations
 
-import json
 import math
 import signal
 import sys
@@ -45,7 +44,8 @@ from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import device_lines_said, quiet_library_notices
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
-from gyrodenoise.provenance import git_revision, machine_description
+from gyrodenoise.provenance import code_version as _code_version
+from gyrodenoise.provenance import machine_description
 from gyrodenoise.tables import markdown_table
 
 
@@ -242,25 +242,6 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
         f"run resumes from its newest checkpoint (auto_resume; last.ckpt is {_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
     )
-
-
-def _code_version() -> dict:
-    """The package version and, run from a checkout of this repository (src/gyrodenoise), its commit and whether
-    src/ differs from it; an installed copy (`pip install .`), the commit its wheel was built from
-    (gyrodenoise/_build_info.json, written by setup.py; `"built": true`). A git repository around site-packages (a
-    .venv inside someone's project) is not this code's and is not asked."""
-    import gyrodenoise
-
-    out: dict = {"package": gyrodenoise.__version__}
-    package = Path(gyrodenoise.__file__).resolve().parent
-    repo = package.parents[1]
-    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
-        out["commit"], out["dirty"] = rev
-    elif (info := package / "_build_info.json").is_file():
-        built = json.loads(info.read_text(encoding="utf-8"))
-        if built.get("commit"):
-            out |= {"commit": built["commit"], "dirty": built.get("dirty"), "built": True}
-    return out
 
 
 _LOADED_CODE: dict | None = None  # the code this process loaded, read once: a later commit or edit is not this run's
