@@ -308,6 +308,21 @@ def test_cli_with_a_cross_compiler_in_cc_is_one_line(tmp_path, capsys, monkeypat
     assert main([str(path), "--c", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "cannot run here" in err and err.count("\n") == 1
+    assert (tmp_path / "out" / c_export.HEADER).is_file()  # right, maybe, for the machine it is built for: kept
+
+
+def test_cli_removes_files_that_do_not_compile_and_names_a_missing_cc(tmp_path, capsys, monkeypatch, compiler):
+    """Files the compiler refuses are removed like files that compute something else (none left to look whole);
+    a $CC that is not on the PATH is named, and the host compiler checks instead."""
+    path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")
+    monkeypatch.setenv("CC", f"{compiler} -include {tmp_path / 'no_such_header.h'}")
+    assert main([str(path), "--c", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "do not compile or run" in err and "so they were removed" in err
+    assert not (tmp_path / "bad" / c_export.SOURCE).exists()
+    monkeypatch.setenv("CC", "no-such-cross-gcc")
+    assert main([str(path), "--c", str(tmp_path / "good")]) == 0
+    assert "$CC=no-such-cross-gcc is not on the PATH: checked with" in capsys.readouterr().out
 
 
 def test_cli_without_a_compiler_writes_and_says_it_did_not_check(tmp_path, capsys, monkeypatch):

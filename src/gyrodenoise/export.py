@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import copy
 import importlib.metadata
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -293,12 +294,20 @@ def write_c(
         return msg
     if (cc := c_export.find_c_compiler()) is None:
         return msg + " (not compiled nor checked: no C compiler found: cc, gcc, clang or $CC)"
+    if (wanted := os.environ.get("CC")) and cc != wanted:
+        msg += f" ($CC={wanted} is not on the PATH: checked with {cc})"
     try:
         err = c_export.c_parity(model, out_dir, compiler=cc)
     except RuntimeError as e:  # the generated code fails to compile or to run: say the compiler's first error
         lines = str(e).splitlines()
-        first = next((ln for ln in lines if "error" in ln), lines[-1])
-        raise ValueError(f"the C files do not compile or run with {cc}: {first.strip()}") from None
+        first = next((ln for ln in lines if "error" in ln), lines[-1]).strip()
+        if "cannot run here" in first:  # built for another machine: the files may be right for it, so they stay
+            raise ValueError(f"the C files were written but not checked: {first}") from None
+        for p in paths:  # files that do not compile are not an export: none is left to look whole
+            p.unlink(missing_ok=True)
+        raise ValueError(
+            f"the C files do not compile or run with {cc}, so they were removed (--no-check keeps them): {first}"
+        ) from None
     worst = max(err.values())
     if not worst <= c_export.PARITY_TOL_RAD_S:  # NaN included
         for p in paths:
