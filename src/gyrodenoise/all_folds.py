@@ -16,7 +16,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from gyrodenoise.ablation_runs import CV_SUMMARY, Run
 from gyrodenoise.atomic import write_json
 from gyrodenoise.cli_errors import ConfigError
-from gyrodenoise.cross_validation import ALL_FOLDS, collect, read_run, report, write
+from gyrodenoise.cross_validation import ALL_FOLDS, FOLD_KEY, collect, read_run, report, write
 from gyrodenoise.paths import portable_path, portable_tree
 
 
@@ -69,6 +69,10 @@ def _check_kept_fold(folder: Path, kept: dict, cfg_k: DictConfig) -> None:
         )
 
 
+def _sets_fold(override: str) -> bool:
+    return override.lstrip("+").startswith(f"{FOLD_KEY}=")
+
+
 def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictConfig, Path], dict]) -> dict:
     """`dataset.cv_fold=all`: `train_one(cfg_k, out_dir/fold<k>)` for every fold k, then the summary of the folds
     in out_dir; returns a run summary whose val/aoe_deg is the recipe's figure."""
@@ -97,8 +101,7 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
         print(f"\n=== fold {k} of {len(flights)}: {flights[k]} held out ({folder}) ===")
         summary = train_one(cfg_k, folder)
         # the fold's record names its own fold, not the command line's 'all'
-        summary["overrides"] = [f"dataset.cv_fold={k}" if o.lstrip("+").startswith("dataset.cv_fold=") else o
-                                for o in summary.get("overrides", [])]  # fmt: skip
+        summary["overrides"] = [f"{FOLD_KEY}={k}" if _sets_fold(o) else o for o in summary.get("overrides", [])]
         write_json(folder / "summary.json", summary)
         runs.append(Run(folder / "summary.json", {}, summary["config"], summary))
     result = collect(runs)
@@ -111,8 +114,7 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
     first = runs[0].summary
     summary = {  # the run's own record: what the ablation collector and an Optuna sweep read
         **{k: first.get(k) for k in ("command", "overrides", "seed", "dataset", "model", "machine", "code_version")},
-        "overrides": [o for o in first.get("overrides", []) if not o.lstrip("+").startswith("dataset.cv_fold=")]
-        + [f"dataset.cv_fold={ALL_FOLDS}"],
+        "overrides": [o for o in first.get("overrides", []) if not _sets_fold(o)] + [f"dataset.cv_fold={ALL_FOLDS}"],
         "config": {**first["config"], "dataset": {**first["config"]["dataset"], "cv_fold": ALL_FOLDS}},
         "output_dir": portable_path(out_dir),
         "train_wall_time_s": sum(r.summary.get("train_wall_time_s") or 0.0 for r in runs),

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.ablation_runs import (
@@ -372,12 +373,6 @@ def write(prefix: Path, md: str, data: dict) -> None:
     write_text(with_ext(prefix, ".md"), md)
 
 
-try:  # the Hydra hook of experiment=cross_validation
-    from hydra.experimental.callback import Callback as _HydraCallback
-except ImportError:  # pragma: no cover
-    _HydraCallback = object  # type: ignore[assignment,misc]
-
-
 def fold_list_problem(config: DictConfig) -> str | None:
     """What is wrong with the folds a multirun sweeps (its dataset.cv_fold override, else the experiment's sweep),
     or None."""
@@ -403,7 +398,7 @@ def fold_list_problem(config: DictConfig) -> str | None:
     )
 
 
-class CrossValidationCallback(_HydraCallback):
+class CrossValidationCallback(Callback):
     """Hydra callback: after a multirun over folds, `<sweep dir>/cross_validation.{md,json}`."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
