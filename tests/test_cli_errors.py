@@ -167,3 +167,26 @@ def test_the_projects_warnings_print_as_one_line_inside_a_command():
         assert warnings.formatwarning(msg, DataFormatWarning, "/site/readers.py", 84) == f"warning: {msg}\n"
         assert "DeprecationWarning: old" in warnings.formatwarning("old", DeprecationWarning, "/site/lib.py", 1)
     assert "DataFormatWarning: " + msg in warnings.formatwarning(msg, DataFormatWarning, "/site/readers.py", 84)
+
+
+def test_a_refused_rerun_leaves_the_folders_hydra_record_as_it_was(tmp_path):
+    run = tmp_path / "run"
+    record = run / ".hydra"
+    record.mkdir(parents=True)
+    before = {"config.yaml": "seed: 1\n", "overrides.yaml": "- seed=1\n"}  # an older Hydra wrote no hydra.yaml
+    for name, text in before.items():
+        (record / name).write_text(text)
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", "select=best", "logger=none", f"hydra.run.dir={run}"],
+        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=180,
+    )  # fmt: skip
+    assert proc.returncode == 2 and "select='best'" in proc.stderr, proc.stderr
+    assert {p.name: p.read_text() for p in record.iterdir()} == before
+    # a fresh folder holds no other run: the refused command's record stays, as Hydra wrote it
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrodenoise.train", "select=best", "logger=none", f"hydra.run.dir={tmp_path / 'new'}"],
+        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=180,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert "select=best" in (tmp_path / "new" / ".hydra" / "overrides.yaml").read_text()

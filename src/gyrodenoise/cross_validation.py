@@ -309,7 +309,7 @@ def load_recipes(
     unfinished run folders."""
     runs, unfinished = find_runs(dirs)
     # a cv_fold=all run as its folds before filtering: a fold's own summary says what it trained (the run folder's
-    # .hydra/overrides.yaml is rewritten by any later command in that folder, one refused included)
+    # .hydra/overrides.yaml is rewritten by any later command in that folder that runs, e.g. a resume)
     runs = [fold for r in runs for fold in _folds_inside(r)]
     runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
     if not runs:

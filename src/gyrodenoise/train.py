@@ -46,6 +46,7 @@ from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import code_version as _code_version
 from gyrodenoise.provenance import machine_description
+from gyrodenoise.run_record import restored_on_refusal
 from gyrodenoise.tables import markdown_table
 
 
@@ -482,7 +483,7 @@ def single_run_of_a_sweep_note(cfg: DictConfig | None = None) -> str | None:
 @hydra_key_hints("train")
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
-    with console_to_job_log(), user_errors():
+    with console_to_job_log(), user_errors(), restored_on_refusal():
         if note := single_run_of_a_sweep_note(cfg):
             print(note)
         summary = train(cfg)
