@@ -2,10 +2,12 @@
 
     python -m gyrodenoise.export euroc --c OUT_DIR
 
-writes OUT_DIR/gyrodenoise_model.h (the API: sizes as #defines, the state struct, gd_reset, gd_step),
-OUT_DIR/gyrodenoise_model.c (the weights as `static const float` arrays, batch norm folded into the convolutions,
-and the code) and OUT_DIR/example_main.c (CSV on stdin -> corrected gyro on stdout). The C code needs <math.h> and
-<string.h> only and allocates nothing: the state (one ring buffer of inputs per dilated layer) is one struct.
+writes OUT_DIR/gyrodenoise_model.h (the API: sizes as #defines, the state struct, gd_reset, gd_step and the stamped
+gd_step_t, whose timestamp checks are `c_clock`'s), OUT_DIR/gyrodenoise_model.c (the weights as `static const float`
+arrays, batch norm folded into the convolutions, and the code) and OUT_DIR/example_main.c (CSV on stdin -> corrected
+gyro on stdout). The C code needs <math.h>, <string.h> and <stdint.h> only and allocates nothing: the state (one ring
+buffer of inputs per dilated layer, the stream's last stamp) is one struct. It computes in float32 only (no double:
+`c_targets` cross-compiles it for Cortex-M with -Wdouble-promotion -Werror and runs it under QEMU).
 
 The arithmetic is the streaming corrector's (`gyrodenoise.streaming`): the weights written are those it folds, the
 normalisation is (x - mean) * (1 / std), a stream's first sample fills every layer's history with its copies (the
@@ -25,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gyrodenoise import provenance
+from gyrodenoise import c_clock, provenance
 from gyrodenoise.atomic import write_text
+from gyrodenoise.c_example import UNSTAMPED, example_source
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, predict_with_spread
@@ -168,7 +171,7 @@ def _footprint(members: list[StreamingCorrector], sizes: dict) -> str:
     """Multiply-adds per sample, the state's RAM and the weights' flash."""
     macs = sum(sum(ly.weight.size for ly in sc.layers) + sc.head_w.size + 9 for sc in members)
     floats = max(sizes["ring_floats"], 1) + 2 * sizes["max_channels"] + 3 * len(members)
-    ram = 4 * floats + 4 * (max(sizes["n_rings"], 1) + 1)
+    ram = 4 * floats + 4 * (max(sizes["n_rings"], 1) + 2) + 24  # + the stream's stamps (gd_step_t)
     n_weights = sum(
         2 * sc.mean.size + 9 + sc.head_w.size + 3 + sum(ly.weight.size + ly.bias.size for ly in sc.layers)
         for sc in members
@@ -214,11 +217,15 @@ HEADER_API = """\
 #ifndef GYRODENOISE_MODEL_H
 #define GYRODENOISE_MODEL_H
 
+#include <stdint.h>
+
 #ifdef __cplusplus
 extern "C" {{ /* C++ callers link the C-compiled gyrodenoise_model.c */
 #endif
 
 {defines}
+
+{clock_defines}
 
 /* One stream's state: sizeof(gd_state) bytes of RAM, no allocation. A zeroed (static) state is a reset one. */
 typedef struct gd_state {{
@@ -227,6 +234,7 @@ typedef struct gd_state {{
     int started;                                          /* 0: the next sample starts a stream */
     float work[2][GD_MAX_CHANNELS];                       /* scratch of one step */
     float member_out[GD_N_MEMBERS][3];                    /* each member's corrected gyro of the last step */
+{state_fields}
 }} gd_state;
 
 /* Forget the past: the next gd_step's sample starts a stream and fills every layer's history with copies of
@@ -236,9 +244,12 @@ void gd_reset(gd_state *s);
 
 /* Consume one sample imu = {{gx, gy, gz [rad/s], ax, ay, az [m/s^2]}}; write the corrected gyro [rad/s] to gyro_out
    and, when std_out is not NULL, the members' spread per axis [rad/s] (zeros for a single network).
-   Returns 0, or -1 when the sample holds a NaN/inf or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX: it would
-   spoil a receptive field of outputs, so it is refused and the state is left unchanged (nothing is written). */
+   Returns GD_OK (0), or GD_REFUSED_SAMPLE (-1) when the sample holds a NaN/inf or a value beyond GD_GYRO_ABS_MAX /
+   GD_ACC_ABS_MAX: it would spoil a receptive field of outputs, so it is refused and the state is left unchanged
+   (nothing is written). Timestamps are not checked: feed consecutive samples at GD_RATE_HZ, gd_reset after a gap. */
 int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out);
+
+{declaration}
 
 #ifdef __cplusplus
 }}
@@ -283,8 +294,8 @@ static void conv_step(const gd_layer *L, const float *ring, int newest, float *r
     for (int i = 0; i < L->kernel; i++) {{
         int r = newest - (L->kernel - 1 - i) * L->dilation;
         if (r < 0) r += rows;
-        const float *x = ring + (size_t)r * L->c_in;
-        const float *w = L->w + (size_t)i * L->c_in * L->c_out;
+        const float *x = ring + (size_t)r * (size_t)L->c_in;
+        const float *w = L->w + (size_t)i * (size_t)L->c_in * (size_t)L->c_out;
         for (int c = 0; c < L->c_in; c++, w += L->c_out) {{
             const float xc = x[c];
             for (int o = 0; o < L->c_out; o++) y[o] += w[o] * xc;
@@ -300,9 +311,9 @@ static int push_input(const gd_layer *L, float *ring, int newest, const float *h
     const int rows = L->dilation * (L->kernel - 1) + 1;
     const size_t bytes = (size_t)L->c_in * sizeof *h;
     if (start)
-        for (int r = 0; r < rows; r++) memcpy(ring + (size_t)r * L->c_in, h, bytes);
+        for (int r = 0; r < rows; r++) memcpy(ring + (size_t)r * (size_t)L->c_in, h, bytes);
     newest = newest + 1 == rows ? 0 : newest + 1;
-    memcpy(ring + (size_t)newest * L->c_in, h, bytes);
+    memcpy(ring + (size_t)newest * (size_t)L->c_in, h, bytes);
     return newest;
 }}
 
@@ -318,7 +329,7 @@ static void member_step(const gd_member *m, gd_state *s, const float imu[6], int
         float *t = h; h = y; y = t;
     }}
     for (int a = 0; a < 3; a++) {{
-        const float *c_hat = m->c_hat + 3 * a, *w = m->head_w + (size_t)a * m->head_in;
+        const float *c_hat = m->c_hat + 3 * a, *w = m->head_w + (size_t)a * (size_t)m->head_in;
         float head = 0.0f;
         for (int c = 0; c < m->head_in; c++) head += w[c] * h[c];
         out[a] = (c_hat[0] * imu[0] + c_hat[1] * imu[1] + c_hat[2] * imu[2]) + head + m->head_b[a];
@@ -334,15 +345,9 @@ static int sample_ok(const float imu[6])
     return 1;
 }}
 
-void gd_reset(gd_state *s)
+/* one step of a checked sample: every member, then their mean and spread */
+static void step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
 {{
-    s->started = 0;
-    memset(s->newest, 0, sizeof s->newest); /* a state never zeroed (on the stack) holds any index here */
-}}
-
-int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
-{{
-    if (!sample_ok(imu)) return -1;
     for (int k = 0; k < GD_N_MEMBERS; k++) member_step(&gd_members[k], s, imu, !s->started, s->member_out[k]);
     s->started = 1;
     for (int a = 0; a < 3; a++) {{
@@ -353,59 +358,9 @@ int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
         gyro_out[a] = mean;
         if (std_out) std_out[a] = GD_N_MEMBERS > 1 ? sqrtf(sq / (GD_N_MEMBERS - 1)) * spread_scale : 0.0f;
     }}
-    return 0;
 }}
-"""
 
-EXAMPLE_CODE = """\
-/* Correct a CSV stream with the exported model: lines t,gx,gy,gz,ax,ay,az (gyro rad/s, acc m/s^2) on stdin,
-   lines t,wx,wy,wz (corrected gyro rad/s{std_cols_doc}) on stdout; t is copied as written. Lines that do not start
-   with a number (a header, # comments) are skipped. Samples must be consecutive, at the model's rate.
-
-   Compile: {compile}
-   Run:     ./gyrodenoise < imu.csv > corrected.csv
-*/
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-
-#include "gyrodenoise_model.h"
-
-static gd_state state; /* static: zeroed (a reset state), and off the stack (sizeof(gd_state) may be large) */
-
-int main(void)
-{{
-    char line[1024];
-    long n = 0, lineno = 0;
-    printf("t,wx,wy,wz{std_cols}\\n");
-    while (fgets(line, sizeof line, stdin)) {{
-        lineno++;
-        char *p = line + strspn(line, " \\t"), *end;
-        if (*p == '\\0' || !strchr("+-.0123456789", *p)) continue; /* a header, a comment, an empty line */
-        const char *t = p;
-        float imu[6], w[3], sd[3];
-        for (int c = 0; c < 6; c++) {{
-            p = strchr(p, ',');
-            if (p) *p++ = '\\0'; /* ends t (c == 0), then steps over each comma */
-            imu[c] = p ? strtof(p, &end) : 0.0f;
-            if (!p || end == p) {{
-                fprintf(stderr, "line %ld: expected t,gx,gy,gz,ax,ay,az\\n", lineno);
-                return 1;
-            }}
-            p = end;
-        }}
-        n++;
-        if (gd_step(&state, imu, w, sd) != 0) {{
-            fprintf(stderr, "sample %ld (t=%s): NaN/inf or beyond any IMU's range, refused\\n", n, t);
-            return 1;
-        }}
-        printf("%s,%.9g,%.9g,%.9g", t, w[0], w[1], w[2]);
-{std_print}        printf("\\n");
-    }}
-    return 0;
-}}
-"""
-
+{clock_code}"""
 
 DEFINES = (  # name, value key, comment
     ("GD_N_MEMBERS", "n_members", "networks averaged (an ensemble: > 1)"),
@@ -428,12 +383,14 @@ def _header(model: CorrectionModel, members: list[StreamingCorrector], meta: dic
     std_arg = "std" if ensemble else "NULL"
     usage = [
         "",
-        "Use (C99, <math.h> and <string.h> only, no allocation):",
+        "Use (C99, <math.h>, <string.h> and <stdint.h> only, no allocation):",
         '    #include "gyrodenoise_model.h"',
         "    static gd_state st;                  // one per stream; zeroed = reset",
         "    float imu[6] = {gx, gy, gz, ax, ay, az}, w[3]" + (", std[3];" if ensemble else ";"),
-        f"    if (gd_step(&st, imu, w, {std_arg}) != 0) {{ ... }}  // sample refused (NaN/inf, out of range)",
-        "    gd_reset(&st);                       // after a gap: the next sample starts a new stream",
+        f"    int code = gd_step_t(&st, t_ns, imu, w, {std_arg});  // t_ns: the sample's stamp, int64 nanoseconds",
+        "    if (code < 0) { ... }                // refused (GD_REFUSED_*): state unchanged, drop the sample",
+        "    else { ... }                         // w written (GD_RESTARTED: after a gap; GD_RATE_OFF: rate off)",
+        f"  Without stamps: gd_step(&st, imu, w, {std_arg}), and gd_reset(&st) after a gap.",
         _footprint(members, sizes),
         f"Example: {EXAMPLE} (CSV on stdin); compile:\n    {COMPILE}",
         "Outputs equal gyrodenoise's StreamingCorrector and batch model to float32 rounding (~1e-7 rad/s).",
@@ -442,10 +399,16 @@ def _header(model: CorrectionModel, members: list[StreamingCorrector], meta: dic
     # nothing from the metadata may end the comment, nor open one inside it (gcc -Wall: "/*" within comment)
     text = "\n".join(lines).replace("*/", "* /").replace("/*", "/ *")
     comment = "\n".join(f" * {s}".rstrip() for s in text.splitlines())
-    return f"/*\n{comment}\n */\n" + HEADER_API.format(defines=_defines(sizes))
+    api = HEADER_API.format(
+        defines=_defines(sizes),
+        clock_defines=c_clock.header_defines(sizes["rate_hz"], sizes["rf"] > 1),
+        state_fields=c_clock.STATE_FIELDS,
+        declaration=c_clock.DECLARATION,
+    )
+    return f"/*\n{comment}\n */\n" + api
 
 
-def _source(members: list[StreamingCorrector], spread_scale: float) -> str:
+def _source(members: list[StreamingCorrector], spread_scale: float, sizes: dict) -> str:
     tables, _, _ = _member_tables(members)
     names = list(C_ACTIVATIONS)
     cases = "\n".join(f"    case GD_ACT_{n.upper()}: return {C_ACTIVATIONS[n]};" for n in names)
@@ -455,22 +418,13 @@ def _source(members: list[StreamingCorrector], spread_scale: float) -> str:
         tables=tables,
         spread_scale=_float(spread_scale),
         act_cases=cases,
+        clock_code=c_clock.source_code(sizes["rate_hz"], sizes["rf"] > 1),
     )
     head = (
         "/* gyrodenoise gyro correction: weights and code (generated by python -m gyrodenoise.export --c; "
         f"see {HEADER}) */\n"
     )
     return head + f'#include <math.h>\n#include <string.h>\n\n#include "{HEADER}"\n\n' + code
-
-
-def _example(ensemble: bool) -> str:
-    std_print = '        printf(",%.9g,%.9g,%.9g", sd[0], sd[1], sd[2]);\n' if ensemble else ""
-    return EXAMPLE_CODE.format(
-        compile=COMPILE,
-        std_cols=",w_std_x,w_std_y,w_std_z" if ensemble else "",
-        std_cols_doc=", then the members' spread w_std_x,w_std_y,w_std_z" if ensemble else "",
-        std_print=std_print,
-    )
 
 
 DEFAULT_PREFIX = "gd"
@@ -504,14 +458,15 @@ def c_sources(model: CorrectionModel, meta: dict | None = None, prefix: str = DE
         "max_channels": max([6] + [ly.weight.shape[0] for sc in members for ly in sc.layers]),
         "rf": _receptive_field(members),
         "rate": f"{float(rate):.6g}" + ("" if "." in f"{float(rate):.6g}" else ".0"),
+        "rate_hz": float(rate),
         "gyro_max": f"{GYRO_ABS_MAX:.1f}f",
         "acc_max": f"{ACC_ABS_MAX:.1f}f",
     }
     spread = float(getattr(model, "spread_scale", 1.0))
     files = {
         HEADER: _header(model, members, meta, sizes),
-        SOURCE: _source(members, spread),
-        EXAMPLE: _example(len(members) > 1),
+        SOURCE: _source(members, spread, sizes),
+        EXAMPLE: example_source(len(members) > 1, COMPILE),
     }
     return {name: with_prefix(text, prefix) for name, text in files.items()}
 
@@ -557,20 +512,36 @@ def compile_example(
     return Path(exe)
 
 
-def run_example(exe: str | Path, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """Feed (N, 6) samples (as float32, written exactly) to a compiled example; (gyro (N, 3), std (N, 3) or None)."""
-    x = np.asarray(imu, dtype=np.float32)
-    lines = "".join(f"{n}," + ",".join(f"{v:.9g}" for v in row) + "\n" for n, row in enumerate(x.tolist()))
+def example_input(imu: np.ndarray, t_ns: np.ndarray | None = None) -> str:
+    """The example's CSV input: (N, 6) samples as float32, written exactly, after their stamps (default 0..N-1)."""
+    x = np.asarray(imu, dtype=np.float32).tolist()
+    t = range(len(x)) if t_ns is None else np.asarray(t_ns, dtype=np.int64).tolist()
+    rows = (f"{s}," + ",".join(f"{v:.9g}" for v in row) + "\n" for s, row in zip(t, x, strict=True))
+    return "t,gx,gy,gz,ax,ay,az\n" + "".join(rows)
+
+
+def example_output(stdout: str, n: int, what: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """(gyro (n, 3), std (n, 3) or None) from the example's output; RuntimeError naming `what` unless n lines."""
+    lines = stdout.splitlines()[1:]
+    if len(lines) != n:
+        raise RuntimeError(f"{what} wrote {len(lines)} lines for {n} samples")
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines])
+    return rows[:, 1:4], (rows[:, 4:7] if rows.shape[1] == 7 else None)
+
+
+def run_example(
+    exe: str | Path, imu: np.ndarray, t_ns: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Feed (N, 6) samples to a compiled example; (gyro (N, 3), std (N, 3) or None). t_ns: (N,) int64 stamps, the
+    stamped step (gd_step_t; every sample must be taken); None: `--unstamped`, the samples taken as consecutive."""
+    cmd = [str(exe)] + ([UNSTAMPED] if t_ns is None else [])
     try:
-        done = subprocess.run([str(exe)], input="t,gx,gy,gz,ax,ay,az\n" + lines, capture_output=True, text=True)
+        done = subprocess.run(cmd, input=example_input(imu, t_ns), capture_output=True, text=True)
     except OSError as e:  # built for another machine: $CC a cross compiler
         raise RuntimeError(f"{exe} cannot run here: {e.strerror} (is $CC a cross compiler?)") from None
     if done.returncode != 0:
         raise RuntimeError(f"{exe} failed: {done.stderr.strip()}")
-    rows = np.array([[float(v) for v in ln.split(",")] for ln in done.stdout.splitlines()[1:]])
-    if rows.shape[0] != len(x):
-        raise RuntimeError(f"{exe} wrote {rows.shape[0]} lines for {len(x)} samples")
-    return rows[:, 1:4], (rows[:, 4:7] if rows.shape[1] == 7 else None)
+    return example_output(done.stdout, len(imu), str(exe))
 
 
 def stream_reference(model: CorrectionModel, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

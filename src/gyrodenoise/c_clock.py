@@ -1,0 +1,177 @@
+"""The C export's stamped step, `gd_step_t`: the timestamp rules of `gyrodenoise.stream_clock`, in C.
+
+    int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out);
+
+StreamingCorrector.push(x, t_ns) refuses a stamp that is not after the previous one, one that comes sooner than
+STREAM_FAST_FACTOR periods of the model's rate, and one after a gap (more than STREAM_GAP_FACTOR periods), all with the
+state unchanged; it warns once when the first RATE_WINDOW steps of a stream average a rate more than RATE_TOL off the
+model's. `gd_step_t` makes the same decisions, as return codes (`CODES`): refused (< 0, state unchanged, nothing
+written), or taken (>= 0, outputs written). After a gap it does what the Python caller does next (reset(), then push
+the sample as the first of a new stream) and says so (GD_RESTARTED): an onboard loop cannot stop at a gap.
+
+The thresholds are computed here in float64 as StreamClock computes them, and written as integer nanoseconds, so that
+the C decisions (integer arithmetic, no float and no double on the target) are Python's, boundaries included. A model
+without memory (a calibrated one) checks the order only, as StreamClock(gaps=False); a model whose rate is not
+recorded learns its period from the stream's mean step (gaps only), as StreamClock(rate_hz=None).
+"""
+
+from __future__ import annotations
+
+import math
+
+from gyrodenoise.data.checks import RATE_TOL
+from gyrodenoise.stream_clock import RATE_WINDOW, STREAM_FAST_FACTOR, STREAM_GAP_FACTOR
+
+# name, value, meaning (the header's #defines)
+CODES = (
+    ("GD_OK", 0, "taken"),
+    ("GD_RESTARTED", 1, "gd_step_t: taken after a gap (a step over GD_MAX_STEP_NS): a new stream"),
+    ("GD_RATE_OFF", 2, "gd_step_t: taken; the stream's rate is over GD_RATE_TOL off GD_RATE_HZ"),
+    ("GD_REFUSED_SAMPLE", -1, "a NaN/inf, or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX"),
+    ("GD_REFUSED_ORDER", -2, "gd_step_t: the stamp is not after the previous one"),
+    ("GD_REFUSED_EARLY", -3, "gd_step_t: under GD_MIN_STEP_NS after the previous one"),
+    ("GD_REFUSED_UNSTAMPED", -4, "gd_step on a stream that gd_step_t stamped"),
+)
+INT64_MAX = 2**63 - 1
+
+
+def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
+    """The stamped step's thresholds in ns, as StreamClock decides: min_step (shorter: refused), max_step (longer:
+    a gap; 0: GAP_FACTOR x the stream's mean step; -1: none), and the sum of the first RATE_WINDOW steps that does
+    not warn, [rate_sum_min, rate_sum_max]."""
+    free = {"min_step": 1, "rate_sum_min": 0, "rate_sum_max": INT64_MAX}
+    if not memory:  # StreamClock(None, gaps=False): the order only
+        return {**free, "max_step": -1}
+    if not rate_hz:  # StreamClock(None): the period learnt from the stream (gaps only)
+        return {**free, "max_step": 0}
+    period = 1e9 / rate_hz  # StreamClock.period_ns
+    fast, gap = STREAM_FAST_FACTOR * period, STREAM_GAP_FACTOR * period  # refused: step < fast; a gap: step > gap
+
+    def warns_fast(s: int) -> bool:  # StreamClock.commit's test, measured rate above the model's
+        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 > RATE_TOL
+
+    def warns_slow(s: int) -> bool:
+        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 < -RATE_TOL
+
+    return {
+        "min_step": math.ceil(fast),
+        "max_step": math.floor(gap),
+        "rate_sum_min": _first(lambda s: not warns_fast(s)),  # the measured rate falls as the sum grows
+        "rate_sum_max": _first(warns_slow) - 1,
+    }
+
+
+def _first(pred, lo: int = 1, hi: int = INT64_MAX) -> int:
+    """The smallest integer in [lo, hi] where the monotone `pred` holds (bisection)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if pred(mid) else (mid + 1, hi)
+    return lo
+
+
+def _gap_fraction() -> tuple[int, int]:
+    """STREAM_GAP_FACTOR as numerator / denominator (2.5 = 5 / 2), for an exact integer test in C."""
+    return STREAM_GAP_FACTOR.as_integer_ratio()
+
+
+def header_defines(rate_hz: float, memory: bool) -> str:
+    """The #defines of the stamp rules and of the return codes."""
+    lim = step_limits(rate_hz, memory)
+    if not memory:
+        min_doc, max_doc = "1: any increasing stamp", "-1: none (a model without memory)"
+    elif not rate_hz:
+        min_doc, max_doc = "1: any increasing stamp (no rate)", "0: GAP_FACTOR x the stream's mean step (no rate)"
+    else:
+        min_doc, max_doc = "ceil(FAST_FACTOR x period): shorter, refused", "floor(GAP_FACTOR x period): longer, a gap"
+    rows = [
+        ("GD_STAMP_FAST_FACTOR", f"{STREAM_FAST_FACTOR!r}f", "a step under this many periods is refused"),
+        ("GD_STAMP_GAP_FACTOR", f"{STREAM_GAP_FACTOR!r}f", "a step over this many periods is a gap"),
+        ("GD_MIN_STEP_NS", f"INT64_C({lim['min_step']})", min_doc),
+        ("GD_MAX_STEP_NS", f"INT64_C({lim['max_step']})", max_doc),
+        ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps averaged, once per stream, to compare the rate"),
+        ("GD_RATE_TOL", f"{RATE_TOL!r}f", "relative rate difference that gives GD_RATE_OFF"),
+    ]
+    stamps = "\n".join(f"#define {n:<20} {v:<18} /* {doc} */" for n, v, doc in rows)
+    codes = "\n".join(f"#define {n:<20} {f'({v})' if v < 0 else v:<4} /* {doc} */" for n, v, doc in CODES)
+    return (
+        "/* The stamp rules of gd_step_t, gyrodenoise.stream_clock's (period: 1e9 / the model's rate, in ns) */\n"
+        f"{stamps}\n\n/* Return codes: >= 0 the sample was taken (outputs written); < 0 it was refused (the state is\n"
+        f"   unchanged, nothing is written: drop the sample) */\n{codes}"
+    )
+
+
+STATE_FIELDS = """\
+    int stamped;                                          /* gd_step_t has stamped this stream */
+    int64_t last_ns;                                      /* the stamp of its last sample */
+    uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */"""
+
+DECLARATION = """\
+/* gd_step with the sample's timestamp t_ns [integer nanoseconds, any epoch]: the checks of gyrodenoise's
+   StreamingCorrector.push(imu, t_ns) (stream_clock), as return codes (the GD_* above):
+   - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, the state is unchanged, nothing is written
+     (drop the sample; the next one is compared with the last sample taken);
+   - GD_RESTARTED: after a gap, the sample started a new stream (Python raises there; its caller resets and pushes);
+   - GD_RATE_OFF: taken, and the stream's rate is off the model's (Python warns).
+   Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). */
+int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out);"""
+
+
+def source_code(rate_hz: float, memory: bool) -> str:
+    """gd_reset, gd_step and gd_step_t (they call `step`, the unchecked step, and `sample_ok`)."""
+    lim = step_limits(rate_hz, memory)
+    num, den = _gap_fraction()
+    return f"""\
+/* the first GD_RATE_WINDOW steps of a stream sum to [rate_sum_min, rate_sum_max] ns unless its rate is more than
+   GD_RATE_TOL off GD_RATE_HZ (StreamClock's test, as integers) */
+static const uint64_t rate_sum_min = UINT64_C({lim["rate_sum_min"]}), rate_sum_max = UINT64_C({lim["rate_sum_max"]});
+
+void gd_reset(gd_state *s)
+{{
+    s->started = 0;
+    memset(s->newest, 0, sizeof s->newest); /* a state never zeroed (on the stack) holds any index here */
+    s->stamped = 0;
+    s->last_ns = 0;
+    s->steps_ns = s->n_steps = 0;
+}}
+
+int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
+{{
+    if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
+    if (s->stamped) return GD_REFUSED_UNSTAMPED;
+    step(s, imu, gyro_out, std_out);
+    return GD_OK;
+}}
+
+/* a step (> 0 ns) longer than GD_MAX_STEP_NS, or than {num}/{den} (GD_STAMP_GAP_FACTOR) of the stream's mean step */
+static int is_gap(const gd_state *s, uint64_t step_ns)
+{{
+    if (GD_MAX_STEP_NS > 0) return step_ns > (uint64_t)GD_MAX_STEP_NS;
+    if (GD_MAX_STEP_NS < 0 || s->n_steps == 0) return 0;
+    return step_ns > (UINT64_C({num}) * s->steps_ns) / (UINT64_C({den}) * s->n_steps);
+}}
+
+int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out)
+{{
+    int code = GD_OK;
+    uint64_t step_ns = 0;
+    if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
+    if (s->stamped) {{
+        if (t_ns <= s->last_ns) return GD_REFUSED_ORDER;
+        step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
+        if (step_ns < (uint64_t)GD_MIN_STEP_NS) return GD_REFUSED_EARLY;
+        if (is_gap(s, step_ns)) {{
+            gd_reset(s);
+            code = GD_RESTARTED;
+        }}
+    }}
+    step(s, imu, gyro_out, std_out);
+    if (s->stamped) {{ /* a step of this stream (not its first sample) */
+        s->steps_ns += step_ns;
+        if (++s->n_steps == GD_RATE_WINDOW && (s->steps_ns < rate_sum_min || s->steps_ns > rate_sum_max))
+            code = GD_RATE_OFF;
+    }}
+    s->stamped = 1;
+    s->last_ns = t_ns;
+    return code;
+}}
+"""

@@ -1,0 +1,241 @@
+"""The C export's stamped step `gd_step_t` decides as StreamingCorrector.push(x, t_ns) does (`stream_clock`): the same
+samples taken and refused, for the same reasons, boundaries included, and the same outputs within 1e-5 rad/s; after a
+gap it restarts the stream where Python raises and its caller resets. Compiled with the host C compiler (skips
+without one, as tests/test_c_export.py)."""
+
+from __future__ import annotations
+
+import subprocess
+import warnings
+
+import numpy as np
+import pytest
+import torch
+from _models import random_imu, random_model
+
+from gyrodenoise import c_clock, c_export
+from gyrodenoise.data.checks import SanityWarning
+from gyrodenoise.models.build import build_model
+from gyrodenoise.stream_clock import StreamTimeError
+from gyrodenoise.streaming import StreamingCorrector
+
+ATOL = 1e-5  # rad/s, as tests/test_c_export.py
+SMALL = {"channels": (8, 16, 12), "kernel_size": 3, "dilations": (1, 4, 9)}
+CODE = {name: value for name, value, _ in c_clock.CODES}
+SENTINEL = 1234.5  # the driver's outputs before a step: a refused step must leave them
+
+# stdin: lines t,gx,gy,gz,ax,ay,az (t "-": gd_step, no stamp); stdout: code,wx,wy,wz per line
+DRIVER = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "gyrodenoise_model.h"
+static gd_state st;
+int main(void)
+{
+    char line[512], t[32];
+    float imu[6];
+    while (fgets(line, sizeof line, stdin)) {
+        float w[3] = {1234.5f, 1234.5f, 1234.5f}, sd[3];
+        if (sscanf(line, "%31[^,],%g,%g,%g,%g,%g,%g", t, &imu[0], &imu[1], &imu[2], &imu[3], &imu[4], &imu[5]) != 7)
+            return 2;
+        const int code = strcmp(t, "-") == 0 ? gd_step(&st, imu, w, sd)
+                                             : gd_step_t(&st, (int64_t)strtoll(t, NULL, 10), imu, w, sd);
+        printf("%d,%.9g,%.9g,%.9g\n", code, (double)w[0], (double)w[1], (double)w[2]);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def compiler() -> str:
+    cc = c_export.find_c_compiler()
+    if cc is None:
+        pytest.skip("no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared")
+    return cc
+
+
+def stamped_sequence(lim: dict[str, int]) -> tuple[list[int | None], np.ndarray, list[str]]:
+    """A 200 Hz stream with jitter, a repeated, a backwards and an early stamp, one missing sample, steps either side
+    of the thresholds `lim`, a sample without a stamp, a NaN, gaps, then 410 steps at 185 Hz (the rate is compared
+    after 400 steps): (stamps, samples, the codes a network at 200 Hz gives)."""
+    rng = np.random.default_rng(3)
+    stamps: list[int | None] = [1_403_636_579_000_000_000]
+    expected, last = ["GD_OK"], stamps[0]
+
+    def add(step: int, code: str = "GD_OK") -> None:
+        nonlocal last
+        stamps.append(last + step)
+        expected.append(code)
+        if code in ("GD_OK", "GD_RESTARTED", "GD_RATE_OFF"):
+            last = last + step
+
+    for step in 5_000_000 + rng.integers(-500_000, 500_000, 60):
+        add(int(step))
+    add(0, "GD_REFUSED_ORDER")  # repeated
+    add(-3_000_000, "GD_REFUSED_ORDER")  # backwards
+    add(2_000_000, "GD_REFUSED_EARLY")
+    add(10_000_000)  # one sample missing: taken
+    add(lim["min_step"] - 1, "GD_REFUSED_EARLY")
+    add(lim["min_step"])
+    add(lim["max_step"])
+    add(lim["max_step"] + 1, "GD_RESTARTED")
+    add(5_000_000, "GD_REFUSED_UNSTAMPED")
+    stamps[-1] = None  # no stamp on a stamped stream
+    for _ in range(30):
+        add(5_000_000)
+    add(5_000_000, "GD_REFUSED_SAMPLE")
+    nan_at = len(stamps) - 1
+    add(5_000_000)
+    add(1_000_000_000, "GD_RESTARTED")
+    for _ in range(20):
+        add(5_000_000)
+    add(1_000_000_000, "GD_RESTARTED")
+    for k in range(410):
+        add(5_405_405, "GD_RATE_OFF" if k == 399 else "GD_OK")  # 185 Hz
+    imu = random_imu(len(stamps), seed=9)
+    imu[nan_at, 1] = np.nan
+    return stamps, imu, expected
+
+
+def python_decisions(model, rate_hz: float | None, stamps, imu) -> tuple[list[int], np.ndarray]:
+    """StreamingCorrector.push on each sample: the code gd_step_t should return, and the output (NaN if refused)."""
+    sc = StreamingCorrector(model, rate_hz=rate_hz)
+    codes, out = [], np.full((len(imu), 3), np.nan)
+    for n, (t, x) in enumerate(zip(stamps, imu.astype(np.float32), strict=True)):
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always", SanityWarning)
+            try:
+                out[n] = sc.push(x, t_ns=t)
+                code = "GD_OK"
+            except StreamTimeError as e:
+                if "periods" not in str(e):  # not a gap: refused
+                    code = "GD_REFUSED_ORDER" if "is not after" in str(e) else "GD_REFUSED_EARLY"
+                else:  # a gap: the caller resets and pushes the sample as the first of a new stream
+                    sc.reset()
+                    out[n] = sc.push(x, t_ns=t)
+                    code = "GD_RESTARTED"
+            except ValueError as e:
+                code = "GD_REFUSED_UNSTAMPED" if "given timestamps" in str(e) else "GD_REFUSED_SAMPLE"
+        if any(issubclass(w.category, SanityWarning) for w in said):
+            code = "GD_RATE_OFF"
+        codes.append(CODE[code])
+    return codes, out
+
+
+def c_decisions(model, meta: dict, stamps, imu, tmp_path, compiler) -> tuple[list[int], np.ndarray]:
+    out_dir = tmp_path / "c"
+    c_export.export_c(model, out_dir, meta)
+    (out_dir / "driver.c").write_text(DRIVER)
+    exe = tmp_path / "driver"
+    cmd = [*compiler.split(), "-O2", "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion"]
+    done = subprocess.run(
+        [*cmd, "-o", str(exe), str(out_dir / "driver.c"), str(out_dir / c_export.SOURCE), "-lm"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    x = imu.astype(np.float32).tolist()
+    lines = (
+        ("-" if t is None else str(t)) + "," + ",".join(f"{v:.9g}" for v in r) for t, r in zip(stamps, x, strict=True)
+    )
+    done = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, check=True)
+    rows = np.array([ln.split(",") for ln in done.stdout.splitlines()], dtype=float)
+    return rows[:, 0].astype(int).tolist(), rows[:, 1:]
+
+
+def random_denoiser():
+    model = random_model(seed=4, **SMALL)
+    model.net[-1].weight.data *= 10  # corrections of ~1 rad/s: a sample fed twice or lost shows in the outputs
+    return model
+
+
+def calibrated():
+    model = build_model("calibrated")
+    model.bias.data[:] = torch.tensor([0.01, 0.02, -0.03])
+    return model
+
+
+@pytest.mark.parametrize(
+    "build, rate_hz",
+    [(random_denoiser, 200.0), (random_denoiser, None), (calibrated, 200.0)],
+    ids=["network-200Hz", "network-rate-not-recorded", "calibrated-no-memory"],
+)
+def test_stamped_step_decides_as_the_streaming_corrector(build, rate_hz, tmp_path, compiler):
+    model = build()
+    stamps, imu, expected = stamped_sequence(c_clock.step_limits(200.0, True))
+    codes, out = python_decisions(model, rate_hz, stamps, imu)
+    meta = {"name": "test"} | ({"rate_hz": rate_hz} if rate_hz else {})
+    c_codes, c_out = c_decisions(model, meta, stamps, imu, tmp_path, compiler)
+    assert c_codes == codes
+    taken = np.array(codes) >= 0
+    assert np.abs(c_out[taken] - out[taken]).max() < ATOL
+    assert (c_out[~taken] == SENTINEL).all()  # refused: nothing written
+    seen = {name for name, value, _ in c_clock.CODES if value in codes}
+    always = {"GD_OK", "GD_REFUSED_ORDER", "GD_REFUSED_SAMPLE", "GD_REFUSED_UNSTAMPED"}
+    if build is calibrated:  # no memory: the order only
+        assert seen == always
+    elif rate_hz:
+        assert codes == [CODE[c] for c in expected]
+    else:  # the period learnt from the stream: gaps only, no rate
+        assert seen == always | {"GD_RESTARTED"}
+
+
+def test_thresholds_are_the_stream_clocks():
+    """The integer thresholds written into the C code are where StreamClock's float tests change their answer."""
+    from gyrodenoise.stream_clock import StreamClock
+
+    for rate in (200.0, 200.00263, 100.0, 333.3):
+        lim = c_clock.step_limits(rate, True)
+        for step, refused in ((lim["min_step"] - 1, True), (lim["min_step"], False)):
+            clock = StreamClock(rate)
+            clock.commit(clock.check(0, 1))
+            if refused:
+                with pytest.raises(StreamTimeError, match="faster"):
+                    clock.check(step, 1)
+            else:
+                clock.check(step, 1)
+        for step, gap in ((lim["max_step"], False), (lim["max_step"] + 1, True)):
+            clock = StreamClock(rate)
+            clock.commit(clock.check(0, 1))
+            if gap:
+                with pytest.raises(StreamTimeError, match="periods"):
+                    clock.check(step, 1)
+            else:
+                clock.check(step, 1)
+
+
+def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp_path, compiler):
+    """example_main.c calls gd_step_t with each line's t: a repeated stamp is dropped (no output line, said on stderr,
+    exit 1), a gap restarts the stream (said), t in seconds is refused naming the fix; --unstamped ignores t."""
+    model = random_denoiser()
+    c_export.export_c(model, tmp_path / "c", {"name": "test", "rate_hz": 200.0})
+    exe = c_export.compile_example(tmp_path / "c", tmp_path / "gd", compiler, werror=True)
+    imu = random_imu(40, seed=2)
+    t = 1_000_000_000 + 5_000_000 * np.arange(40)
+    t[20:] += 2_000_000_000  # a 2 s gap before sample 20
+    gyro, _ = c_export.run_example(exe, imu, t)
+    sc = StreamingCorrector(model, rate_hz=200.0)
+    ref = [sc.push(x) for x in imu[:20].astype(np.float32)]
+    sc.reset()
+    ref += [sc.push(x) for x in imu[20:].astype(np.float32)]
+    assert np.abs(gyro - np.array(ref)).max() < ATOL
+
+    def run(text: str, *args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([str(exe), *args], input=text, capture_output=True, text=True)
+
+    text = c_export.example_input(imu, t)
+    done = run(text)
+    assert done.returncode == 0 and "sample 21 (t=3100000000): a gap before it: the stream restarted" in done.stderr
+    repeated = text.replace("\n1010000000,", "\n1005000000,")  # sample 3 stamped as sample 2
+    done = run(repeated)
+    assert done.returncode == 1 and "sample 3 (t=1005000000): its stamp is not after the previous" in done.stderr
+    assert len(done.stdout.splitlines()) == 1 + 39 and "1 of 40 samples refused" in done.stderr
+    seconds = "t,gx,gy,gz,ax,ay,az\n1403636579.758555,0,0,0,0,0,9.8\n"
+    done = run(seconds)
+    assert done.returncode == 1 and "line 2: t=1403636579.758555 is not integer nanoseconds" in done.stderr
+    assert "--unstamped" in done.stderr
+    done = run(seconds, "--unstamped")
+    assert done.returncode == 0 and done.stdout.splitlines()[1].startswith("1403636579.758555,")
+    assert run("", "--bad").returncode == 2
