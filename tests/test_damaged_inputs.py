@@ -172,3 +172,37 @@ def test_a_truth_covering_part_of_the_recording_is_said(root, tmp_path):
     gt.write_text("".join(lines[: 1 + 20]))  # 0.1 s: too short to train on, said in one line
     with pytest.raises(ConfigError, match="check that the ground truth covers the recording"):
         train(config(part, tmp_path / "run", "dataset.train_seqs=[a]", "dataset.test_seqs=[]", "test=false"))
+
+
+def test_a_data_error_while_the_fit_sets_up_leaves_nothing_to_resume(root, tmp_path, capsys):
+    """A file refused while the fit sets up wrote interrupted.ckpt of the untrained model with the default
+    normalisation (mean 0, std 1): the rerun in that folder once the file was fixed resumed from it and trained
+    without the data's statistics, and a resumed run failing so overwrote the checkpoint it resumed from
+    (own-data walkthrough)."""
+    from gyrodenoise.data.readers import DataFormatError
+
+    data = tmp_path / "data"
+    shutil.copytree(root, data)
+    good = imu_file(data, "b").read_text()
+    lines = good.splitlines(keepends=True)
+    lines[40] = lines[40].split(",", 1)[0] + ",nan," + lines[40].split(",", 2)[2]
+    imu_file(data, "b").write_text("".join(lines))
+    run = tmp_path / "run"
+    with pytest.raises(DataFormatError, match="NaN"):
+        train(config(data, run))
+    assert not (run / "checkpoints" / "interrupted.ckpt").exists()
+    assert "weights_only" not in capsys.readouterr().err  # Lightning's note on its default, at every save
+    # a real interruption's checkpoint survives a resumed run that fails in its set-up
+    imu_file(data, "b").write_text(good)
+    cfg = config(data, tmp_path / "first", "trainer.max_epochs=2")
+    cfg.callbacks.last_checkpoint.every_n_epochs = 1
+    train(cfg)
+    ckpt = run / "checkpoints" / "interrupted.ckpt"
+    ckpt.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copy(tmp_path / "first" / "checkpoints" / "last.ckpt", ckpt)
+    before = ckpt.read_bytes()
+    imu_file(data, "b").write_text("".join(lines))
+    capsys.readouterr()
+    with pytest.raises(DataFormatError, match="NaN"):
+        train(config(data, run, "trainer.max_epochs=4"))
+    assert "auto_resume: " in capsys.readouterr().out and ckpt.read_bytes() == before

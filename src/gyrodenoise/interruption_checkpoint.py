@@ -6,6 +6,11 @@ last.ckpt / interrupted.ckpt it finds in the run folder (measured with Lightning
 folder of an unfinished run went on from its epoch-6 last.ckpt instead of starting afresh, and every fresh run
 printed two warnings about it). Resuming is the train command's decision (`auto_resume`, `ckpt_path`), not a side
 effect of a callback.
+
+Nothing is written when the fit stops before its first optimiser step (a data file refused while the fit sets up):
+such a checkpoint holds the untrained weights with the default normalisation (mean 0, std 1, the data's statistics
+are set later in the set-up), so the rerun in that folder, once the file was fixed, resumed from it and trained
+without the data's normalisation; and a resumed run that failed there overwrote the checkpoint it resumed from.
 """
 
 from __future__ import annotations
@@ -29,7 +34,9 @@ class InterruptionCheckpoint(Checkpoint):
         return os.path.join(self.dirpath, self.filename + ".ckpt")
 
     def on_exception(self, trainer: L.Trainer, *_: Any, **__: Any) -> None:
-        trainer.save_checkpoint(self.ckpt_path)
+        if trainer.global_step == 0:  # not one step trained (or, resuming, not restored yet): nothing to resume
+            return
+        trainer.save_checkpoint(self.ckpt_path, weights_only=False)  # said, or Lightning logs its default
 
     def teardown(self, trainer: L.Trainer, *_: Any, **__: Any) -> None:  # a run that ended normally keeps none
         trainer.strategy.remove_checkpoint(self.ckpt_path)
