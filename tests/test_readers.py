@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gyrodenoise.data.cache import load_sequence
-from gyrodenoise.data.readers import DataFormatError, read_groundtruth, read_imu
+from gyrodenoise.data.readers import DataFormatError, DataFormatWarning, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import build_sequence
 
 IMU_HEADER = "#timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z\n"
@@ -76,10 +76,31 @@ def test_nan_is_reported_not_dropped(tmp_path):
 
 
 def test_duplicate_timestamp(tmp_path):
+    """A stamp repeated with other values is refused, counted (one error per rerun before)."""
     rows = imu_rows()
-    rows[5] = rows[4]
-    with pytest.raises(DataFormatError, match=r"imu.csv:7: duplicate timestamp .* line 6"):
+    rows[5] = rows[4].replace(",0.01,", ",0.05,")
+    rows[30] = rows[29].replace(",0.02,", ",0.04,")
+    with pytest.raises(DataFormatError, match=r"imu.csv:7: duplicate timestamp .* line 6\) with other values .*2 such"):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_an_exact_repeat_of_a_line_is_kept_once_with_a_warning(tmp_path):
+    """A logger that wrote a sample twice (same stamp, same values) stopped training, one error per rerun, while
+    gyrodenoise-correct offers --drop-duplicates and the bag import keeps such messages once (own-data
+    walkthrough): kept once, named; the line numbers of later messages still point into the file."""
+    rows = imu_rows()
+    repeated = rows[:5] + [rows[4]] + rows[5:20] + [rows[19], rows[19]] + rows[20:]
+    with pytest.warns(DataFormatWarning, match=r"imu.csv:7: 3 IMU lines repeat the line before exactly .*line 6\)"):
+        imu = read_imu(write(tmp_path / "imu.csv", IMU_HEADER, repeated))
+    clean = read_imu(write(tmp_path / "clean.csv", IMU_HEADER, rows))
+    np.testing.assert_array_equal(imu.t_ns, clean.t_ns)
+    np.testing.assert_array_equal(imu.gyro, clean.gyro)
+    gt = gt_rows()
+    gt = gt[:3] + [gt[2]] + gt[3:]
+    gt[10] = gt[10][: gt[10].rfind(",1,0,0,0")] + ",0.9,0,0,0"  # file line 12 (header, 3 rows, the repeat, ...)
+    with pytest.warns(DataFormatWarning, match=r"gt.csv:5: 1 ground truth line repeats"):
+        with pytest.raises(DataFormatError, match=r"gt.csv:12: quaternion"):
+            read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, gt))
 
 
 def test_non_monotonic_timestamp(tmp_path):

@@ -1,7 +1,8 @@
 """Readers for the ASL folder format (EuRoC, TUM-VI, simulated data) with input validation.
 
 Every error names the file, the line (1-based, as an editor shows it) or column, what is wrong,
-and what to do. Nothing is dropped silently.
+and what to do. Nothing is dropped silently (a line that repeats the one before it exactly is kept once, with a
+warning).
 """
 
 from __future__ import annotations
@@ -162,6 +163,7 @@ def read_csv_table(
     t_ns = np.array(stamps, dtype=np.int64)
     lines = np.array(line_numbers)
     _check_values(path, values, lines, what)
+    t_ns, values, lines = _drop_repeated_lines(path, t_ns, values, lines, what)
     _check_time(path, t_ns, lines, what)
     return t_ns, values, lines
 
@@ -177,13 +179,38 @@ def _check_values(path: Path, values: np.ndarray, lines: np.ndarray, what: str) 
         )
 
 
+def _drop_repeated_lines(
+    path: Path, t_ns: np.ndarray, values: np.ndarray, lines: np.ndarray, what: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A line that repeats the one before it exactly (same stamp, same values: a logger or a merge that wrote the
+    sample twice) is kept once, with a warning naming the file, the first such line and how many (as the bag import
+    does); a repeated stamp with other values stays an error (`_check_time`)."""
+    same = (np.diff(t_ns) == 0) & np.all(values[1:] == values[:-1], axis=1)
+    if not same.any():
+        return t_ns, values, lines
+    k = int(np.argmax(same)) + 1
+    n = int(same.sum())
+    warnings.warn(
+        DataFormatWarning(
+            f"{path}:{lines[k]}: {n} {what} line{'s' if n > 1 else ''} repeat{'' if n > 1 else 's'} the line before "
+            f"exactly (same timestamp, same values; the first is a copy of line {lines[k - 1]}): each sample is "
+            "kept once"
+        ),
+        stacklevel=3,
+    )
+    keep = np.concatenate([[True], ~same])
+    return t_ns[keep], values[keep], lines[keep]
+
+
 def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> None:
     d = np.diff(t_ns)
     if (d == 0).any():
         k = int(np.argmax(d == 0))
+        n = int((d == 0).sum())
         raise DataFormatError(
-            f"{path}:{lines[k + 1]}: duplicate timestamp {t_ns[k + 1]} (same as line {lines[k]}) in the "
-            f"{what}. Remove the duplicated sample."
+            f"{path}:{lines[k + 1]}: duplicate timestamp {t_ns[k + 1]} (same as line {lines[k]}) with other values "
+            f"in the {what} ({n} such line{'s' if n > 1 else ''}; exact repeats of a line are kept once by "
+            "themselves). Keep one sample per timestamp: the one the sensor really measured then."
         )
     if (d < 0).any():
         k = int(np.argmax(d < 0))
