@@ -1,5 +1,6 @@
 """Reader validation: every bad input names the file, the line or column, and what is wrong."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +123,36 @@ def test_ground_truth_not_overlapping(tmp_path):
     gt = read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, gt_rows(t0=9_000_000_000)))
     with pytest.raises(DataFormatError, match="does not overlap the IMU"):
         build_sequence("x", imu, gt)
+
+
+@pytest.mark.parametrize(
+    ("stamps", "says"),
+    [
+        (lambda k: 1_700_000_001_000_000 + k * 8_333, "look like µs; write them as integer ns \\(x 1e\\+03\\)"),
+        (lambda k: 1_700_000_001 + k, "look like s; write them as integer ns \\(x 1e\\+09\\)"),
+        (lambda k: k * 8_333_333, "start near zero"),
+    ],
+)
+def test_a_ground_truth_on_another_clock_says_which(tmp_path, stamps, says):
+    """Mocap stamps in µs (or s, or from its own start) beside the IMU's ns said only 'does not overlap' (own-data
+    walkthrough)."""
+    t0 = 1_700_000_001_000_000_000
+    imu = read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(n=400, t0=t0)))
+    rows = [f"{stamps(k)},1,2,3,1,0,0,0" for k in range(200)]
+    gt = read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, rows))
+    with pytest.raises(DataFormatError, match="does not overlap the IMU .*" + says):
+        build_sequence("x", imu, gt)
+
+
+@pytest.mark.parametrize(
+    ("stamp", "says"),
+    [("1700001000.300002", "stamps in seconds"), ("1.700001e+18", "write the nanoseconds as integers")],
+)
+def test_a_decimal_timestamp_says_what_to_write(tmp_path, stamp, says):
+    rows = gt_rows()
+    rows[3] = stamp + rows[3][rows[3].index(",") :]
+    with pytest.raises(DataFormatError, match=rf"gt.csv:5: column 1 \(timestamp\) is '{re.escape(stamp)}'.*{says}"):
+        read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, rows))
 
 
 def test_gap_in_ground_truth_is_masked(tmp_path):

@@ -142,7 +142,7 @@ def read_csv_table(
             named = not rows and any(c.isalpha() for c in s)  # a header line without its '#'
             raise DataFormatError(
                 f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number of nanoseconds."
-                + (" A header line must start with '#'." if named else "")
+                + (" A header line must start with '#'." if named else _decimal_stamp_hint(fields[0]))
             ) from None
         rows.append(fields[1:min_cols])
         line_numbers.append(lineno)
@@ -166,6 +166,20 @@ def read_csv_table(
     t_ns, values, lines = _drop_repeated_lines(path, t_ns, values, lines, what)
     _check_time(path, t_ns, lines, what)
     return t_ns, values, lines
+
+
+def _decimal_stamp_hint(field: str) -> str:
+    """What a timestamp written as a decimal number says of its unit ('' when it is no number)."""
+    try:
+        value = float(field)
+    except ValueError:
+        return ""
+    if abs(value) < 1e11:  # up to ~3000 years in s; ns are 1e18 today, and an IMU's first s or ms are small too
+        return (
+            " It reads as a decimal number: stamps in seconds (or ms)? Write them as integer nanoseconds "
+            "(seconds x 1e9, rounded), the IMU's and the ground truth's alike."
+        )
+    return " It reads as a decimal number: write the nanoseconds as integers (a float64 drops the last digits)."
 
 
 def _check_values(path: Path, values: np.ndarray, lines: np.ndarray, what: str) -> None:

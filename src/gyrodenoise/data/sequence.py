@@ -74,6 +74,28 @@ class Sequence:
         return int(np.searchsorted(self.t - self.t[0], seconds))
 
 
+def _clock_hint(t_imu0_ns: int, t_gt0_ns: int) -> str:
+    """What the first stamps of an IMU (ns, its rate checked by the reader) and of a ground truth that does not
+    overlap it say: the truth's stamps in another unit (about 1e3, 1e6 or 1e9 times smaller), or counted from its
+    own start while the IMU's are absolute. '' when they say neither."""
+    if t_imu0_ns <= 0 or t_gt0_ns < 0:
+        return ""
+    if t_gt0_ns > 0:
+        ratio = t_imu0_ns / t_gt0_ns
+        for unit, factor in (("µs", 1e3), ("ms", 1e6), ("s", 1e9)):
+            if 0.9 * factor < ratio < 1.1 * factor:
+                return (
+                    f" The ground truth's stamps are about {factor:.0e} times smaller than the IMU's: they look like "
+                    f"{unit}; write them as integer ns (x {factor:.0e})."
+                )
+    if t_gt0_ns < 10**12 <= t_imu0_ns:  # under ~17 min against an absolute clock
+        return (
+            " The ground truth's stamps start near zero (time since its own start?) while the IMU's do not: put "
+            "both on one clock (add the IMU's stamp at the truth's start to the truth's)."
+        )
+    return ""
+
+
 def build_sequence(name: str, imu: ImuData, gt: GroundTruthData, max_gap_factor: float = 3.0) -> Sequence:
     """Align ground truth to the IMU stamps.
 
@@ -89,6 +111,7 @@ def build_sequence(name: str, imu: ImuData, gt: GroundTruthData, max_gap_factor:
         raise DataFormatError(
             f"{gt.path}: ground truth [{t_gt[0]}, {t_gt[-1]}] ns does not overlap the IMU "
             f"{imu.path} [{t_imu[0]}, {t_imu[-1]}] ns. Both must use the same clock (ns)."
+            + _clock_hint(int(t_imu[0]), int(t_gt[0]))
         )
     keep = (t_imu >= lo) & (t_imu <= hi)
     t_ns = t_imu[keep]
