@@ -419,6 +419,23 @@ def test_columns_whose_header_names_say_otherwise_get_the_columns_to_pass(tmp_pa
     assert code == 0
 
 
+def test_axis_letters_glued_to_the_name_are_read(tmp_path, model_file, capsys):
+    """A phone logger's 'accX [g],...,gyroX [deg/s],...,temp [C]' got 'Map them with --columns' and no columns to
+    pass: the axis of accX/gyroZ (camelCase) was not read (own-data walkthrough)."""
+    from gyrodenoise.data.asl_header import classify
+
+    t_ns, gyro, acc = synth()
+    header = "time [s],accX [g],accY [g],accZ [g],gyroX [deg/s],gyroY [deg/s],gyroZ [deg/s]"
+    f = _user_csv(tmp_path / "phone.csv", header, t_ns, gyro, acc, order=(0, 4, 5, 6, 1, 2, 3), g_scale=180 / math.pi,
+                  a_scale=1 / G0)  # fmt: skip
+    err = expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "a"], "wx <- 'accX [g]'")
+    assert "Pass --columns 1,5,6,7,2,3,4 (read off the header)" in err
+    assert run([f, "-m", model_file, "-o", tmp_path / "b", "--columns", "1,5,6,7,2,3,4"], capsys)[0] == 0
+    for name, kind_axis in [("rotationRateY", ("gyro", "y")), ("userAccelerationZ", ("acc", "z")),
+                            ("GyrX", ("gyro", "x")), ("qW", ("quat", "w")), ("acc_max", ("acc", None))]:  # fmt: skip
+        assert classify(name) == kind_axis, name
+
+
 def test_a_header_column_of_no_axis_does_not_break_the_columns_read_off_it():
     """A 'gyro_norm' column (a kind, no axis) raised TypeError where --columns is read off a header."""
     from gyrodenoise.data.asl_header import columns_from_names

@@ -24,6 +24,11 @@ _DEG_RATE = re.compile(r"deg|dps|°")
 _G_UNIT = re.compile(r"^\[?\s*m?g\s*\]?$")
 _SHORT = re.compile(r"^([gwapq])_?([wxyz])$")
 _SHORT_KIND = {"g": "gyro", "w": "gyro", "a": "acc", "p": "pos", "q": "quat"}
+# an axis letter glued to a quantity's name, as phone and logger apps write them (accX, gyroZ, userAccelerationY,
+# rotationRateX; lowercased here): only after these words, so a name that merely ends in x (a 'max') is not one
+_GLUED_AXIS = re.compile(
+    r"(acc|accel|accelerometer|acceleration|gyr|gyro|gyroscope|omega|angvel|rate|pos|position|quat)[wxyz]$"
+)
 _TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s"}
 
 
@@ -55,6 +60,8 @@ def classify(name: str) -> tuple[str | None, str | None]:
         kind = "gyro" if re.search(r"rad\s*/?\s*s|deg\s*/?\s*s|dps", unit) else None
         kind = kind or ("acc" if re.search(r"m\s*/?\s*s\s*\^?-?2|m s\^-2", unit) or _G_UNIT.match(unit) else None)
     axis = base[-1] if base and base[-1] in "wxyz" and (len(base) == 1 or not base[-2].isalpha()) else None
+    if axis is None and kind is not None and _GLUED_AXIS.search(base):  # accX, gyroZ, rotationRateY, qW
+        axis = base[-1]
     return kind, axis
 
 
