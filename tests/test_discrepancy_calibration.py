@@ -168,3 +168,17 @@ def test_delay_or_lowpass_separability_grows_with_the_delay(tmp_path):
     assert big.expected_delta_bic > 1000 * small.expected_delta_bic  # ~ 10^4 for a 10x delay
     assert big.separable
     assert "equivalent delay" in small.sentence() or small.separable
+
+
+def test_low_pass_that_replaces_a_named_delay_is_reported(tmp_path, monkeypatch):
+    """When the noise floor is not visible in the trusted band (behind a noisy motion capture) the
+    selection names the delay, and `_delay_or_lowpass` may then keep a low-pass instead. That design
+    lacked the low-pass, and `fill_params` stopped with KeyError 'sensor_bandwidth' (a blind trial with a
+    0.05 deg mocap, benchmarks/blind_discrepancy). A 5 Hz low-pass (32 ms of delay, a large droop)."""
+    from gyrodenoise.discrepancy import rank
+
+    monkeypatch.setattr(rank, "fit_floor_shape", lambda *a, **k: None)  # the floor not visible
+    fcs = _contexts(tmp_path, [SensorBandwidth(corner_hz=5.0)], 2, seed=4)
+    sel = select_effects(fcs, candidates=["time_offset", "sensor_bandwidth"])
+    assert sel.delay_or_lowpass["kept"] == "sensor_bandwidth" and sel.named == ["sensor_bandwidth"]
+    assert float(sel.params["sensor_bandwidth"]["corner_hz"]) == pytest.approx(5.0, rel=0.05)

@@ -514,7 +514,9 @@ def _delay_or_lowpass(
     best = (np.inf, None, None)
     for c in dol.corner_hz * np.geomspace(0.25, 4.0, 17):
         v = [sensor_view(fc, float(c)) for fc in fcs]
-        d = Design(v, {n: effects[n] for n in others}, sigma)
+        # the design kept if the low-pass wins holds it too (stochastic: no columns), as every
+        # selected effect's design does: `fill_params` asks it for the columns of all of them
+        d = Design(v, {n: effects[n] for n in [*others, "sensor_bandwidth"]}, sigma)
         r = d.fit(others)
         if r.rss < best[0]:
             best = (r.rss, float(c), (d, r, v))
