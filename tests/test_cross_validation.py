@@ -208,16 +208,19 @@ def test_a_reference_of_another_dataset_or_not_a_summary_is_refused(tmp_path, ca
     assert "notes.json: not a run summary written by gyrodenoise.train" in capsys.readouterr().err
 
 
-def test_a_launcher_or_sweeper_without_its_plugin_says_what_to_install(monkeypatch):
+def test_a_launcher_sweeper_or_logger_without_its_package_says_what_to_install(monkeypatch):
     import importlib.util
 
     from gyrodenoise.cli_errors import missing_plugin_message
 
     monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
     assert "pip install 'gyrodenoise[sweep]'" in missing_plugin_message(["-m", "hydra/launcher=local"])
-    assert "hparams_search=euroc_optuna needs a Hydra plugin" in missing_plugin_message(["hparams_search=euroc_optuna"])
+    assert "hparams_search=euroc_optuna needs a package" in missing_plugin_message(["hparams_search=euroc_optuna"])
     assert "[slurm]" in missing_plugin_message(["hydra/launcher=slurm"])
+    assert "logger=[tensorboard,mlflow] needs" in missing_plugin_message(["logger=[tensorboard,mlflow]"])
+    assert "gyrodenoise[mlflow]" in missing_plugin_message(["logger=mlflow"])
     assert missing_plugin_message(["dataset=euroc"]) is None
+    assert missing_plugin_message(["logger=csv"]) is None
 
 
 def test_each_job_leaves_the_table_of_the_folds_finished_so_far(tmp_path):

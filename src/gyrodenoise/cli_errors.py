@@ -12,6 +12,7 @@ import errno
 import functools
 import importlib.util
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -95,22 +96,23 @@ def _one_line(message: str) -> None:
     raise SystemExit(2) from None
 
 
-# config choices that need a Hydra plugin of an extra: (override prefix, plugin module, extra)
+# config choices that need a package of an extra: (override pattern, module, extra)
 PLUGINS = (
-    ("hydra/launcher=local", "hydra_plugins.hydra_joblib_launcher", "sweep"),
-    ("hparams_search=", "hydra_plugins.hydra_optuna_sweeper", "sweep"),
-    ("hydra/launcher=slurm", "hydra_plugins.hydra_submitit_launcher", "slurm"),
+    (r"hydra/launcher=local", "hydra_plugins.hydra_joblib_launcher", "sweep"),
+    (r"hparams_search=", "hydra_plugins.hydra_optuna_sweeper", "sweep"),
+    (r"hydra/launcher=slurm", "hydra_plugins.hydra_submitit_launcher", "slurm"),
+    (r"logger=.*\bmlflow\b", "mlflow", "mlflow"),  # logger=mlflow, logger=[tensorboard,mlflow]
 )
 
 
 def missing_plugin_message(overrides: Sequence[str]) -> str | None:
-    """What to install when a command line names a launcher or sweeper whose Hydra plugin is not installed (Hydra
-    says only "Could not load 'hydra/launcher/joblib'")."""
-    for prefix, module, extra in PLUGINS:
-        if any(o.startswith(prefix) for o in overrides) and importlib.util.find_spec(module) is None:
-            given = next(o for o in overrides if o.startswith(prefix))
+    """What to install when a command line names a launcher, sweeper or logger whose package is not installed
+    (Hydra says only "Could not load 'hydra/launcher/joblib'"; Lightning's logger a ModuleNotFoundError)."""
+    for pattern, module, extra in PLUGINS:
+        given = next((o for o in overrides if re.match(pattern, o)), None)
+        if given is not None and importlib.util.find_spec(module) is None:
             return (
-                f"{given} needs a Hydra plugin that is not installed: pip install 'gyrodenoise[{extra}]' (from a "
+                f"{given} needs a package that is not installed: pip install 'gyrodenoise[{extra}]' (from a "
                 f"checkout: pip install -e '.[{extra}]')"
             )
     return None

@@ -3,7 +3,7 @@
 Hyperparameters are plain dicts and numbers only, so checkpoints reload under torch's
 `weights_only` default. Validation integrates the corrected gyro over each whole validation
 sequence (in float64, on the training device) and logs its AOE per validation group; figures go to
-TensorBoard when that logger is active.
+TensorBoard or MLflow when one of those loggers is active (gyrodenoise.run_loggers).
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ import math
 import lightning.pytorch as L
 import numpy as np
 import torch
-from lightning.pytorch.loggers import TensorBoardLogger
 from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise import plots
@@ -21,6 +20,7 @@ from gyrodenoise.cli_errors import TrainingDiverged
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.metrics import aoe_torch, orientation_errors
 from gyrodenoise.models.build import build_model
+from gyrodenoise.run_loggers import log_figures, wants_figures
 from gyrodenoise.so3 import integrate_gyro_torch
 
 
@@ -155,32 +155,30 @@ class DenoiserModule(L.LightningModule):
         self.log("test/raw_imu_aoe_deg", raw_3d, batch_size=1)
 
     def _log_figures(self, o: dict, prefix: str) -> None:
-        for logger in self.loggers:
-            if isinstance(logger, TensorBoardLogger):
-                tb = logger.experiment
-                # the step of the scalars logged by this validation (Lightning's logger step), not global_step,
-                # which is one ahead of it here: figures and curves of one validation share an x value
-                step = getattr(self.trainer.fit_loop.epoch_loop, "_batches_that_stepped", self.global_step)
-                of = f"/{self.trainer.max_epochs}" if self.trainer.max_epochs else ""
-                title = (
-                    f"{o['name']}: AOE {math.degrees(o['aoe']):.2f} deg, yaw {math.degrees(o['aoe_yaw']):.2f} deg "
-                    f"(epoch {self.current_epoch + 1}{of})"
-                )
-                b = o["batch"]
-                t, rot = b["t"][0].cpu().numpy(), b["rot"][0].cpu().numpy()
-                gt_mask = b["gt_mask"][0].cpu().numpy()
-                w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
-                # the raw IMU integrated the same way: the reference the correction has to beat
-                R_raw = self._raw_reference(b)[0].cpu().numpy()
-                R_est = o["R_est"].cpu().numpy()
-                tb.add_figure(
-                    f"{prefix}/orientation",
-                    plots.orientation_figure(t, rot, {"corrected": R_est}, title, gt_mask=gt_mask),
-                    step,
-                )
-                errors = {"corrected": orientation_errors(rot, R_est), "raw IMU": orientation_errors(rot, R_raw)}
-                tb.add_figure(f"{prefix}/orientation_error", plots.error_figure(t, errors, title, gt_mask), step)
-                tb.add_figure(f"{prefix}/gyro_correction", plots.correction_figure(t, w_tilde, title), step)
+        if not wants_figures(self.loggers):
+            return
+        # the step of the scalars logged by this validation (Lightning's logger step), not global_step,
+        # which is one ahead of it here: figures and curves of one validation share an x value
+        step = getattr(self.trainer.fit_loop.epoch_loop, "_batches_that_stepped", self.global_step)
+        of = f"/{self.trainer.max_epochs}" if self.trainer.max_epochs else ""
+        title = (
+            f"{o['name']}: AOE {math.degrees(o['aoe']):.2f} deg, yaw {math.degrees(o['aoe_yaw']):.2f} deg "
+            f"(epoch {self.current_epoch + 1}{of})"
+        )
+        b = o["batch"]
+        t, rot = b["t"][0].cpu().numpy(), b["rot"][0].cpu().numpy()
+        gt_mask = b["gt_mask"][0].cpu().numpy()
+        w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
+        # the raw IMU integrated the same way: the reference the correction has to beat
+        R_raw = self._raw_reference(b)[0].cpu().numpy()
+        R_est = o["R_est"].cpu().numpy()
+        errors = {"corrected": orientation_errors(rot, R_est), "raw IMU": orientation_errors(rot, R_raw)}
+        figures = {
+            f"{prefix}/orientation": plots.orientation_figure(t, rot, {"corrected": R_est}, title, gt_mask=gt_mask),
+            f"{prefix}/orientation_error": plots.error_figure(t, errors, title, gt_mask),
+            f"{prefix}/gyro_correction": plots.correction_figure(t, w_tilde, title),
+        }
+        log_figures(self.loggers, figures, step)
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         # the random stream (crops, augmentation, dropout: all torch's generators) travels with the weights, so a

@@ -26,7 +26,6 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from lightning.pytorch.callbacks import LearningRateMonitor, ProgressBar, WeightAveraging
-from lightning.pytorch.loggers import TensorBoardLogger
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf, open_dict
 
@@ -46,12 +45,13 @@ from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import code_version as _code_version
 from gyrodenoise.provenance import machine_description
+from gyrodenoise.run_loggers import log_run_end
 from gyrodenoise.run_record import restored_on_refusal
 from gyrodenoise.tables import markdown_table
 
 
 def flat_hparams(cfg: DictConfig) -> dict:
-    """Scalar hyperparameters for TensorBoard's hparams view."""
+    """Scalar hyperparameters for the loggers' view of a sweep (TensorBoard's hparams, MLflow's params)."""
     out = {}
     for group in ("model", "optim", "loss"):
         node = OmegaConf.to_container(cfg[group], resolve=True)
@@ -452,13 +452,8 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
             f"same training data. {TAIL_NAME_NOTE}"
         )
     print(f"outputs in {out_dir}")
-    for lg in trainer.loggers:
-        if isinstance(lg, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
-            # under hparams/...: Lightning writes these metrics at step 0, which under their own names
-            # (val/aoe_deg, test/aoe_deg) would add a point at step 0 to the curves
-            metrics = {f"hparams/{k}": v for k, v in {**val, **test}.items() if k.count("/") == 1}
-            lg.log_hyperparams(flat_hparams(cfg), metrics)
-            lg.experiment.flush()  # on disk now, not when the writer's thread next flushes (a reader could miss it)
+    final = {k: v for k, v in {**val, **test}.items() if k.count("/") == 1}
+    log_run_end(trainer.loggers, flat_hparams(cfg), final, out_dir)
     return summary
 
 

@@ -1,0 +1,73 @@
+"""What a run sends to its experiment loggers beyond Lightning's curves: figures, its settings beside its final
+figures, and its output files.
+
+TensorBoard (`logger=tensorboard`, the default) gets the figures as images and the hparams view; MLflow
+(`logger=mlflow`, `pip install ".[mlflow]"`) gets the figures and the run's files (summary.json, model.pt,
+calibrated.pt, train.log) as artifacts, the run's data settings as params (the module's model, optim and loss
+settings are logged by Lightning at the start) and the kept model's validation figures as `selected_val/...`. The
+CSV logger takes curves only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from lightning.pytorch.loggers import Logger, MLFlowLogger, TensorBoardLogger
+from matplotlib.figure import Figure
+
+RUN_FILES = ("summary.json", "model.pt", "calibrated.pt", "train.log")
+
+
+class MLflowRunLogger(MLFlowLogger):
+    """Lightning's MLFlowLogger with metric names its file store can hold: that store makes each `/` a folder, so
+    `test/aoe_deg` (a file) and `test/aoe_deg/MH_02_easy` (inside a folder of the same name) cannot both exist.
+    Past the group (`test/`), `/` becomes `.`: `test/aoe_deg.MH_02_easy`."""
+
+    def log_metrics(self, metrics: dict[str, float], step: int | None = None) -> None:
+        super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
+
+
+def mlflow_metric_name(name: str) -> str:
+    """`group/metric/sequence` -> `group/metric.sequence` (the names MLflow's file store can hold side by side)."""
+    group, sep, rest = name.partition("/")
+    return f"{group}{sep}{rest.replace('/', '.')}"
+
+
+def log_figures(loggers: Sequence[Logger], figures: dict[str, Figure], step: int) -> None:
+    """`figures` (tag -> Figure) at `step`: TensorBoard images, MLflow artifacts `figures/<tag>/step<step>.png`."""
+    for logger in loggers:
+        if isinstance(logger, TensorBoardLogger):
+            for tag, fig in figures.items():
+                logger.experiment.add_figure(tag, fig, step, close=False)
+        elif isinstance(logger, MLFlowLogger):
+            for tag, fig in figures.items():
+                logger.experiment.log_figure(logger.run_id, fig, f"figures/{tag}/step{step:07d}.png")
+
+
+def wants_figures(loggers: Sequence[Logger]) -> bool:
+    """Whether any logger takes figures (drawing them costs a validation's time otherwise spent on nothing)."""
+    return any(isinstance(lg, TensorBoardLogger | MLFlowLogger) for lg in loggers)
+
+
+def log_run_end(loggers: Sequence[Logger], hparams: dict[str, Any], metrics: dict[str, float], out_dir: Path) -> None:
+    """The run's settings beside its final figures (`metrics`: val/..., test/...), and its files."""
+    for logger in loggers:
+        if isinstance(logger, TensorBoardLogger):  # hparams view: settings next to final val/test AOE
+            # under hparams/...: Lightning writes these metrics at step 0, which under their own names
+            # (val/aoe_deg, test/aoe_deg) would add a point at step 0 to the curves
+            logger.log_hyperparams(hparams, {f"hparams/{k}": v for k, v in metrics.items()})
+            logger.experiment.flush()  # on disk now, not when the writer's thread next flushes (a reader could miss it)
+        elif isinstance(logger, MLFlowLogger):
+            # the model/optim/loss settings are already params (Lightning logged the module's at the start, as
+            # model/..., optim/...); MLflow refuses a param logged twice with another value, so only the others
+            logger.log_hyperparams(
+                {k: v for k, v in hparams.items() if k.split(".")[0] not in ("model", "optim", "loss")}
+            )
+            # the kept model's validation figures (select=best_val: not the curve's last point) beside test/...
+            logger.log_metrics({f"selected_{k}": v for k, v in metrics.items() if k.startswith("val")})
+            logger.experiment.set_tag(logger.run_id, "output_dir", str(out_dir))
+            for name in RUN_FILES:
+                if (out_dir / name).is_file():
+                    logger.experiment.log_artifact(logger.run_id, str(out_dir / name))

@@ -1,0 +1,57 @@
+"""What a training sends to MLflow (logger=mlflow) and TensorBoard together: curves, figures, settings, final
+figures and the run's files, checked by reading the MLflow store back (tiny synthetic data, one epoch)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+from _asl import TINY_TRAINING, run_train
+
+mlflow = pytest.importorskip("mlflow", reason="logger=mlflow needs the [mlflow] extra (in [dev])")
+
+
+def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboard(
+    tiny_asl_root, tmp_path, monkeypatch
+):
+    store = tmp_path / "mlruns"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"file:{store}")
+    args = [
+        "dataset=asl_folder",
+        f"dataset.root={tiny_asl_root}",
+        "dataset.train_seqs=[a,b]",
+        "dataset.test_seqs=[c]",
+        *[a for a in TINY_TRAINING if not a.startswith("logger=")],
+        "logger=[tensorboard,mlflow]",
+        "seed=3",
+        "trainer.max_epochs=2",  # a validation inside the fit each epoch: its curve and figures
+        "trainer.check_val_every_n_epoch=1",
+        "trainer.log_every_n_steps=1",
+        "optim.scheduler.T_0=2",
+        f"hydra.run.dir={tmp_path / 'run'}",
+    ]
+    run_train(args, cwd=tmp_path)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert list((tmp_path / "run" / "tensorboard").glob("events.out.tfevents.*"))  # both loggers ran
+
+    client = mlflow.tracking.MlflowClient(tracking_uri=f"file:{store}")
+    (experiment,) = [e for e in client.search_experiments() if e.name == "train-asl_folder"]
+    (run,) = client.search_runs([experiment.experiment_id])
+    assert run.info.run_name == "denoiser-seed3" and run.info.status == "FINISHED"
+    assert run.data.tags["output_dir"] == str(tmp_path / "run")
+    params = run.data.params
+    assert params["seed"] == "3" and params["dataset"] == "asl_folder"
+    assert params["model/channels"] == "[4, 8]" and params["optim/lr"] == "0.01"  # the module's, by Lightning
+    metrics = run.data.metrics  # the last value of each curve, and the run's final figures
+    assert metrics["test/aoe_deg"] == pytest.approx(summary["test"]["test/aoe_deg"])
+    assert metrics["selected_val/aoe_deg"] == pytest.approx(summary["val"]["val/aoe_deg"])
+    assert len(client.get_metric_history(run.info.run_id, "val/aoe_deg")) == 2
+    assert metrics["test/aoe_deg.c"] == pytest.approx(summary["test"]["test/aoe_deg/c"])  # a sequence's figure
+    assert client.get_metric_history(run.info.run_id, "train/loss")
+    files = {a.path for a in client.list_artifacts(run.info.run_id)}
+    assert {"summary.json", "model.pt", "calibrated.pt", "train.log", "figures"} <= files
+    figures = [a.path for d in client.list_artifacts(run.info.run_id, "figures/val") for a in [d]]
+    assert sorted(os.path.basename(f) for f in figures) == ["gyro_correction", "orientation", "orientation_error"]
+    pngs = client.list_artifacts(run.info.run_id, "figures/val/orientation")
+    assert pngs and all(p.path.endswith(".png") for p in pngs)
