@@ -379,6 +379,22 @@ def test_the_sensor_a_model_learned_is_said():
     assert trained_on({"sensor": {"model": "BMI160"}}) == "a BMI160" and trained_on({"dataset": "mine"}) is None
 
 
+def test_the_placeholder_sensor_of_own_data_is_not_named_as_one():
+    """A model trained with dataset=asl_folder and no dataset.sensor.model 'learned the errors of the handheld
+    dataset's unknown' (correct's note), and its ONNX metadata and the other-IMU warning named 'unknown' as the
+    sensor (own-data walkthrough)."""
+    from gyrodenoise.correct import trained_on
+    from gyrodenoise.export import onnx_metadata
+    from gyrodenoise.models.build import build_model
+    from gyrodenoise.pretrained import other_imu_warning
+
+    meta = {"name": "model.pt", "dataset": "handheld", "sensor": {"model": "unknown", "rate_hz": 400.0}}
+    assert trained_on(meta) is None
+    assert "gyrodenoise.sensor" not in onnx_metadata(build_model("calibrated"), meta)
+    assert "gyrodenoise.sensor" in onnx_metadata(build_model("calibrated"), {**meta, "sensor": {"model": "BMI088"}})
+    assert "trained on handheld, not on euroc" in other_imu_warning(meta, "euroc", {"model": "ADIS16448"})
+
+
 def test_a_second_run_into_the_same_folder_says_it_replaces_the_first(tmp_path, model_file, capsys):
     f = bad_file(tmp_path)
     assert run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)[0] == 0

@@ -48,7 +48,7 @@ from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_rate, not_better_warning
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_rate, not_better_warning, sensor_model
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.streaming import StreamingCorrector
@@ -375,8 +375,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def trained_on(meta: dict) -> str | None:
-    """'the euroc dataset's ADIS16448' from a model's metadata, or None when it does not say."""
-    sensor = (meta.get("sensor") or {}).get("model")
+    """'the euroc dataset's ADIS16448' from a model's metadata, or None when it does not say (asl_folder's
+    placeholder 'unknown' included)."""
+    sensor = sensor_model(meta)
     if not sensor:
         return None
     return f"the {meta['dataset']} dataset's {sensor}" if meta.get("dataset") else f"a {sensor}"

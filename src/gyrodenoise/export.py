@@ -35,7 +35,7 @@ from gyrodenoise import c_export
 from gyrodenoise.atomic import atomic_path
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings, quiet_library_notices
-from gyrodenoise.pretrained import load_model
+from gyrodenoise.pretrained import load_model, sensor_model
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
 from gyrodenoise.stateful_graph import StatefulCorrection
 
@@ -160,7 +160,7 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
             )
     if meta.get("rate_hz"):
         out["gyrodenoise.rate_hz"] = f"{float(meta['rate_hz']):g}"
-    sensor = (meta.get("sensor") or {}).get("model")
+    sensor = sensor_model(meta)
     if sensor:
         out["gyrodenoise.sensor"] = f"{sensor}: learned the errors of this IMU model; another IMU needs its own model"
     for key in ("name", "dataset", "beats_calibrated"):

@@ -159,6 +159,16 @@ class ModelQualityWarning(UserWarning):
     """A loaded model's metadata says it is worse than a simpler model."""
 
 
+UNKNOWN_SENSOR = "unknown"  # dataset.sensor.model's placeholder in conf/dataset/asl_folder.yaml
+
+
+def sensor_model(meta: dict) -> str | None:
+    """The IMU model a model file's metadata names (its dataset's `sensor.model`); None where it names none: missing,
+    empty, or asl_folder's placeholder 'unknown' (which read 'learned the errors of the mine dataset's unknown')."""
+    model = (meta.get("sensor") or {}).get("model")
+    return None if not model or str(model).strip().lower() == UNKNOWN_SENSOR else str(model)
+
+
 def model_rate(meta: dict) -> float | None:
     """Training rate of a model, from its metadata (None when unknown)."""
     rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
@@ -241,8 +251,8 @@ def other_imu_warning(
         return None
     if root is not None and meta.get("data_root") == str(Path(root).resolve()):
         return None
-    model_sensor, data_sensor = (meta.get("sensor") or {}).get("model"), (sensor or {}).get("model")
-    if model_sensor and model_sensor == data_sensor and model_sensor != "unknown":  # asl_folder's placeholder
+    model_sensor, data_sensor = sensor_model(meta), sensor_model({"sensor": sensor})
+    if model_sensor and model_sensor == data_sensor:
         return None
     imu = f" ({model_sensor})" if model_sensor else ""
     name = meta.get("name", meta.get("path", "this model"))
