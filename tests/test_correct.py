@@ -393,6 +393,10 @@ def test_the_placeholder_sensor_of_own_data_is_not_named_as_one():
     assert "gyrodenoise.sensor" not in onnx_metadata(build_model("calibrated"), meta)
     assert "gyrodenoise.sensor" in onnx_metadata(build_model("calibrated"), {**meta, "sensor": {"model": "BMI088"}})
     assert "trained on handheld, not on euroc" in other_imu_warning(meta, "euroc", {"model": "ADIS16448"})
+    from gyrodenoise.c_export import c_sources
+
+    header = c_sources(build_model("calibrated"), meta)["gyrodenoise_model.h"]
+    assert " * Sensor: not recorded\n" in header  # it said 'Sensor: unknown: learned the errors of this IMU model'
 
 
 def test_a_second_run_into_the_same_folder_says_it_replaces_the_first(tmp_path, model_file, capsys):

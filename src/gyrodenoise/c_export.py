@@ -33,7 +33,7 @@ from gyrodenoise.c_example import UNSTAMPED, example_source
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
 from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, predict_with_spread
-from gyrodenoise.pretrained import not_better_warning
+from gyrodenoise.pretrained import not_better_warning, sensor_model
 from gyrodenoise.streaming import StreamingCorrector
 
 HEADER, SOURCE, EXAMPLE = "gyrodenoise_model.h", "gyrodenoise_model.c", "example_main.c"
@@ -184,7 +184,7 @@ def _footprint(members: list[StreamingCorrector], sizes: dict) -> str:
 
 def _describe(model: CorrectionModel, members: list[StreamingCorrector], meta: dict) -> list[str]:
     """The header comment's lines about the model: name, sensor, rate, units, receptive field, origin."""
-    sensor = (meta.get("sensor") or {}).get("model")
+    sensor = sensor_model(meta)
     rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
     rf = _receptive_field(members)
     kind = f"ensemble of {len(members)} members" if isinstance(model, EnsembleCorrection) else type(model).__name__
