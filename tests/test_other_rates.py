@@ -3,6 +3,7 @@ evaluation, correction and streaming, and resampling down filters instead of ali
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -26,6 +27,19 @@ def test_training_sequences_at_different_rates_stop_the_run(tmp_path):
     dm = ImuDataModule(name="mine", root=str(tmp_path), train_seqs=["slow", "fast"], test_seqs=[], window=256)
     with pytest.raises(ConfigError, match=r"different rates \(fast 400 Hz, slow 100 Hz\)"):
         dm.setup("fit")
+
+
+@pytest.mark.parametrize(
+    ("increments", "nearest"), [([80, 160], "[64, 128]"), ([16, 24], "[16, 32]"), ([0, 16], "[1, 16]")]
+)
+def test_increments_scaled_to_another_rate_get_the_nearest_powers_of_two(tmp_path, increments, nearest):
+    """80/160 ms at 1 kHz, scaled as own-data.md says, printed Hydra's 'Error in call to target ... ValueError'
+    naming neither loss.increments nor what to give (own-data walkthrough)."""
+    said = (
+        re.escape(f"loss.increments={increments}: ") + ".*powers of two.*" + re.escape(f"'loss.increments={nearest}'")
+    )
+    with pytest.raises(ConfigError, match=said):
+        ImuDataModule(name="mine", root=str(tmp_path), train_seqs=["a"], test_seqs=[], increments=increments)
 
 
 def test_a_test_sequence_at_another_rate_warns(tmp_path):

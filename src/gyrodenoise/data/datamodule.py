@@ -162,8 +162,13 @@ class ImuDataModule(L.LightningDataModule):
         self.eval_gt_variants = {k: dict(v) for k, v in (eval_gt_variants or {}).items()}
         self.window, self.crops_per_epoch = window, crops_per_epoch
         self.step, self.block = min(increments), max(increments)
-        if any(j & (j - 1) for j in increments) or self.block % self.step:
-            raise ValueError(f"increments must be powers of two, got {list(increments)}")
+        if any(j < 1 or j & (j - 1) for j in increments) or self.block % self.step:
+            near = sorted({2 ** max(0, round(math.log2(max(j, 1)))) for j in increments})
+            raise ConfigError(  # a ValueError; inside Hydra's instantiate it printed as a wrapped error
+                f"loss.increments={list(increments)}: the increments (samples) must be powers of two (the loss "
+                f"multiplies the gyro's rotations in a tree of pairs): the nearest, e.g. 'loss.increments={near}'. "
+                "At another rate than 200 Hz: docs/own-data.md, 'Rates other than 200 Hz'"
+            )
         self.sensor = dict(sensor or {})
         self._augment_spec = dict(augment or {})
         # checked now (a wrong key fails before any data is read); rebuilt at the data's measured rate for training
