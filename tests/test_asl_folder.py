@@ -217,3 +217,30 @@ def test_augmentation_noise_follows_the_data_rate_not_a_wrong_nominal_one(asl_ro
     with pytest.warns(UserWarning, match=r"sensor.rate_hz=400, but the training sequences are sampled at 200\.0 Hz"):
         assert gyro_std(400.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(200.0), rel=1e-6)
     assert gyro_std(205.0) == pytest.approx(0.5 * 1e-4 * math.sqrt(205.0))  # within 5 %: the nominal rate
+
+
+def test_training_sequences_too_short_to_validate_are_named(tmp_path):
+    """Recordings no longer than train_duration_s are trained on whole: with all of them so, validation was NaN and
+    the safety net could not run, said only by Lightning's 'Total length of DataLoader ... is zero' (own-data
+    walkthrough: 40-s recordings and the default 50 s)."""
+    import warnings
+
+    from _asl import write_asl_sequence
+
+    from gyrodenoise.data.consistency import DataConsistencyWarning
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    for name, seconds in (("long", 8.0), ("short", 4.0)):
+        write_asl_sequence(tmp_path / name, seconds=seconds, seed=len(name))
+    split = {"name": "mine", "root": str(tmp_path), "test_seqs": [], "window": 256, "train_duration_s": 5.0}
+    dm = ImuDataModule(train_seqs=["long", "short"], **split)
+    with pytest.warns(DataConsistencyWarning, match=r"short \(4.0 s\) no longer than dataset.train_duration_s=5 "
+                      "are trained on whole, so nothing of them validates"):  # fmt: skip
+        dm.setup("fit")
+    assert [s.name for s in dm.val_part] == ["long[5s:]"]
+    dm = ImuDataModule(train_seqs=["short"], **split)
+    with pytest.warns(DataConsistencyWarning, match="no validation data at all: the validation AOE is NaN"):
+        dm.setup("fit")
+    with warnings.catch_warnings():  # whole sequences asked for (train_duration_s: null): nothing to say
+        warnings.simplefilter("error", DataConsistencyWarning)
+        ImuDataModule(train_seqs=["short"], **{**split, "train_duration_s": None}).setup("fit")

@@ -99,7 +99,14 @@ def test_a_calibrated_model_is_not_told_to_resample(tmp_path, capsys):
 
 def test_increments_shorter_than_two_truth_periods_warn(tmp_path):
     write_asl_sequence(tmp_path / "a", seconds=6.0, seed=1)  # IMU and truth at 200 Hz
-    common = {"name": "mine", "root": str(tmp_path), "train_seqs": ["a"], "test_seqs": [], "window": 256}
+    common = {
+        "name": "mine",
+        "root": str(tmp_path),
+        "train_seqs": ["a"],
+        "test_seqs": [],
+        "window": 256,
+        "train_duration_s": 4.0,
+    }
     ok = ImuDataModule(**common, increments=(2, 4))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # 10 ms: two truth periods, no warning

@@ -262,6 +262,7 @@ class ImuDataModule(L.LightningDataModule):
 
     def setup(self, stage: str | None = None) -> None:
         if stage in (None, "fit", "validate") and not self.train_part:
+            short: list[str] = []  # training sequences no longer than train_duration_s: nothing of them validates
             for name in sorted(set(self.train_names) | set(self.val_names)):
                 seq = self.load(name)
                 if name not in self.train_names:  # a validation sequence of its own: whole
@@ -272,6 +273,8 @@ class ImuDataModule(L.LightningDataModule):
                 self.train_part.append(seq.slice(0, cut + 1, name))
                 if name in self.val_names:
                     if (self.cv_holdout is not None or not self.val_explicit) and len(seq) - cut <= self.block:
+                        if self.cv_holdout is None and self.train_duration_s is not None:
+                            short.append(f"{name} ({seq.t[-1] - seq.t[0]:.1f} s)")
                         continue  # a flight trained on whole has no tail; validation was not asked for by name
                     if len(seq) - cut <= self.block:
                         raise ValueError(
@@ -283,9 +286,29 @@ class ImuDataModule(L.LightningDataModule):
                     self.val_part.append(tail.from_first_ground_truth())  # a cut inside an occlusion
                     self.part_origin[self.val_part[-1].name] = (name, float(self.train_duration_s))
                     self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
+            if short:
+                self._warn_short(short)
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
         self._check_rates()
+
+    def _warn_short(self, short: list[str]) -> None:
+        """Training sequences no longer than train_duration_s are trained on whole: nothing of them validates. When
+        none validates, validation AOE is NaN and the safety net (beats the calibrated baseline?) cannot run; that
+        was said only by NaN and Lightning's 'Total length of DataLoader ... is zero' (own-data walkthrough)."""
+        what = (
+            "so there is no validation data at all: the validation AOE is NaN and whether the model beats the "
+            "calibrated baseline cannot be told"
+            if not self.val_part
+            else "so nothing of them validates"
+        )
+        warnings.warn(
+            f"training sequence(s) {', '.join(short)} no longer than dataset.train_duration_s="
+            f"{self.train_duration_s:g} are trained on whole, {what}. Lower dataset.train_duration_s (e.g. to two "
+            "thirds of the shortest), or name validation sequences in dataset.val_seqs",
+            consistency.DataConsistencyWarning,
+            stacklevel=2,
+        )
 
     def _check_rates(self) -> None:
         """One model, one rate: the network's convolutions and increments count samples. Training sequences more
@@ -307,6 +330,7 @@ class ImuDataModule(L.LightningDataModule):
                 f"the shortest loss increment, {self.step} samples, spans {1e3 * self.step / self.rate_hz:.3g} ms at "
                 f"{self.rate_hz:.4g} Hz, under two periods of the ground truth ({1e3 * gt_period:.3g} ms): the loss "
                 "then mostly fits the truth's noise and interpolation. Lengthen loss.increments (powers of two)",
+                consistency.DataConsistencyWarning,  # a project category: printed as one 'warning:' line
                 stacklevel=1,
             )
         self._increment_checked = True
@@ -316,6 +340,7 @@ class ImuDataModule(L.LightningDataModule):
                 warnings.warn(
                     f"{seq.name} samples at {seq.rate_hz:.4g} Hz, the training data at {self.rate_hz:.4g} Hz: its "
                     "figures measure the model off its rate (resample it, or train at its rate)",
+                    consistency.DataConsistencyWarning,
                     stacklevel=1,
                 )
             checked.add(seq.name)
