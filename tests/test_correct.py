@@ -282,6 +282,17 @@ def test_duplicated_stamps(tmp_path, model_file, capsys):
     assert len(read_out(tmp_path)[0]) == 2999
 
 
+def test_a_line_repeated_exactly_is_kept_once(tmp_path, model_file, capsys):
+    """A logger's sample written twice (same stamp, same values) was refused while training reads the same file
+    (own-data walkthrough): one sample, kept once and said; --drop-duplicates is for stamps with other values."""
+    t_ns, gyro, acc = synth()
+    idx = np.insert(np.arange(len(t_ns)), [500, 800, 800], [499, 799, 799])
+    f = write_asl(tmp_path / "rep.csv", t_ns[idx], gyro[idx], acc[idx])
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path], capsys)
+    assert code == 0 and f"{f}:502: 3 lines repeat the line before exactly" in err and "copy of line 501" in err
+    assert len(read_out(tmp_path)[0]) == len(t_ns)
+
+
 def test_time_going_back(tmp_path, model_file, capsys):
     t_ns = synth()[0].copy()
     t_ns[[10, 11]] = t_ns[[11, 10]]

@@ -64,13 +64,28 @@ def check_time_order(rec: ImuRecording, drop_duplicates: bool = False, report: C
             f"{rec.lines[k - 1]} ({back.size} such places). Sort the file by time "
             "(e.g. `sort -t, -k1,1n`) or check that --columns maps the time column."
         )
+    # a line repeating the one before exactly (a logger that wrote a sample twice) is one sample: kept once, said, as
+    # the ASL reader of training does (it refused the recording before, while training read the same file)
+    same = (d == 0) & np.all(rec.gyro[1:] == rec.gyro[:-1], axis=1) & np.all(rec.acc[1:] == rec.acc[:-1], axis=1)
+    if same.any():
+        k, n = int(np.argmax(same)) + 1, int(same.sum())
+        msg = (
+            f"{_where(rec, k)}: {n} line{'s' if n > 1 else ''} repeat{'' if n > 1 else 's'} the line before exactly "
+            f"(same timestamp, same values; the first is a copy of line {rec.lines[k - 1]}): each sample is kept once."
+        )
+        if report is not None:
+            report.warn(msg)
+        else:
+            warnings.warn(msg, SanityWarning, stacklevel=2)
+        rec = _subset(rec, np.concatenate([[True], ~same]))
+        d = np.diff(rec.t_ns)
     dup = np.flatnonzero(d == 0) + 1
     if dup.size:
         if not drop_duplicates:
             k = int(dup[0])
             raise SanityCheckError(
-                f"{_where(rec, k)}: duplicated timestamp {rec.t_ns[k]} ns (same as line {rec.lines[k - 1]}; "
-                f"{dup.size} duplicated samples in all). Remove the duplicated lines, or pass "
+                f"{_where(rec, k)}: duplicated timestamp {rec.t_ns[k]} ns with other values (same as line "
+                f"{rec.lines[k - 1]}; {dup.size} duplicated samples in all). Remove the duplicated lines, or pass "
                 "--drop-duplicates to keep the first sample of each stamp."
             )
         keep = np.ones(len(rec), dtype=bool)
