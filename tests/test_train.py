@@ -311,7 +311,9 @@ def test_test_data_is_checked_before_the_fit(root, tmp_path, capsys):
     shutil.copytree(root, bad)
     imu = bad / "c" / "mav0" / "imu0" / "data.csv"
     lines = imu.read_text().splitlines()
-    imu.write_text("\n".join([*lines[:10], lines[9], *lines[10:]]) + "\n")  # a duplicated line
+    stamp, *values = lines[9].split(",")
+    other = ",".join([stamp, *(f"{float(v) + 0.1:.9f}" for v in values)])  # its stamp again, other values
+    imu.write_text("\n".join([*lines[:10], other, *lines[10:]]) + "\n")
     with pytest.raises(DataFormatError, match="duplicate"):
         train(config(bad, tmp_path / "badtest"))
     assert not (tmp_path / "badtest" / "checkpoints").exists()
