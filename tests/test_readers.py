@@ -72,7 +72,7 @@ def test_binary_file_names_file_byte_and_layout(tmp_path, reader):
 def test_nan_is_reported_not_dropped(tmp_path):
     rows = imu_rows()
     rows[7] = rows[7].replace("9.8", "nan")
-    with pytest.raises(DataFormatError, match=r"imu.csv:9: column 7 .*NaN"):
+    with pytest.raises(DataFormatError, match=r"imu.csv:9: column 7 .*NaN.*\(1 such line\)"):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
 
 

@@ -182,13 +182,17 @@ def _decimal_stamp_hint(field: str) -> str:
     return " It reads as a decimal number: write the nanoseconds as integers (a float64 drops the last digits)."
 
 
+def _such_lines(n: int) -> str:
+    return "1 such line" if n == 1 else f"{n} such lines"
+
+
 def _check_values(path: Path, values: np.ndarray, lines: np.ndarray, what: str) -> None:
     bad = ~np.isfinite(values)
     if bad.any():
         r, c = np.argwhere(bad)[0]
         raise DataFormatError(
             f"{path}:{lines[r]}: column {c + 2} of the {what} is {values[r, c]} (NaN/inf) "
-            f"({int(bad.any(1).sum())} such lines). Remove or repair these samples; gyrodenoise does not "
+            f"({_such_lines(int(bad.any(1).sum()))}). Remove or repair these samples; gyrodenoise does not "
             "fill them in silently."
         )
 
@@ -223,7 +227,7 @@ def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> N
         n = int((d == 0).sum())
         raise DataFormatError(
             f"{path}:{lines[k + 1]}: duplicate timestamp {t_ns[k + 1]} (same as line {lines[k]}) with other values "
-            f"in the {what} ({n} such line{'s' if n > 1 else ''}; exact repeats of a line are kept once by "
+            f"in the {what} ({_such_lines(n)}; exact repeats of a line are kept once by "
             "themselves). Keep one sample per timestamp: the one the sensor really measured then."
         )
     if (d < 0).any():
@@ -307,7 +311,7 @@ def read_groundtruth(path: str | Path) -> GroundTruthData:
     if k is not None:
         raise DataFormatError(
             f"{path}:{lines[k]}: quaternion (columns 5-8, w x y z) has norm {norm[k]:.6f}, more than "
-            f"{QUAT_NORM_TOL} from 1 ({count} such lines). Check the column order "
+            f"{QUAT_NORM_TOL} from 1 ({_such_lines(count)}). Check the column order "
             "(t, p_x, p_y, p_z, q_w, q_x, q_y, q_z) and the file's units."
         )
     q_wxyz = q_wxyz / norm[:, None]
