@@ -94,6 +94,13 @@ class InterruptAtEpoch(L.Callback):
             raise KeyboardInterrupt
 
 
+class InterruptAtStart(L.Callback):
+    """Ctrl-C while the fit sets up, before its first step."""
+
+    def on_train_start(self, trainer, module) -> None:
+        raise KeyboardInterrupt
+
+
 class FirstEpoch(L.Callback):
     """Records the epoch a fit starts at (0 unless it resumed from a checkpoint)."""
 
@@ -206,3 +213,15 @@ def test_a_data_error_while_the_fit_sets_up_leaves_nothing_to_resume(root, tmp_p
     with pytest.raises(DataFormatError, match="NaN"):
         train(config(data, run, "trainer.max_epochs=4"))
     assert "auto_resume: " in capsys.readouterr().out and ckpt.read_bytes() == before
+
+
+def test_an_interruption_before_the_first_step_says_there_is_nothing_to_resume(root, tmp_path, capsys):
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit):
+            train(config(root, tmp_path / "run", "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtStart"))
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    err = capsys.readouterr().err
+    assert "interrupted before the first training step" in err and "nothing to resume" in err
+    assert "ckpt_path=" not in err and not list((tmp_path / "run").glob("checkpoints/*.ckpt"))

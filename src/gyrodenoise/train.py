@@ -235,6 +235,13 @@ def _last_ckpt_cadence(cfg: DictConfig) -> str:
 def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
     ckpts = Path(cfg.paths.output_dir) / "checkpoints"
     saved = [p for p in (ckpts / "interrupted.ckpt", ckpts / "last.ckpt") if p.is_file()]
+    if not saved and trainer.global_step == 0 and not cfg.get("ckpt_path"):
+        print(
+            "interrupted before the first training step: nothing was trained or saved, so nothing to resume; rerun "
+            "the command to start again",
+            file=sys.stderr,
+        )
+        return
     where = f"ckpt_path={saved[0]}" if saved else "ckpt_path=<a run's checkpoints/last.ckpt>"
     print(
         f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where}"
