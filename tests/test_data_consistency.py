@@ -159,3 +159,36 @@ def test_a_gyro_far_smaller_than_the_truths_rate_warns(seq):
     """A gyro 1000 times too small rarely exceeds the moving threshold; it follows the truth, so it is a scale."""
     with pytest.warns(consistency.DataConsistencyWarning, match=r"the gyro is 0\.00(1|099\d*) times the rate"):
         consistency.check(dataclasses.replace(seq, gyro=seq.gyro * 1e-3))
+
+
+def _xyzw_truth(folder):
+    """The ground truth's quaternion written x, y, z, w where the ASL files hold w, x, y, z (no header to say so)."""
+    gt = folder / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    lines = gt.read_text().splitlines()
+    rows = [ln.split(",") for ln in lines[1:]]
+    gt.write_text("\n".join([lines[0]] + [",".join(r[:4] + r[5:8] + [r[4]]) for r in rows]) + "\n")
+
+
+def test_a_training_sequence_whose_truth_disagrees_stops_training_unless_told(tmp_path):
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    for i, name in enumerate(["good", "swapped"]):
+        write_asl_sequence(tmp_path / name, seconds=20.0, seed=20 + i)
+    _xyzw_truth(tmp_path / "swapped")
+
+    def module(train, test, **kw):
+        return ImuDataModule(name="mine", root=str(tmp_path), train_seqs=train, test_seqs=test, window=256,
+                             cache_dir="", train_duration_s=15, **kw)  # fmt: skip
+
+    with pytest.raises(consistency.InconsistentTruthError) as stop:
+        module(["good", "swapped"], []).setup("fit")
+    said = str(stop.value)
+    assert "swapped (" in said and "state_groundtruth_estimate0/data.csv" in said and "quaternion order" in said
+    assert "dataset.inconsistent_truth=warn" in said
+    with pytest.warns(consistency.DataConsistencyWarning, match="quaternion order"):
+        module(["good", "swapped"], [], inconsistent_truth="warn").setup("fit")
+    with pytest.warns(consistency.DataConsistencyWarning, match="quaternion order"):  # a test sequence: said only
+        module(["good"], ["swapped"]).check_sequences()
+    with pytest.raises(ConfigError, match="inconsistent_truth='halt'"):
+        module(["good"], [], inconsistent_truth="halt")

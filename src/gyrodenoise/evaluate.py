@@ -178,6 +178,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         with open_dict(cfg):
             cfg.dataset.train_seqs = []
     dm = hydra.utils.instantiate(cfg.dataset)
+    if hasattr(dm, "inconsistent_truth"):  # scoring, not training: a disagreeing truth is said beside the scores
+        dm.inconsistent_truth = "warn"
     with noting_data_warnings() as data_warnings:  # the sequences are read and checked here
         dm.check_sequences(
             train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"

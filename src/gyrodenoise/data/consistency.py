@@ -163,9 +163,16 @@ def clock_offset(m: Consistency) -> bool:
     )
 
 
-def check(seq: Sequence) -> Consistency:
-    """Raise for a gyro in deg/s; warn (DataConsistencyWarning) for IMU gaps, a gyro/truth scale far from 1
-    and a truth off the IMU's clock. Returns the measures."""
+class InconsistentTruthError(DataFormatError):
+    """A training sequence's ground truth does not describe its gyro (scale, axes or clock): a model trained on it
+    learns nothing true (`check(..., stop=True)`)."""
+
+
+def check(seq: Sequence, stop: bool = False) -> Consistency:
+    """Raise for a gyro in deg/s; warn (DataConsistencyWarning) for IMU gaps and an IMU outside the truth's span;
+    for a gyro/truth scale far from 1, a truth about other axes or off the IMU's clock, warn, or raise
+    `InconsistentTruthError` with `stop` (training sequences: their scores and their training mean nothing).
+    Returns the measures."""
     m = measure(seq)
     files = [portable_path(f) if f else "?" for f in (seq.meta.get("imu_file"), seq.meta.get("gt_file"))]
     where = f"{seq.name} ({files[0]}, truth {files[1]})"  # portable: the message is kept in reports
@@ -192,13 +199,26 @@ def check(seq: Sequence) -> Consistency:
             DataConsistencyWarning,
             stacklevel=2,
         )
+    problems = _truth_problems(m)
+    if problems and stop:
+        raise InconsistentTruthError(
+            f"{where}: {' Also, '.join(problems)} This is a training sequence: training on it would fit the "
+            "disagreement, so the run stops here. Fix the file, or give dataset.inconsistent_truth=warn to train "
+            "anyway."
+        )
+    for problem in problems:
+        warnings.warn(f"{where}: {problem}", DataConsistencyWarning, stacklevel=2)
+    return m
+
+
+def _truth_problems(m: Consistency) -> list[str]:
+    """What makes the ground truth a wrong description of the gyro: scale, axes, clock (each a sentence)."""
+    problems = []
     if np.isfinite(m.rate_ratio) and not RATIO_RANGE[0] <= m.rate_ratio <= RATIO_RANGE[1]:
-        warnings.warn(
-            f"{where}: the gyro is {m.rate_ratio:.3g} times the rate of the ground truth's orientation (about 1 "
+        problems.append(
+            f"the gyro is {m.rate_ratio:.3g} times the rate of the ground truth's orientation (about 1 "
             "expected): check the gyro's unit and scale, and that the gyro columns are not the accelerometer's "
-            "(ASL order: t, gyro x y z, acc x y z).",
-            DataConsistencyWarning,
-            stacklevel=2,
+            "(ASL order: t, gyro x y z, acc x y z)."
         )
     if m.mirrored or m.axes_angle_deg > AXES_MAX_DEG:
         if m.mirrored:  # a reflection: no rotation undoes it, whatever angle the best rotation reaches
@@ -211,21 +231,17 @@ def check(seq: Sequence) -> Consistency:
                 f"the gyro turns about axes {m.axes_angle_deg:.0f} deg away from the ground truth's body axes (the "
                 f"rotation that best maps the truth's body rate onto the gyro; under {AXES_MAX_DEG:g} deg expected):"
             )
-        warnings.warn(
-            f"{where}: {what} the truth's quaternion order may be wrong (the ASL files hold w, x, y, z; x, y, z, w "
+        problems.append(
+            f"{what} the truth's quaternion order may be wrong (the ASL files hold w, x, y, z; x, y, z, w "
             "read so gives ~100 deg or more), it may be the pose of another body than the IMU, or world-in-body "
             f"instead of body-in-world; or{'' if m.mirrored else ' a gyro axis is flipped or permuted, or'} the gyro "
             "columns are the accelerometer's. Scores against it mean nothing: fix the file or rotate the truth into "
-            "the IMU frame.",
-            DataConsistencyWarning,
-            stacklevel=2,
+            "the IMU frame."
         )
     if clock_offset(m):
-        warnings.warn(
-            f"{where}: the gyro's rate magnitude matches the ground truth's best {m.best_lag_s:+.3f} s away from "
+        problems.append(
+            f"the gyro's rate magnitude matches the ground truth's best {m.best_lag_s:+.3f} s away from "
             f"the stamps (correlation {m.corr_at_best:.2f} there, {m.corr_at_zero:.2f} at zero lag): the ground "
-            f"truth is probably not on the IMU's clock; add {m.best_lag_s:+.3f} s to the ground truth's timestamps.",
-            DataConsistencyWarning,
-            stacklevel=2,
+            f"truth is probably not on the IMU's clock; add {m.best_lag_s:+.3f} s to the ground truth's timestamps."
         )
-    return m
+    return problems

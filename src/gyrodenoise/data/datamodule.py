@@ -132,6 +132,7 @@ class ImuDataModule(L.LightningDataModule):
         cache_dir: str | None = None,
         sensor: Mapping | None = None,
         cv_fold: int | str | None = None,  # 'all': refused here (a training mode of gyrodenoise.train)
+        inconsistent_truth: str = "stop",  # a training sequence whose truth disagrees with its gyro: stop | warn
     ) -> None:
         super().__init__()
         self.name, self.root = name, str(root)
@@ -174,6 +175,12 @@ class ImuDataModule(L.LightningDataModule):
         # checked now (a wrong key fails before any data is read); rebuilt at the data's measured rate for training
         self.augment = self._augment_config(self.sensor.get("rate_hz", 200.0))
         self.max_gap_factor, self.cache_dir = max_gap_factor, cache_dir
+        if inconsistent_truth not in ("stop", "warn"):
+            raise ConfigError(
+                f"dataset.inconsistent_truth={inconsistent_truth!r}: 'stop' (a training sequence whose ground truth "
+                "disagrees with its gyro in scale, axes or clock stops the run) or 'warn' (train anyway)"
+            )
+        self.inconsistent_truth = inconsistent_truth
         self.train_part: list[Sequence] = []
         self._rates_warned: set[str] = set()  # sequences whose rate was compared with the training data's
         self._increment_checked = False  # the loss increments against the ground truth's period
@@ -254,17 +261,19 @@ class ImuDataModule(L.LightningDataModule):
         training part of its sequence ends, anything else (whole sequences) at its beginning."""
         return self.part_origin.get(seq.name, (seq.name, 0.0))
 
-    def load(self, name: str) -> Sequence:
-        """A sequence through the cache, checked against its ground truth (`consistency`: deg/s, gaps, clock)."""
+    def load(self, name: str, training: bool = False) -> Sequence:
+        """A sequence through the cache, checked against its ground truth (`consistency`: deg/s, gaps, clock; read
+        to train on (`training`), one whose truth disagrees with its gyro stops the run unless
+        inconsistent_truth=warn)."""
         seq = load_sequence(self.root, name, self.gt_files.get(name), self.max_gap_factor, self.cache_dir)
-        consistency.check(seq)
+        consistency.check(seq, stop=training and self.inconsistent_truth == "stop")
         return seq
 
     def setup(self, stage: str | None = None) -> None:
         if stage in (None, "fit", "validate") and not self.train_part:
             short: list[str] = []  # training sequences no longer than train_duration_s: nothing of them validates
             for name in sorted(set(self.train_names) | set(self.val_names)):
-                seq = self.load(name)
+                seq = self.load(name, training=name in self.train_names)
                 if name not in self.train_names:  # a validation sequence of its own: whole
                     self.val_part.append(seq)
                     self.val_groups.append("val")
