@@ -234,8 +234,8 @@ def main(argv: list[str] | None = None) -> int:
         "--c-prefix",
         default=c_export.DEFAULT_PREFIX,
         metavar="NAME",
-        help="with --c: the prefix of the C names (default gd: gd_step, gd_reset, gd_state, GD_*); another prefix per "
-        "model lets two exported models link into one program",
+        help="with --c: the prefix of the C names (default gd: gd_step, gd_step_t, gd_reset, gd_state, GD_*); another "
+        "prefix per model lets two exported models link into one program",
     )
     ap.add_argument(
         "--no-check",
