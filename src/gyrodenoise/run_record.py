@@ -51,9 +51,12 @@ def restore_run_record() -> None:
 
 @contextmanager
 def restored_on_refusal() -> Iterator[None]:
-    """Around a task: a `ConfigError` (found before any work is done) restores the folder's previous record."""
+    """Around a task: a `ConfigError` (found before any work is done) restores the folder's previous record, one
+    raised inside a config's target too (the data module's: Hydra's instantiate raises it as the cause of its own
+    InstantiationException)."""
     try:
         yield
-    except ConfigError:
-        restore_run_record()
+    except Exception as e:
+        if isinstance(e, ConfigError) or isinstance(e.__cause__, ConfigError):
+            restore_run_record()
         raise
