@@ -192,3 +192,16 @@ def test_a_training_sequence_whose_truth_disagrees_stops_training_unless_told(tm
         module(["good"], ["swapped"]).check_sequences()
     with pytest.raises(ConfigError, match="inconsistent_truth='halt'"):
         module(["good"], [], inconsistent_truth="halt")
+
+
+@pytest.mark.parametrize("dataset", ["sim", "euroc", "tumvi", "asl_folder"])
+def test_every_dataset_config_takes_the_override_the_stop_names(dataset):
+    """The stop says 'give dataset.inconsistent_truth=warn': that override composes with every dataset config (a
+    config without the key refused it: 'Key inconsistent_truth is not in struct')."""
+    from hydra import compose, initialize_config_dir
+
+    from gyrodenoise.config import CONF_DIR
+
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        cfg = compose("train", overrides=[f"dataset={dataset}", "dataset.inconsistent_truth=warn"])
+    assert cfg.dataset.inconsistent_truth == "warn"
