@@ -48,6 +48,8 @@ def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboa
     assert metrics["selected_val/aoe_deg"] == pytest.approx(summary["val"]["val/aoe_deg"])
     assert len(client.get_metric_history(run.info.run_id, "val/aoe_deg")) == 2
     assert metrics["test/aoe_deg.c"] == pytest.approx(summary["test"]["test/aoe_deg/c"])  # a sequence's figure
+    # a validation tail a[4s:] by a name MLflow holds (Lightning stripped its brackets and colon: a4s)
+    assert {"val/aoe_deg.a_after4s", "val/aoe_deg.b_after4s"} <= set(metrics)
     assert client.get_metric_history(run.info.run_id, "train/loss")
     files = {a.path for a in client.list_artifacts(run.info.run_id)}
     assert {"summary.json", "model.pt", "calibrated.pt", "train.log", "figures"} <= files

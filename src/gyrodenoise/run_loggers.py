@@ -10,6 +10,7 @@ CSV logger takes curves only.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -29,10 +30,17 @@ class MLflowRunLogger(MLFlowLogger):
         super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
 
 
+_TAIL = re.compile(r"\[([0-9.]+)s:\]$")  # a training sequence's validation tail, NAME[Ns:]
+_NOT_MLFLOW = re.compile(r"[^a-zA-Z0-9_/. -]")  # what Lightning's MLFlowLogger strips from a name, with a warning
+
+
 def mlflow_metric_name(name: str) -> str:
-    """`group/metric/sequence` -> `group/metric.sequence` (the names MLflow's file store can hold side by side)."""
+    """`group/metric/sequence` -> `group/metric.sequence` (the names MLflow's file store can hold side by side). A
+    validation tail `NAME[Ns:]` becomes `NAME_afterNs`, and other characters MLflow refuses `_` (Lightning stripped
+    them, with a warning per name: `MH_01_easy[50s:]` read `MH_01_easy50s`)."""
     group, sep, rest = name.partition("/")
-    return f"{group}{sep}{rest.replace('/', '.')}"
+    rest = _TAIL.sub(r"_after\1s", rest.replace("/", "."))
+    return _NOT_MLFLOW.sub("_", f"{group}{sep}{rest}")
 
 
 def log_figures(loggers: Sequence[Logger], figures: dict[str, Figure], step: int) -> None:
