@@ -146,7 +146,12 @@ def test_a_ground_truth_on_another_clock_says_which(tmp_path, stamps, says):
 
 @pytest.mark.parametrize(
     ("stamp", "says"),
-    [("1700001000.300002", "stamps in seconds"), ("1.700001e+18", "write the nanoseconds as integers")],
+    [
+        ("1700001000.300002", "stamps in seconds"),
+        ("1700001000300.002", "stamps in milli- or microseconds.*ms x 1e6"),  # since 1970 in ms, a phone log's
+        ("1700001000300002.5", "stamps in milli- or microseconds.*µs x 1e3"),
+        ("1.700001e+18", "write the nanoseconds as integers"),
+    ],
 )
 def test_a_decimal_timestamp_says_what_to_write(tmp_path, stamp, says):
     rows = gt_rows()

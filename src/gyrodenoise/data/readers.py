@@ -179,6 +179,11 @@ def _decimal_stamp_hint(field: str) -> str:
             " It reads as a decimal number: stamps in seconds (or ms)? Write them as integer nanoseconds "
             "(seconds x 1e9, rounded), the IMU's and the ground truth's alike."
         )
+    if abs(value) < 1e17:  # since 1970 in ms (~1.7e12) or µs (~1.7e15); ns are ~1.7e18
+        return (
+            " It reads as a decimal number: stamps in milli- or microseconds (since 1970: ~1.7e12 ms, ~1.7e15 µs)? "
+            "Write them as integer nanoseconds (ms x 1e6, µs x 1e3, rounded), the IMU's and the ground truth's alike."
+        )
     return " It reads as a decimal number: write the nanoseconds as integers (a float64 drops the last digits)."
 
 
