@@ -241,6 +241,10 @@ def test_training_sequences_too_short_to_validate_are_named(tmp_path):
     dm = ImuDataModule(train_seqs=["short"], **split)
     with pytest.warns(DataConsistencyWarning, match="no validation data at all: the validation AOE is NaN"):
         dm.setup("fit")
+    # 4 s against 3.9 s: a tail (20 samples) no longer than the loss's longest increment does not validate either
+    with pytest.warns(DataConsistencyWarning, match=r"short \(4.0 s\) no longer than dataset.train_duration_s=3.9 "
+                      r"plus the loss's longest increment \(32 samples\) are trained on whole"):  # fmt: skip
+        ImuDataModule(train_seqs=["short"], **{**split, "train_duration_s": 3.9}).setup("fit")
     with warnings.catch_warnings():  # whole sequences asked for (train_duration_s: null): nothing to say
         warnings.simplefilter("error", DataConsistencyWarning)
         ImuDataModule(train_seqs=["short"], **{**split, "train_duration_s": None}).setup("fit")

@@ -272,6 +272,7 @@ class ImuDataModule(L.LightningDataModule):
     def setup(self, stage: str | None = None) -> None:
         if stage in (None, "fit", "validate") and not self.train_part:
             short: list[str] = []  # training sequences no longer than train_duration_s: nothing of them validates
+            over = False  # one of them longer than train_duration_s, by at most the loss's longest increment
             for name in sorted(set(self.train_names) | set(self.val_names)):
                 seq = self.load(name, training=name in self.train_names)
                 if name not in self.train_names:  # a validation sequence of its own: whole
@@ -284,6 +285,7 @@ class ImuDataModule(L.LightningDataModule):
                     if (self.cv_holdout is not None or not self.val_explicit) and len(seq) - cut <= self.block:
                         if self.cv_holdout is None and self.train_duration_s is not None:
                             short.append(f"{name} ({seq.t[-1] - seq.t[0]:.1f} s)")
+                            over |= seq.t[-1] - seq.t[0] > self.train_duration_s  # a tail too short to validate
                         continue  # a flight trained on whole has no tail; validation was not asked for by name
                     if len(seq) - cut <= self.block:
                         raise ValueError(
@@ -296,12 +298,12 @@ class ImuDataModule(L.LightningDataModule):
                     self.part_origin[self.val_part[-1].name] = (name, float(self.train_duration_s))
                     self.val_groups.append("val" if self.cv_holdout is None else "val_tail")
             if short:
-                self._warn_short(short)
+                self._warn_short(short, over)
         if stage in (None, "test", "predict") and not self.test_part:
             self.test_part = [self.load(n) for n in self.test_names]
         self._check_rates()
 
-    def _warn_short(self, short: list[str]) -> None:
+    def _warn_short(self, short: list[str], over: bool = False) -> None:
         """Training sequences no longer than train_duration_s are trained on whole: nothing of them validates. When
         none validates, validation AOE is NaN and the safety net (beats the calibrated baseline?) cannot run; that
         was said only by NaN and Lightning's 'Total length of DataLoader ... is zero' (own-data walkthrough)."""
@@ -311,9 +313,11 @@ class ImuDataModule(L.LightningDataModule):
             if not self.val_part
             else "so nothing of them validates"
         )
+        extra = f" plus the loss's longest increment ({self.block} samples)" if over else ""
         warnings.warn(
             f"training sequence(s) {', '.join(short)} no longer than dataset.train_duration_s="
-            f"{self.train_duration_s:g} are trained on whole, {what}. Lower dataset.train_duration_s (e.g. to two "
+            f"{self.train_duration_s:g}{extra} "
+            f"are trained on whole, {what}. Lower dataset.train_duration_s (e.g. to two "
             "thirds of the shortest), or name validation sequences in dataset.val_seqs",
             consistency.DataConsistencyWarning,
             stacklevel=2,
