@@ -57,3 +57,20 @@ def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboa
     assert sorted(os.path.basename(f) for f in figures) == ["gyro_correction", "orientation", "orientation_error"]
     pngs = client.list_artifacts(run.info.run_id, "figures/val/orientation")
     assert pngs and all(p.path.endswith(".png") for p in pngs)
+
+
+def test_a_fold_is_named_and_a_resumed_folder_goes_on_in_its_unfinished_mlflow_run(tmp_path):
+    from gyrodenoise.run_loggers import MLflowRunLogger
+
+    store = f"file:{tmp_path / 'mlruns'}"
+    kw = {"experiment_name": "train-mine", "run_name": "denoiser-seed0", "tracking_uri": store}
+    first = MLflowRunLogger(fold=2, tags={"output_dir": "/runs/a"}, **kw)
+    first.log_metrics({"train/loss": 1.0}, step=1)  # the run starts; interrupted: never finalized
+    client = mlflow.tracking.MlflowClient(tracking_uri=store)
+    assert client.get_run(first.run_id).info.run_name == "denoiser-seed0-fold2"
+    again = MLflowRunLogger(fold=2, tags={"output_dir": "/runs/a"}, **kw)  # auto_resume in the same folder
+    assert again.run_id == first.run_id
+    other = MLflowRunLogger(fold=2, tags={"output_dir": "/runs/b"}, **kw)  # another folder: a run of its own
+    assert other.run_id != first.run_id
+    again.finalize("success")
+    assert MLflowRunLogger(tags={"output_dir": "/runs/a"}, **kw).run_id != first.run_id  # a finished run is not reused

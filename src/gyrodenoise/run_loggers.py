@@ -24,10 +24,42 @@ RUN_FILES = ("summary.json", "model.pt", "calibrated.pt", "train.log")
 class MLflowRunLogger(MLFlowLogger):
     """Lightning's MLFlowLogger with metric names its file store can hold: that store makes each `/` a folder, so
     `test/aoe_deg` (a file) and `test/aoe_deg/MH_02_easy` (inside a folder of the same name) cannot both exist.
-    Past the group (`test/`), `/` becomes `.`: `test/aoe_deg.MH_02_easy`."""
+    Past the group (`test/`), `/` becomes `.`: `test/aoe_deg.MH_02_easy`.
+
+    A cross-validation fold's run is named with its fold (`fold`: `denoiser-seed0-fold2`). A run resumed in its own
+    folder (auto_resume, a requeued job) goes on in the MLflow run of that folder that did not finish (tag
+    `output_dir`), so its curves stay one run, instead of a second run starting mid-way."""
+
+    def __init__(self, *, fold: int | None = None, **kwargs: Any) -> None:
+        if fold is not None and kwargs.get("run_name"):
+            kwargs["run_name"] = f"{kwargs['run_name']}-fold{fold}"
+        folder = (kwargs.get("tags") or {}).get("output_dir")
+        if folder and kwargs.get("run_id") is None:
+            kwargs["run_id"] = _unfinished_run(kwargs, str(folder))
+        super().__init__(**kwargs)
 
     def log_metrics(self, metrics: dict[str, float], step: int | None = None) -> None:
         super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
+
+
+def _unfinished_run(kwargs: dict[str, Any], folder: str) -> str | None:
+    """The id of the newest run of the experiment that logged `folder` and did not finish (None: none)."""
+    from mlflow.tracking import MlflowClient
+
+    # the store Lightning's MLFlowLogger uses: tracking_uri, else file:<save_dir>
+    uri = kwargs.get("tracking_uri") or f"file:{kwargs.get('save_dir') or './mlruns'}"
+    client = MlflowClient(tracking_uri=uri)
+    experiment = client.get_experiment_by_name(kwargs.get("experiment_name") or "lightning_logs")
+    if experiment is None:
+        return None
+    quoted = folder.replace("'", "\\'")
+    runs = client.search_runs(
+        [experiment.experiment_id],
+        filter_string=f"tags.output_dir = '{quoted}' and attributes.status != 'FINISHED'",
+        order_by=["attributes.start_time DESC"],
+        max_results=1,
+    )
+    return runs[0].info.run_id if runs else None
 
 
 _TAIL = re.compile(r"\[([0-9.]+)s:\]$")  # a training sequence's validation tail, NAME[Ns:]
