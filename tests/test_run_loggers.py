@@ -74,3 +74,21 @@ def test_a_fold_is_named_and_a_resumed_folder_goes_on_in_its_unfinished_mlflow_r
     assert other.run_id != first.run_id
     again.finalize("success")
     assert MLflowRunLogger(tags={"output_dir": "/runs/a"}, **kw).run_id != first.run_id  # a finished run is not reused
+
+
+def _start_run(store: str, name: str) -> str:
+    from gyrodenoise.run_loggers import MLflowRunLogger
+
+    return MLflowRunLogger(experiment_name=name, run_name="job", tracking_uri=store).run_id
+
+
+def test_sweep_jobs_started_together_share_one_experiment(tmp_path):
+    """The joblib launcher starts jobs at once in a fresh store: each must find the one experiment, not make its own."""
+    import multiprocessing
+
+    store = f"file:{tmp_path / 'mlruns'}"
+    with multiprocessing.get_context("spawn").Pool(6) as pool:
+        runs = pool.starmap(_start_run, [(store, "train-mine")] * 6)
+    client = mlflow.tracking.MlflowClient(tracking_uri=store)
+    (experiment,) = [e for e in client.search_experiments() if e.name == "train-mine"]
+    assert sorted(r.info.run_id for r in client.search_runs([experiment.experiment_id])) == sorted(runs)

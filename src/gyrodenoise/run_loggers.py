@@ -37,9 +37,35 @@ class MLflowRunLogger(MLFlowLogger):
         if folder and kwargs.get("run_id") is None:
             kwargs["run_id"] = _unfinished_run(kwargs, str(folder))
         super().__init__(**kwargs)
+        if self._run_id is None:  # Lightning would look the experiment up, and create it, unguarded
+            self._experiment_id = _experiment_id(self._mlflow_client, self._tracking_uri, self._experiment_name)
 
     def log_metrics(self, metrics: dict[str, float], step: int | None = None) -> None:
         super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
+
+
+def _experiment_id(client: Any, uri: str, name: str) -> str:
+    """The experiment's id, created if new. Sweep jobs started together (the joblib launcher) would each find no
+    experiment and create one: MLflow's file store then holds several of one name, the runs split among them. In a
+    file store the lookup and creation hold a lock file; another store refuses a second creation, then looked up."""
+    from filelock import FileLock  # a dependency of torch's
+    from mlflow.exceptions import MlflowException
+
+    def find_or_create() -> str:
+        found = client.get_experiment_by_name(name)
+        if found is not None:
+            return found.experiment_id
+        try:
+            return client.create_experiment(name)
+        except MlflowException:  # created by another job meanwhile (a server's or a database's store)
+            return client.get_experiment_by_name(name).experiment_id
+
+    if not uri.startswith("file:"):
+        return find_or_create()
+    store = Path(uri.removeprefix("file:").removeprefix("//"))
+    store.mkdir(parents=True, exist_ok=True)
+    with FileLock(store / ".gyrodenoise-experiments.lock"):
+        return find_or_create()
 
 
 def _unfinished_run(kwargs: dict[str, Any], folder: str) -> str | None:
