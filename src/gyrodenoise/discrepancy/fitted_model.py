@@ -68,6 +68,21 @@ class Selection:
         return [d["sentence"]] if d is not None and not d["separable"] else []
 
     @property
+    def cautions(self) -> list[str]:
+        """Named effects that another explanation may hide behind on this data (sentences for the report): a
+        low-pass kept over a named time offset also smooths the ground truth's own noise, which a delay cannot (a
+        4 ms offset behind a 0.05 deg mocap was named a 39.7 Hz low-pass: benchmarks/results/blind_discrepancy.md)."""
+        d = self.delay_or_lowpass
+        if d is None or d.get("kept") != "sensor_bandwidth":
+            return []
+        return [
+            f"sensor_bandwidth ({d['lowpass_corner_hz']:.1f} Hz) replaced a named time offset of "
+            f"{1e3 * d['delay_s']:.2f} ms (delta BIC {d['delta_bic_lowpass_vs_offset']:.0f} for the low-pass): fitted "
+            "to a noisy ground truth's rate a low-pass also smooths that noise, which a delay cannot; behind a motion "
+            f"capture, read it as a possible time offset of {1e3 * d['delay_s']:.2f} ms"
+        ]
+
+    @property
     def below_practical(self) -> list[dict]:
         """Candidates of the last step that clear their threshold but not the practical minimum: there
         (statistically), too small to matter (what they close on the held-out sequences is recorded)."""

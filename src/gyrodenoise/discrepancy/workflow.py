@@ -276,8 +276,8 @@ def run(
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)
-    if sel.equivalences:
-        verdict += " (" + "; ".join(sel.equivalences) + ")"
+    if sel.equivalences or sel.cautions:
+        verdict += " (" + "; ".join(sel.equivalences + sel.cautions) + ")"
     fit_resid = residuals_after(sel_base.design, sel_base.result, sel_base.selected)
     report = {
         "verdict": verdict,
@@ -305,6 +305,7 @@ def run(
         "identifiability": sel.identifiability,
         "delay_or_lowpass": sel.delay_or_lowpass,
         "equivalences": sel.equivalences,
+        "cautions": sel.cautions,
         "reconstruction": {
             "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
             "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],
