@@ -239,3 +239,11 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
     done = run(seconds, "--unstamped")
     assert done.returncode == 0 and done.stdout.splitlines()[1].startswith("1403636579.758555,")
     assert run("", "--bad").returncode == 2
+    # nothing dropped silently: a line without t, a line of 8 columns, a line longer than the buffer end the run
+    done = run("t,gx,gy,gz,ax,ay,az\n,0,0,0,0,0,9.8\n")
+    assert done.returncode == 1 and "line 2: t= is not integer nanoseconds" in done.stderr
+    done = run("# a comment\r\n\r\n1000000000,0,0,0,0,0,9.8,17\r\n")
+    assert done.returncode == 1 and "line 3: more than 7 columns" in done.stderr
+    done = run("1000000000," + "0" * 2000 + ",0,0,0,0,9.8\n")
+    assert done.returncode == 1 and "line 1: longer than" in done.stderr
+    assert run("1000000000,0,0,0,0,0,9.8\r\n").returncode == 0  # CRLF line ends

@@ -20,8 +20,8 @@ REFUSALS = {  # what stderr says of a refused sample
 
 EXAMPLE_CODE = """\
 /* Correct a CSV stream with the exported model: lines t,gx,gy,gz,ax,ay,az (t integer nanoseconds, gyro rad/s, acc
-   m/s^2) on stdin, lines t,wx,wy,wz (corrected gyro rad/s{std_cols_doc}) on stdout, t copied as written. Lines
-   that do not start with a number (a header, # comments) are skipped.
+   m/s^2) on stdin, lines t,wx,wy,wz (corrected gyro rad/s{std_cols_doc}) on stdout, t copied as written. Empty
+   lines and lines that start with a letter or # (a header, comments) are skipped; any other line must be 7 numbers.
 
    Each sample goes through gd_step_t with its stamp, as an onboard loop would: a refused sample (a NaN, a stamp not
    after the previous one or too soon after it) is dropped, with a line on stderr and no output line; after a gap the
@@ -31,6 +31,7 @@ EXAMPLE_CODE = """\
    Compile: {compile}
    Run:     ./gyrodenoise < imu.csv > corrected.csv
 */
+#include <ctype.h>
 #include <errno.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -73,8 +74,13 @@ int main(int argc, char **argv)
     printf("t,wx,wy,wz{std_cols}\\n");
     while (fgets(line, sizeof line, stdin)) {{
         lineno++;
-        char *p = line + strspn(line, " \\t"), *end;
-        if (*p == '\\0' || !strchr("+-.0123456789", *p)) continue; /* a header, a comment, an empty line */
+        if (!strchr(line, '\\n') && !feof(stdin)) {{
+            fprintf(stderr, "line %ld: longer than %d characters: not t,gx,gy,gz,ax,ay,az\\n", lineno,
+                    (int)sizeof line - 2);
+            return 1;
+        }}
+        char *p = line + strspn(line, " \\t\\r\\n"), *end;
+        if (*p == '\\0' || *p == '#' || isalpha((unsigned char)*p)) continue; /* empty, a comment, a header */
         const char *t = p;
         float imu[6], w[3], sd[3];
         int64_t t_ns = 0;
@@ -87,6 +93,10 @@ int main(int argc, char **argv)
                 return 1;
             }}
             p = end;
+        }}
+        if (p[strspn(p, " \\t\\r\\n")] != '\\0') {{
+            fprintf(stderr, "line %ld: more than 7 columns: expected t,gx,gy,gz,ax,ay,az\\n", lineno);
+            return 1;
         }}
         if (stamped && !read_stamp(t, &t_ns)) {{
             fprintf(stderr, "line %ld: t=%s is not integer nanoseconds: write t as int64 ns (seconds x 1e9), or "
