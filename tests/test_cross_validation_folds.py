@@ -120,3 +120,23 @@ def test_all_folds_refuses_one_checkpoint_for_every_fold(tmp_path):
             _cfg(ckpt_path="x/fold1/last.ckpt"), tmp_path, _fake_training([1.0, 2.0, 3.0], trained)
         )
     assert trained == []
+
+
+def test_all_folds_checks_every_flights_truth_before_the_first_fold(tmp_path):
+    """Fold 0 holds flight a out (validates on it: a disagreeing truth only warns there), so a's truth would stop the
+    run only at fold 1, after fold 0 trained: it is checked before fold 0 trains."""
+    from _asl import write_asl_sequence
+    from test_data_consistency import _xyzw_truth
+
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.data.consistency import InconsistentTruthError
+
+    for i, name in enumerate(["a", "b", "c"]):
+        write_asl_sequence(tmp_path / "data" / name, seconds=20.0, seed=30 + i)
+    _xyzw_truth(tmp_path / "data" / "a")
+    args = ["dataset=asl_folder", f"dataset.root={tmp_path / 'data'}", "dataset.train_seqs=[a,b,c]",
+            "dataset.cv_fold=all", "+dataset.cache_dir=", f"paths.output_dir={tmp_path / 'run'}"]  # fmt: skip
+    trained: list[int] = []
+    with pytest.raises(InconsistentTruthError, match=r"a \(.*quaternion order"):
+        all_folds.train_all_folds(compose_config("train", args), tmp_path / "run", _fake_training([1, 2, 3], trained))
+    assert trained == []

@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+import hydra
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from gyrodenoise.ablation_runs import CV_SUMMARY, Run
@@ -73,6 +74,18 @@ def _sets_fold(override: str) -> bool:
     return override.lstrip("+").startswith(f"{FOLD_KEY}=")
 
 
+def _check_every_flight(cfg: DictConfig) -> None:
+    """Every flight trains in some fold: a flight whose ground truth disagrees with its gyro (the data module's
+    `inconsistent_truth` stop) stops the run now, not after the folds before the first that trains on it."""
+    dataset = cfg.dataset.copy()
+    with open_dict(dataset):
+        dataset.cv_fold = None
+    dm = hydra.utils.instantiate(dataset)
+    if getattr(dm, "inconsistent_truth", None) == "stop":
+        for name in cfg.dataset.train_seqs:
+            dm.load(name, training=True)
+
+
 def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictConfig, Path], dict]) -> dict:
     """`dataset.cv_fold=all`: `train_one(cfg_k, out_dir/fold<k>)` for every fold k, then the summary of the folds
     in out_dir; returns a run summary whose val/aoe_deg is the recipe's figure."""
@@ -85,6 +98,7 @@ def train_all_folds(cfg: DictConfig, out_dir: Path, train_one: Callable[[DictCon
             "in the same folder without it (auto_resume goes on from the unfinished fold's own checkpoint), or "
             "resume that fold alone with dataset.cv_fold=K"
         )
+    _check_every_flight(cfg)
     runs = []
     for k in range(len(flights)):
         folder = out_dir / f"fold{k}"
