@@ -225,3 +225,21 @@ def test_an_interruption_before_the_first_step_says_there_is_nothing_to_resume(r
     err = capsys.readouterr().err
     assert "interrupted before the first training step" in err and "nothing to resume" in err
     assert "ckpt_path=" not in err and not list((tmp_path / "run").glob("checkpoints/*.ckpt"))
+
+
+def test_what_reading_a_file_said_is_said_again_when_it_comes_from_the_cache(root, tmp_path):
+    """A repeated line kept once (or a last line without a line break) is still in the file on the next run, which
+    loads the sequence from the cache: the reader's warning comes again, not only the first time."""
+    data = tmp_path / "data"
+    shutil.copytree(root / "a", data / "a")
+    imu = imu_file(data)
+    lines = imu.read_text().splitlines()
+    imu.write_text("\n".join([*lines[:10], lines[9], *lines[10:]]) + "\n")  # line 10 written twice
+    for _ in range(2):  # built, then from the cache
+        with pytest.warns(DataFormatWarning, match=r"data.csv:11: 1 IMU line repeats the line before exactly"):
+            load_sequence(data, "a", cache_dir=tmp_path / "cache")
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_sequence(root, "a", cache_dir=tmp_path / "cache")  # a clean file says nothing, from either path
+        load_sequence(root, "a", cache_dir=tmp_path / "cache")

@@ -16,10 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.atomic import atomic_path
-from gyrodenoise.data.readers import find_groundtruth_file, read_groundtruth, read_imu
+from gyrodenoise.data.readers import DataFormatWarning, find_groundtruth_file, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import Sequence, build_sequence, sequence_folder
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2  # 2: the reader warnings kept in meta (read_warnings)
+# a sequence's meta key: the reader's warnings about its files (a repeated line kept once, a last line without a
+# line break), replayed whenever the sequence is loaded from the cache: the files still have what they warned of
+READ_WARNINGS = "read_warnings"
 _ARRAYS = ("t", "gyro", "acc", "rot", "pos", "gt_mask")
 
 
@@ -102,8 +105,15 @@ def load_sequence(
             except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # damaged on disk: rebuild
                 warnings.warn(f"{cache_path}: unreadable cache file ({e}); rebuilt from {mav0}", stacklevel=2)
             else:
+                for message in seq.meta.get(READ_WARNINGS, []):  # what reading the files said, said again
+                    warnings.warn(DataFormatWarning(message), stacklevel=2)
                 return seq.from_first_ground_truth()
-    seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always", DataFormatWarning)
+        seq = build_sequence(name, read_imu(imu_path), read_groundtruth(gt_path), max_gap_factor)
+    for w in said:  # passed on as they came; the reader's own are kept for the runs that load from the cache
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    seq.meta[READ_WARNINGS] = [str(w.message) for w in said if issubclass(w.category, DataFormatWarning)]
     if cache_path is not None:
         try:
             atomic_save_npz(
