@@ -22,6 +22,8 @@ from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
+from gyrodenoise.discrepancy.gyro_lines import compared_band_hz, gyro_lines
+from gyrodenoise.discrepancy.gyro_lines import sentence as lines_sentence
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_report
@@ -256,6 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     report["truth_check"] = checks
     report["data_warnings"] = data_warnings
     report["ground_truth_gaps"] = {"max_gap_s": MAX_GT_GAP_S, "min_stretch_s": MIN_STRETCH_S, "left_out": left_out}
+    report["gyro_lines_above_band"] = gyro_lines(fit + holdout)  # after the selection: each stretch's band is set
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
 
@@ -267,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     write_json(out / "report.json", report)
     write_simulator_model(out / "error_model.yaml", report)
     print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
+    if said := lines_sentence(report["gyro_lines_above_band"], compared_band_hz(fit + holdout)):
+        print(f"note: {said}")
     flagged = {n: c["follows_gyro_bands_hz"] for n, c in checks.items() if c["follows_gyro_bands_hz"]}
     if flagged:
         print(f"caution: the ground truth follows the gyro in {flagged} (Hz); noise levels fitted there are too low")

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.discrepancy.gyro_lines import LINE_RATIO, NEIGHBOURS_HZ
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG
 from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO, TRUTH_FREE
 from gyrodenoise.discrepancy.workflow import NO_EFFECT
@@ -154,6 +155,30 @@ def _network_md(net: dict) -> list[str]:
             "",
         ]
     return lines
+
+
+def _gyro_lines_md(report: dict) -> list[str]:
+    """Lines of the raw gyro above the compared band (`gyro_lines`): seen, not compared with any model."""
+    found = report.get("gyro_lines_above_band") or []
+    if not found:
+        return []
+    out = [
+        "## Lines in the raw gyro above the band the truth can judge (not compared with the model)",
+        "",
+        "Narrow lines in the measured gyro's own spectrum (Welch, 0.25 Hz bins) at least "
+        f"{LINE_RATIO:g} times the running median of the bins within {NEIGHBOURS_HZ:g} Hz, above each stretch's "
+        "trusted band: the truth cannot say there whether a line is motion or sensor error, and no effect is fitted "
+        "to it; a simulator meant to reproduce this gyro needs it either way (e.g. a vibration effect at that "
+        "frequency).",
+        "",
+        "| frequency (Hz) | recordings | peak / running median (x, y, z) | RMS in the line (deg/s; x, y, z) |",
+        "|---|---|---|---|",
+    ]
+    for m in found:
+        ratio = ", ".join(f"{r:.0f}" for r in m["ratio"])
+        rms = ", ".join(f"{np.degrees(v):.3g}" for v in m["rms_rad_s"])
+        out.append(f"| {m['frequency_hz']:.2f} | {', '.join(m['recordings'])} | {ratio} | {rms} |")
+    return [*out, ""]
 
 
 def _reconstruction_md(report: dict) -> list[str]:
@@ -533,6 +558,7 @@ def markdown(report: dict) -> str:
             "(the data cannot separate these effects from the others; they were not tested).",
             "",
         ]
+    lines += _gyro_lines_md(report)
     lines += _reconstruction_md(report) + _truth_check_md(report)
     lines += _decisions_md(report) + _identifiability_md(report)
     gb, ga = report["gap_before"], report["gap_after"]
