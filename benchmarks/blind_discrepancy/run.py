@@ -243,6 +243,8 @@ def main(argv=None) -> None:
             row["not_identifiable"] = report.get("not_identifiable")
             row["base_params"] = report["base_params"]
             row["delay_or_lowpass"] = report.get("delay_or_lowpass")
+            row["gyro_lines"] = report.get("gyro_lines_above_band") or []
+            row["cautions"] = report.get("cautions") or []
         rows.append(row)
         print(f"{trial}: {row['verdict']} ({wall:.0f} s) named {row['named']}", flush=True)
 
@@ -282,13 +284,24 @@ def main(argv=None) -> None:
         "Verdicts (rule in the runner's docstring): PASS = exactly the hidden effect named and its estimate agrees"
         " with the truth (chi-square of z = (estimate - truth) / reported SE, p >= 0.01); null: PASS = nothing named.",
         "",
-        "| trial | hidden effect (truth) | named | fitted ± SE (datasheet units) | verdict | wall time (s) |",
-        "|---|---|---|---|---|---|",
+        "The last column is what the report shows beside its verdict without naming an effect: narrow lines of the"
+        " raw gyro above the band the truth can judge (`gyrodenoise.discrepancy.gyro_lines`), and cautions (a low-pass"
+        " kept over a named delay). They do not change a verdict.",
+        "",
+        "| trial | hidden effect (truth) | named | fitted ± SE (datasheet units) | verdict | wall time (s) |"
+        " seen, not named |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         named = "crash: " + r.get("error", "") if r["named"] is None else (", ".join(r["named"]) or "nothing")
+        seen = [
+            f"gyro line {m['frequency_hz']:.2f} Hz, RMS {_arr(np.degrees(m['rms_rad_s']))} deg/s, in"
+            f" {len(m['recordings'])} recordings"
+            for m in r.get("gyro_lines", [])
+        ] + [f"caution: {c}" for c in r.get("cautions", [])]
         lines.append(
             f"| {r['trial']} | {r['hidden']} | {named} | {r['fit'] or '-'} | {r['verdict']} | {r['wall_s']:.0f} |"
+            f" {'; '.join(seen) or '-'} |"
         )
     lines += ["", "## Notes per trial", ""]
     for r in rows:
