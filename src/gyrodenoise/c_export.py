@@ -107,7 +107,7 @@ def _array(name: str, values: np.ndarray, comment: str) -> str:
 
 
 def _member_arrays(k: int, sc: StreamingCorrector) -> str:
-    """Member k's weights: normalisation, C_hat, each layer [tap][in][out] (tap 0 the oldest), the head."""
+    """Member k's weights: normalisation, C_hat, each layer [out][tap][in] (tap 0 the oldest), the head."""
     parts = [
         _array(f"m{k}_mean", sc.mean, f"member {k}: input mean (gyro rad/s, acc m/s^2)"),
         _array(f"m{k}_inv_std", 1.0 / sc.std, f"member {k}: 1 / input std"),
@@ -118,9 +118,9 @@ def _member_arrays(k: int, sc: StreamingCorrector) -> str:
         parts.append(
             _array(
                 f"m{k}_l{j}_w",
-                ly.weight.transpose(2, 1, 0),  # (C_out, C_in, k) -> [tap][in][out]
+                ly.weight.transpose(0, 2, 1),  # (C_out, C_in, k) -> [out][tap][in]: one dot product per output
                 f"member {k}, layer {j}: conv {c_in} -> {c_out}, kernel {kernel}, dilation {ly.dilation}, {ly.act}; "
-                "batch norm folded in; [tap][in][out], tap 0 the oldest",
+                "batch norm folded in; [out][tap][in], tap 0 the oldest",
             )
         )
         parts.append(_array(f"m{k}_l{j}_b", ly.bias, f"member {k}, layer {j}: bias (batch norm folded in)"))
@@ -262,7 +262,7 @@ SOURCE_CODE = """\
 enum {{ {act_enum} }};
 
 typedef struct {{
-    const float *w, *b;        /* [tap][in][out] weights, bias */
+    const float *w, *b;        /* [out][tap][in] weights, bias */
     int c_in, c_out, kernel, dilation, act;
     int ring;                  /* offset of its ring buffer in gd_state.ring: (dilation*(kernel-1)+1) x c_in */
 }} gd_layer;
@@ -286,22 +286,23 @@ static float activate(int act, float x)
     return x;
 }}
 
-/* y = act(b + sum over the taps, oldest first, of W[tap] x[tap]); tap i is row newest - (kernel-1-i)*dilation */
+/* y[o] = act(b[o] + sum over the taps, oldest first, of W[o][tap] . x[tap]); tap i is row
+   newest - (kernel-1-i)*dilation. One dot product per output: its sum stays in a register (weights [out][tap][in],
+   read once, in order), where an update of every output per input loaded and stored each sum at each multiply-add. */
 static void conv_step(const gd_layer *L, const float *ring, int newest, float *restrict y)
 {{
     const int rows = L->dilation * (L->kernel - 1) + 1;
-    memcpy(y, L->b, (size_t)L->c_out * sizeof *y);
-    for (int i = 0; i < L->kernel; i++) {{
-        int r = newest - (L->kernel - 1 - i) * L->dilation;
-        if (r < 0) r += rows;
-        const float *x = ring + (size_t)r * (size_t)L->c_in;
-        const float *w = L->w + (size_t)i * (size_t)L->c_in * (size_t)L->c_out;
-        for (int c = 0; c < L->c_in; c++, w += L->c_out) {{
-            const float xc = x[c];
-            for (int o = 0; o < L->c_out; o++) y[o] += w[o] * xc;
+    const float *w = L->w;
+    for (int o = 0; o < L->c_out; o++) {{
+        float acc = L->b[o];
+        for (int i = 0; i < L->kernel; i++, w += L->c_in) {{
+            int r = newest - (L->kernel - 1 - i) * L->dilation;
+            if (r < 0) r += rows;
+            const float *x = ring + (size_t)r * (size_t)L->c_in;
+            for (int c = 0; c < L->c_in; c++) acc += w[c] * x[c];
         }}
+        y[o] = activate(L->act, acc);
     }}
-    for (int o = 0; o < L->c_out; o++) y[o] = activate(L->act, y[o]);
 }}
 
 /* Write h as the layer's newest input; at a stream's start, first fill its whole history with h (a constant
