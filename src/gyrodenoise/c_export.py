@@ -287,21 +287,32 @@ static float activate(int act, float x)
 }}
 
 /* y[o] = act(b[o] + sum over the taps, oldest first, of W[o][tap] . x[tap]); tap i is row
-   newest - (kernel-1-i)*dilation. One dot product per output: its sum stays in a register (weights [out][tap][in],
-   read once, in order), where an update of every output per input loaded and stored each sum at each multiply-add. */
+   newest - (kernel-1-i)*dilation. One dot product per output, its sums in registers (weights [out][tap][in], read
+   once, in order), over eight independent partial sums: no chain of dependent multiply-adds. */
 static void conv_step(const gd_layer *L, const float *ring, int newest, float *restrict y)
 {{
     const int rows = L->dilation * (L->kernel - 1) + 1;
     const float *w = L->w;
     for (int o = 0; o < L->c_out; o++) {{
-        float acc = L->b[o];
+        float a0 = L->b[o], a1 = 0.0f, a2 = 0.0f, a3 = 0.0f, a4 = 0.0f, a5 = 0.0f, a6 = 0.0f, a7 = 0.0f;
         for (int i = 0; i < L->kernel; i++, w += L->c_in) {{
             int r = newest - (L->kernel - 1 - i) * L->dilation;
             if (r < 0) r += rows;
             const float *x = ring + (size_t)r * (size_t)L->c_in;
-            for (int c = 0; c < L->c_in; c++) acc += w[c] * x[c];
+            int c = 0;
+            for (; c + 8 <= L->c_in; c += 8) {{
+                a0 += w[c] * x[c];
+                a1 += w[c + 1] * x[c + 1];
+                a2 += w[c + 2] * x[c + 2];
+                a3 += w[c + 3] * x[c + 3];
+                a4 += w[c + 4] * x[c + 4];
+                a5 += w[c + 5] * x[c + 5];
+                a6 += w[c + 6] * x[c + 6];
+                a7 += w[c + 7] * x[c + 7];
+            }}
+            for (; c < L->c_in; c++) a0 += w[c] * x[c];
         }}
-        y[o] = activate(L->act, acc);
+        y[o] = activate(L->act, ((a0 + a4) + (a2 + a6)) + ((a1 + a5) + (a3 + a7)));
     }}
 }}
 
