@@ -48,3 +48,14 @@ def tiny_asl_root(tmp_path_factory) -> Path:
 def _isolated_cache(tmp_path_factory, monkeypatch):
     """Keep the preprocessing cache of tests out of the user's home."""
     monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+@pytest.fixture(scope="session")
+def compiler() -> str:
+    """The host C compiler the C export's tests build with (they skip, saying why, without one)."""
+    from gyrodenoise.c_export import find_c_compiler
+
+    cc = find_c_compiler()
+    if cc is None:
+        pytest.skip("no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared")
+    return cc

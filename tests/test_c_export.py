@@ -52,14 +52,6 @@ int main(int argc, char **argv)
 """
 
 
-@pytest.fixture(scope="module")
-def compiler() -> str:
-    cc = c_export.find_c_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared")
-    return cc
-
-
 def compiled(model, tmp_path, compiler, meta: dict | None = None):
     out = tmp_path / "c"
     c_export.export_c(model, out, meta or {"name": "test"})

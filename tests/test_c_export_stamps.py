@@ -48,14 +48,6 @@ int main(void)
 """
 
 
-@pytest.fixture(scope="module")
-def compiler() -> str:
-    cc = c_export.find_c_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found (cc, gcc, clang or $CC): the C export cannot be compiled and compared")
-    return cc
-
-
 def stamped_sequence(lim: dict[str, int]) -> tuple[list[int | None], np.ndarray, list[str]]:
     """A 200 Hz stream with jitter, a repeated, a backwards and an early stamp, one missing sample, steps either side
     of the thresholds `lim`, a sample without a stamp, a NaN, gaps, then 410 steps at 185 Hz (the rate is compared
