@@ -286,3 +286,13 @@ def test_a_missing_sequence_says_whether_the_root_exists(tmp_path):
         load_sequence(tmp_path / "root", "seq", cache_dir="")
     with pytest.raises(FileNotFoundError, match=r"nowhere does not exist \(relative paths start at "):
         load_sequence(tmp_path / "nowhere", "seq", cache_dir="")
+
+
+def test_a_sequence_without_ground_truth_says_how_to_name_another_file(tmp_path):
+    from gyrodenoise.data.readers import find_groundtruth_file
+
+    mav0 = tmp_path / "walk_1" / "mav0"
+    (mav0 / "vicon0").mkdir(parents=True)
+    with pytest.raises(FileNotFoundError, match=r"\+dataset\.gt_files\.walk_1=FOLDER/data\.csv") as e:
+        find_groundtruth_file(mav0)
+    assert "gyrodenoise-correct for IMU-only recordings" in str(e.value)

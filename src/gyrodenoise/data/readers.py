@@ -332,6 +332,7 @@ def find_groundtruth_file(mav0: Path) -> Path:
             return p
     raise FileNotFoundError(
         f"{mav0}: no ground truth found (looked for state_groundtruth_estimate0/data.csv and "
-        "mocap0/data.csv). Training and evaluation need ground truth; use gyrodenoise.correct for "
-        "IMU-only recordings."
+        "mocap0/data.csv). Training and evaluation need ground truth: a file under another name is given per "
+        f"sequence with +dataset.gt_files.{mav0.parent.name}=FOLDER/data.csv (relative to mav0); use "
+        "gyrodenoise-correct for IMU-only recordings."
     )
