@@ -239,10 +239,11 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
     assert nulls == [None, ["quantization"], None, None]
 
 
-def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_path):
+def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_path, capsys):
     """End to end on data the workflow did not make (gyrodenoise.testworld, null sensor): the fit flight and one
     held-out flight measured by a Vicon-like tracker, a second held-out flight by the tracker fused with the gyro.
-    The fused one is set aside; the verdict is decided on the other."""
+    The fused one is set aside; the verdict is decided on the other. The console says so in words (names and
+    bands, as report.md), not as a printed Python dict or list."""
     import json
 
     from gyrodenoise.discrepancy.__main__ import main
@@ -260,6 +261,13 @@ def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_p
     assert report["holdout_sequences"] == ["clean"] and list(report["gap_after"]["per_sequence"]) == ["clean"]
     assert report["verdict"].endswith("held-out fused set aside (its ground truth follows the gyro)")
     assert "not decided" not in report["verdict"]
+    out = capsys.readouterr().out
+    caution = next(line for line in out.splitlines() if line.startswith("caution:"))
+    bands = ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in report["truth_check"]["fused"]["follows_gyro_bands_hz"])
+    assert caution.startswith(f"caution: the ground truth follows the gyro in fused {bands};"), caution
+    summary = next(line for line in out.splitlines() if "; not identifiable: " in line)
+    assert summary.endswith("not identifiable: " + (", ".join(report["not_identifiable"]) or "none")), summary
+    assert not any(c in caution + summary for c in "[]{}'"), out
     assert "The held-out fused was set aside" in (tmp_path / "out" / "report.md").read_text()
     from gyrodenoise.sim.error_model_file import load_error_model
 

@@ -269,12 +269,13 @@ def main(argv: list[str] | None = None) -> int:
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)
     write_simulator_model(out / "error_model.yaml", report)
-    print(f"{report['verdict']}; not identifiable: {report['not_identifiable'] or 'none'}")
+    print(f"{report['verdict']}; not identifiable: {', '.join(report['not_identifiable']) or 'none'}")
     if said := lines_sentence(report["gyro_lines_above_band"], compared_band_hz(fit + holdout)):
         print(f"note: {said}")
     flagged = {n: c["follows_gyro_bands_hz"] for n, c in checks.items() if c["follows_gyro_bands_hz"]}
-    if flagged:
-        print(f"caution: the ground truth follows the gyro in {flagged} (Hz); noise levels fitted there are too low")
+    if flagged:  # names and bands as the report writes them, not a Python dict
+        where = "; ".join(f"{n} " + ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in b) for n, b in flagged.items())
+        print(f"caution: the ground truth follows the gyro in {where}; noise levels fitted there are too low")
     gb, ga = report["gap_before"], report["gap_after"]
     print(
         f"held-out residual RMS {gb['residual_rms_rad_s']:.4g} -> {ga['residual_rms_rad_s']:.4g} rad/s, "
