@@ -33,12 +33,11 @@ class MLflowRunLogger(MLFlowLogger):
     def __init__(self, *, fold: int | None = None, **kwargs: Any) -> None:
         if fold is not None and kwargs.get("run_name"):
             kwargs["run_name"] = f"{kwargs['run_name']}-fold{fold}"
-        folder = (kwargs.get("tags") or {}).get("output_dir")
-        if folder and kwargs.get("run_id") is None:
-            kwargs["run_id"] = _unfinished_run(kwargs, str(folder))
         super().__init__(**kwargs)
         if self._run_id is None:  # Lightning would look the experiment up, and create it, unguarded
             self._experiment_id = _experiment_id(self._mlflow_client, self._tracking_uri, self._experiment_name)
+            if folder := (self.tags or {}).get("output_dir"):
+                self._run_id = _unfinished_run(self._mlflow_client, self._experiment_id, str(folder))
 
     def log_metrics(self, metrics: dict[str, float], step: int | None = None) -> None:
         super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
@@ -68,19 +67,11 @@ def _experiment_id(client: Any, uri: str, name: str) -> str:
         return find_or_create()
 
 
-def _unfinished_run(kwargs: dict[str, Any], folder: str) -> str | None:
+def _unfinished_run(client: Any, experiment_id: str, folder: str) -> str | None:
     """The id of the newest run of the experiment that logged `folder` and did not finish (None: none)."""
-    from mlflow.tracking import MlflowClient
-
-    # the store Lightning's MLFlowLogger uses: tracking_uri, else file:<save_dir>
-    uri = kwargs.get("tracking_uri") or f"file:{kwargs.get('save_dir') or './mlruns'}"
-    client = MlflowClient(tracking_uri=uri)
-    experiment = client.get_experiment_by_name(kwargs.get("experiment_name") or "lightning_logs")
-    if experiment is None:
-        return None
     quoted = folder.replace("'", "\\'")
     runs = client.search_runs(
-        [experiment.experiment_id],
+        [experiment_id],
         filter_string=f"tags.output_dir = '{quoted}' and attributes.status != 'FINISHED'",
         order_by=["attributes.start_time DESC"],
         max_results=1,
@@ -133,7 +124,6 @@ def log_run_end(loggers: Sequence[Logger], hparams: dict[str, Any], metrics: dic
             )
             # the kept model's validation figures (select=best_val: not the curve's last point) beside test/...
             logger.log_metrics({f"selected_{k}": v for k, v in metrics.items() if k.startswith("val")})
-            logger.experiment.set_tag(logger.run_id, "output_dir", str(out_dir))
             for name in RUN_FILES:
                 if (out_dir / name).is_file():
                     logger.experiment.log_artifact(logger.run_id, str(out_dir / name))
