@@ -7,9 +7,9 @@ gyro's datasheet white noise as --gyro-noise-density), and scores what it named 
 
 - named: exactly the hidden effect (the null trial: nothing);
 - magnitude: per component z = (estimate - truth) / reported standard error, their chi-square and its p-value; a
-  step read from the samples' lattice (standard error 0) is compared by its relative error;
+  value reported without a standard error by its relative error (REL_TOL);
 - verdict: PASS = named exactly the hidden effect and its magnitude agrees (chi-square p >= 0.01, or relative error
-  < 1e-4 where the standard error is 0); MAGNITUDE OFF = named, disagrees; MISS = nothing named; WRONG = another
+  under REL_TOL where no standard error is reported); MAGNITUDE OFF = named, disagrees; MISS = nothing named; WRONG = another
   effect named (also with the right one: + EXTRA); the null trial: PASS or FALSE POSITIVE; CRASH = no report.
 
 Writes benchmarks/results/blind_discrepancy.{md,json} (--results, --name). One trial at a time, OMP_NUM_THREADS=1:
@@ -45,6 +45,10 @@ DEG = np.pi / 180.0
 FIT = ["seq00", "seq01", "seq02"]
 HOLDOUT = ["seq03", "seq04"]
 BASE = "bias,white_noise,bias_random_walk"  # the baseline sensor model of generate.py
+# a value reported without a standard error is compared by its relative error: a step read from the samples'
+# lattice must be exact; a low-pass corner (searched on a grid, no standard error reported) within 25 %
+# (fixed when the low-pass trials were added, before their first run)
+REL_TOL = {"step": 1e-4, "corner_hz": 0.25}
 
 
 def expected(trial: str, key: dict) -> tuple[str | None, dict]:
@@ -52,24 +56,26 @@ def expected(trial: str, key: dict) -> tuple[str | None, dict]:
     h = key["hidden"]
     if h is None:
         return None, {}
-    p = h["params"]
-    if trial == "g_sensitivity":
+    p, kind = h["params"], h["kind"]
+    if kind == "g_sensitivity":
         return "g_sensitivity", {"matrix": np.asarray(p["matrix_deg_s_per_g"])}
-    if trial == "time_offset":
+    if kind == "sensor_lowpass":
+        return "sensor_bandwidth", {"corner_hz": np.asarray(p["corner_hz"])}
+    if kind == "time_offset":
         return "time_offset", {"delta": np.asarray(p["imu_stamp_late_ms"])}  # > 0: IMU stamps late
-    if trial == "misalignment":
+    if kind == "misalignment":
         m = np.asarray(p["matrix_mrad"])
         return "misalignment", {"angles": np.array([m[0, 1], m[0, 2], m[1, 0], m[1, 2], m[2, 0], m[2, 1]])}
-    if trial == "vibration":
+    if kind == "vibration":
         return "vibration", {"frequency_hz": np.asarray(p["f0_hz"])}
-    if trial == "quantization":
+    if kind == "quantization":
         return "quantization", {"step": np.asarray(p["gyro_lsb_rad_s"] / DEG)}
-    if trial == "temperature_drift":
+    if kind == "temperature_drift":
         # the exponential part as y = A exp(-t / tau): A = -c dT exp(-t_on / tau), mean over the fit sequences
         t_on = np.array([s["t_on_s"] for s in key["sequences"] if s["name"] in FIT])
         amp = -np.outer(np.exp(-t_on / p["tau_s"]), np.asarray(p["coeff_deg_s_per_k"]) * p["delta_k"]).mean(0)
         return "warmup_bias", {"amplitude": amp, "tau": np.asarray(p["tau_s"])}
-    raise ValueError(trial)
+    raise ValueError(f"{trial}: no rule for hidden kind {kind!r}")
 
 
 def hidden_text(trial: str, key: dict) -> str:
@@ -80,6 +86,7 @@ def hidden_text(trial: str, key: dict) -> str:
     return {
         "g_sensitivity": lambda: f"G = {np.asarray(p['matrix_deg_s_per_g']).tolist()} deg/s/g",
         "time_offset": lambda: f"IMU stamps {p['imu_stamp_late_ms']:g} ms late",
+        "sensor_lowpass": lambda: f"first-order low-pass of the gyro (rate and noise), corner {p['corner_hz']:g} Hz",
         "misalignment": lambda: f"M = {np.asarray(p['matrix_mrad']).tolist()} mrad (off-diagonal)",
         "vibration": lambda: f"line {p['f0_hz']:g} Hz +-{p['wander_hz']:g} Hz, peak {p['amp_rad_s']} rad/s",
         "quantization": lambda: f"LSB {p['gyro_lsb_rad_s'] / DEG:.6g} deg/s",
@@ -87,7 +94,7 @@ def hidden_text(trial: str, key: dict) -> str:
             f"bias {p['coeff_deg_s_per_k']} deg/s/K x ({p['delta_k']:g} K (1 - exp(-(t + t_on) / {p['tau_s']:g} s))"
             f" + {p['osc_k']:g} K sin(2 pi t / {p['osc_period_s']:g} s))"
         ),
-    }[trial]()
+    }[h["kind"]]()
 
 
 def diagnostic(trial: str, root: Path, key: dict, report: dict | None) -> str:
@@ -143,7 +150,7 @@ def score(trial: str, key: dict, report: dict | None) -> dict:
         if np.all(se > 0):
             zs.append(((v - t) / se).ravel())
         else:
-            rel.append(float(np.max(np.abs(v - t) / np.abs(t))))
+            rel.append((float(np.max(np.abs(v - t) / np.abs(t))), REL_TOL.get(k, 1e-4)))
     out["fit"] = "; ".join(parts)
     ok = True
     if zs:
@@ -153,9 +160,9 @@ def score(trial: str, key: dict, report: dict | None) -> dict:
         out["fit"] += f"; max abs z {np.abs(z).max():.2f}, {np.mean(np.abs(z) <= 1):.0%} within 1 SE, chi2 p {p:.2g}"
         ok = p >= 0.01
     if rel:
-        out["rel_error"] = max(rel)
-        out["fit"] += f"; rel. error {max(rel):.1e} (SE 0)"
-        ok = ok and max(rel) < 1e-4
+        out["rel_error"] = max(r for r, _ in rel)
+        out["fit"] += f"; rel. error {out['rel_error']:.2g} (no SE; tolerance {max(t for _, t in rel):g})"
+        ok = ok and all(r < tol for r, tol in rel)
     out["verdict"] = ("PASS" if ok else "MAGNITUDE OFF") + (" + EXTRA" if len(named) > 1 else "")
     return out
 

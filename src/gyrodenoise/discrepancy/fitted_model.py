@@ -34,6 +34,9 @@ QUANT_LATTICE_FRACTION = 0.95  # share of samples on one lattice for quantizatio
 __all__ = ["Selection", "fill_params", "per_sequence_refit", "predict"]
 
 
+CAUTION_SHARE = 0.5  # the delay-or-low-pass choice is cautioned when this error in the truth's noise would reverse it
+
+
 @dataclass
 class Selection:
     base: list[str]
@@ -69,17 +72,26 @@ class Selection:
 
     @property
     def cautions(self) -> list[str]:
-        """Named effects that another explanation may hide behind on this data (sentences for the report): a
-        low-pass kept over a named time offset also smooths the ground truth's own noise, which a delay cannot (a
-        4 ms offset behind a 0.05 deg mocap was named a 39.7 Hz low-pass: benchmarks/results/blind_discrepancy.md)."""
+        """Named effects that another explanation may hide behind on this data (sentences for the report). Behind a
+        noisy ground truth, the choice between a time offset and a low-pass rests on taking off what the low-pass
+        gains by smoothing the truth's own error (`rank.truth_error_smoothing`); when an error of less than
+        CAUTION_SHARE in that estimate would reverse the choice, the report says so."""
         d = self.delay_or_lowpass
-        if d is None or d.get("kept") != "sensor_bandwidth":
+        if d is None or not d.get("truth_error_smoothing_bic"):
             return []
+        smooth, dbic, thr = d["truth_error_smoothing_bic"], d["delta_bic_lowpass_vs_offset"], d["threshold"]
+        share = abs(dbic - thr) / smooth
+        if share >= CAUTION_SHARE:
+            return []
+        delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
+        if d["kept"] == "sensor_bandwidth":
+            kept, other, way = f"sensor_bandwidth ({corner})", f"a time offset of {delay}", "larger"
+        else:
+            kept, other, way = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}", "smaller"
         return [
-            f"sensor_bandwidth ({d['lowpass_corner_hz']:.1f} Hz) replaced a named time offset of "
-            f"{1e3 * d['delay_s']:.2f} ms (delta BIC {d['delta_bic_lowpass_vs_offset']:.0f} for the low-pass): fitted "
-            "to a noisy ground truth's rate a low-pass also smooths that noise, which a delay cannot; behind a motion "
-            f"capture, read it as a possible time offset of {1e3 * d['delay_s']:.2f} ms"
+            f"{kept} was preferred to {other} by delta BIC {dbic - thr:+.0f} beyond the threshold, after taking off the "
+            f"{smooth:.0f} that a low-pass gains by smoothing the ground truth's own error; if that error were "
+            f"{share:.0%} {way} than estimated, it would be {other}"
         ]
 
     @property

@@ -38,6 +38,7 @@ from gyrodenoise.discrepancy.design import (
     FitResult,
     band_edges,
     band_power,
+    fit_rows,
     n_rows,
     noise_weights,
     nuisance_of,
@@ -51,12 +52,14 @@ from gyrodenoise.discrepancy.design import (
 )
 from gyrodenoise.discrepancy.fitted_model import Selection, fill_params, predict
 from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiability
+from gyrodenoise.discrepancy.reconstruction import draw_error
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
     BandFit,
     FloorShapeFit,
     fit_band,
     fit_floor_shape,
+    fit_nuisance,
 )
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import EFFECTS, Effect, Saturation
@@ -67,6 +70,7 @@ MIN_GAIN = 0.01  # practical minimum: 1% of the residual power in the trusted ba
 MIN_DRIFT_DEG = 0.1  # or (sensor-constant regression effects): 0.1 deg of held-out median 10-s drift
 DRIFT_WINDOW_S = 10.0
 CORNER_FLAT = 50.0  # x rate: a fitted corner above this is no low-pass at all
+KAPPA_TOLERANCE = 0.5  # reconstruction-error level refitted on the selected model's residual: rerun beyond this
 
 __all__ = ["Selection", "residuals_after", "score_step", "select_effects"]
 
@@ -299,6 +303,7 @@ def select_effects(
     trusted_band: bool = True,
     thresholds: Mapping[str, float] | None = None,
     holdout: list[FitContext] | None = None,
+    nuisance_residuals: list[np.ndarray] | None = None,
 ) -> Selection:
     """Greedy forward selection: add the candidate with the largest delta BIC that clears its
     threshold (`thresholds[name]`, default `bic_threshold`) and closes at least `min_gain` of the
@@ -312,7 +317,12 @@ def select_effects(
     correction, `network.py`) leaves it out.
 
     `trusted_band`: compare only in the band where the reconstructed true rate is trusted
-    (`reconstruction.estimate_band`, from the base model's residual; kept in each context's extra)."""
+    (`reconstruction.estimate_band`, from the base model's residual; kept in each context's extra).
+    The level of the reconstruction error that weights the rows is fitted on that residual too, where
+    a missing effect whose residual is as blue as that error (a time offset's: delay x angular
+    acceleration) is read as reconstruction error. So it is refitted on the selected model's
+    residual, and if it moved by more than KAPPA_TOLERANCE the selection is run once more with the
+    bands and weights of that residual (`nuisance_residuals`)."""
     base = list(base)
     for n in base + list(candidates or []):
         if n not in EFFECTS:
@@ -344,7 +354,7 @@ def select_effects(
     if trusted_band:
         # the band where the reconstructed true rate can be trusted, from the base model's residual
         d0 = Design(fcs, {n: effects[n] for n in selected}, sigma)
-        resid0 = residuals_after(d0, d0.fit(selected), selected)
+        resid0 = residuals_after(d0, d0.fit(selected), selected) if nuisance_residuals is None else nuisance_residuals
         # and the reconstruction error as a weighted nuisance; the rows' weights then come from the
         # sensor's floor in the band, not from first differences (which read the reconstruction error)
         sigma_band = set_reconstruction_model(fcs, resid0)
@@ -353,9 +363,9 @@ def select_effects(
         for h in holdout or []:
             if "band_hz" not in h.extra:
                 set_bands([h], [h.residual - h.residual.mean(0)])
-                kappa = fcs[0].extra.get("nuisance_level")
-                if kappa is not None:
-                    set_row_weights([h], fcs[0].extra["sensor_floor"], kappa)
+            kappa = fcs[0].extra.get("nuisance_level")
+            if kappa is not None:
+                set_row_weights([h], fcs[0].extra["sensor_floor"], kappa)
     steps: list[dict] = []
     while True:
         corner = _named_corner(effects, selected)
@@ -433,11 +443,20 @@ def select_effects(
             steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
             design = Design(view, {n: effects[n] for n in selected}, sigma)
             final = design.fit(selected)
+    if trusted_band and nuisance_residuals is None:
+        resid = residuals_after(design, final, selected)
+        if _nuisance_moved(fcs, resid):
+            return select_effects(
+                fcs, base, candidates, bic_threshold, min_gain, min_drift_deg, max_added, rw_knot_spacing_s,
+                band_vibration, trusted_band, thresholds, holdout, nuisance_residuals=resid,
+            )  # fmt: skip
     delay_lp = None
     if "time_offset" in selected and "sensor_bandwidth" in scorable and "sensor_bandwidth" not in selected:
         design, final, view, delay_lp = _delay_or_lowpass(
             design, final, effects, selected, sigma, fcs, thresholds.get("sensor_bandwidth", bic_threshold)
         )
+        if delay_lp is not None and delay_lp["kept"] == "sensor_bandwidth":
+            design, final = _recheck_after_lowpass(design, final, selected, base, thresholds, bic_threshold, steps)
     sel = Selection(
         base=base,
         selected=selected,
@@ -459,6 +478,20 @@ def select_effects(
         # the band's power into it (re-simulations draw the error at this level)
         set_row_weights(fcs + list(holdout or []), fcs[0].extra["sensor_floor"], sel.band.kappa)
     return sel
+
+
+def _nuisance_moved(fcs: list[FitContext], residuals: list[np.ndarray]) -> bool:
+    """Whether the reconstruction error's level refitted on `residuals` differs from the one that
+    weights the rows now by more than KAPPA_TOLERANCE on some axis."""
+    old, nu = fcs[0].extra.get("nuisance_level"), nuisance_of(fcs)
+    if old is None or nu is None:
+        return False
+    nu.floor = fcs[0].extra["sensor_floor"]
+    fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nu)
+    if fit is None:
+        return False
+    ratio = np.maximum(fit[1], 1e-12) / np.maximum(old, 1e-12)
+    return bool(np.any(np.abs(np.log(ratio)) > np.log1p(KAPPA_TOLERANCE)))
 
 
 def _final_identifiability(
@@ -500,6 +533,11 @@ def _delay_or_lowpass(
     whether the data can tell them apart; if not, the selection keeps the time offset and reports
     the equivalence (delay and equivalent corner). If so, both are fitted (the low-pass's corner
     searched, no time offset) and the better one by BIC (by at least `threshold`) is kept.
+
+    A low-pass applied to a reconstructed true rate also smooths that rate's own error (ground-truth
+    noise, `reconstruction`), which the sensor never saw: under either explanation that lowers the
+    low-pass's residual by about the error power it removes (`truth_error_smoothing`), so that
+    amount is added back to the low-pass's residual before the two are compared.
     Returns the (possibly new) design, fit, sensor view of `fcs` and the numbers."""
     delta = float(final.coef[design.cols["time_offset"]][0])
     view = design.fcs
@@ -511,17 +549,24 @@ def _delay_or_lowpass(
     if not dol.separable:
         return design, final, view, out
     others = [n for n in selected if n != "time_offset"]
-    best = (np.inf, None, None)
-    for c in dol.corner_hz * np.geomspace(0.25, 4.0, 17):
+    corners = dol.corner_hz * np.geomspace(0.25, 4.0, 17)
+    smoothing = truth_error_smoothing(fcs, sigma, corners)
+    best = (np.inf, None, None, 0.0)
+    for c, g in zip(corners, smoothing, strict=True):
         v = [sensor_view(fc, float(c)) for fc in fcs]
         # the design kept if the low-pass wins holds it too (stochastic: no columns), as every
         # selected effect's design does: `fill_params` asks it for the columns of all of them
         d = Design(v, {n: effects[n] for n in [*others, "sensor_bandwidth"]}, sigma)
         r = d.fit(others)
-        if r.rss < best[0]:
-            best = (r.rss, float(c), (d, r, v))
+        if r.rss + g < best[0]:
+            best = (r.rss + g, float(c), (d, r, v), float(g))
     dbic = final.n * np.log(final.rss / best[0])
-    out |= {"delta_bic_lowpass_vs_offset": float(dbic), "lowpass_corner_hz": best[1]}
+    out |= {
+        "delta_bic_lowpass_vs_offset": float(dbic),
+        "lowpass_corner_hz": best[1],
+        # what the low-pass's smoothing of the truth's error alone would have been worth (0: exact truth)
+        "truth_error_smoothing_bic": float(final.n * np.log(best[0] / (best[0] - best[3]))),
+    }
     if dbic < threshold:
         return design, final, view, out
     selected.remove("time_offset")
@@ -529,3 +574,54 @@ def _delay_or_lowpass(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+def _recheck_after_lowpass(
+    design: Design,
+    final: FitResult,
+    selected: list[str],
+    base: list[str],
+    thresholds: Mapping[str, float],
+    bic_threshold: float,
+    steps: list[dict],
+) -> tuple[Design, FitResult]:
+    """Backward check once a low-pass replaced a named time offset: effects named beside the offset
+    may have stood in for the low-pass's magnitude droop, which a delay lacks (a scale factor below 1
+    does it at low frequencies). Each named regression effect is refitted out of the low-pass's design;
+    one whose delta BIC there no longer clears its threshold is removed (the weakest first, repeated)."""
+    while True:
+        named = [n for n in selected if n not in base and design.cols.get(n) is not None and design.cols[n].size]
+        scored = []  # (delta BIC, name) of each named effect given the others
+        for n in named:
+            rest = [m for m in selected if m != n]
+            scored.append((float(design.fit(rest).bic - final.bic), n))
+        weak = [(d, n) for d, n in scored if d < thresholds.get(n, bic_threshold)]
+        if not weak:
+            return design, final
+        dbic, name = min(weak)
+        selected.remove(name)
+        steps.append({"model": list(selected), "removed": name, "delta_bic_on_final_residual": dbic})
+        final = design.fit(selected)
+
+
+def truth_error_smoothing(fcs: list[FitContext], sigma: np.ndarray, corners: np.ndarray, draws: int = 16) -> np.ndarray:
+    """(len(corners),) expected drop of a fit's weighted residual sum of squares when the
+    reconstructed true rate is seen through a first-order low-pass of each corner, from the
+    reconstruction's own error alone: E ||rows(e)||^2 - ||rows(H e)||^2, with e drawn from the
+    error model of each sequence (`reconstruction.draw_error`; fixed seed, so the decision is
+    repeatable) and rows those of the fit (`fit_rows`). Zeros for an exact ground truth."""
+    from gyrodenoise.sim.effects import SensorBandwidth
+
+    rng = np.random.default_rng(0)
+    out = np.zeros(len(corners))
+    for fc in fcs:
+        empty = np.zeros((3 * len(fc.t), 1))  # no columns of its own (fit_rows wants one)
+        for _ in range(draws):
+            e = draw_error(fc, rng)
+            if e is None:
+                break
+            base = np.sum(fit_rows(fc, empty, (e / sigma[None, :]).reshape(-1))[1] ** 2)
+            for i, c in enumerate(corners):
+                he = SensorBandwidth.filter_rate(e, float(c), fc.rate_hz)
+                out[i] += (base - np.sum(fit_rows(fc, empty, (he / sigma[None, :]).reshape(-1))[1] ** 2)) / draws
+    return out

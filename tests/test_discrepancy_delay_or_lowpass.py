@@ -1,0 +1,110 @@
+"""A time offset or a sensor low-pass behind a noisy motion capture, on data of the independent blind generator
+(benchmarks/blind_discrepancy/generate.py: numpy/scipy only, nothing from gyrodenoise).
+
+Both delay the motion alike at low frequencies; what tells them apart is the low-pass's magnitude droop. Before these
+fixes a 4 ms offset behind a 0.05 deg mocap was named a 39.7 Hz low-pass (benchmarks/results/blind_discrepancy.md):
+the reconstruction error's level, fitted on the base residual, had taken in the offset's own residual (x9-12), and a
+low-pass applied to the reconstructed rate also smooths that rate's error, which the sensor never saw."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from gyrodenoise.discrepancy.compare import load_fit_context
+from gyrodenoise.discrepancy.fitted_model import Selection
+from gyrodenoise.discrepancy.hidden import make_measured
+from gyrodenoise.discrepancy.rank import select_effects, truth_error_smoothing
+from gyrodenoise.discrepancy.reconstruction import row_frequencies
+from gyrodenoise.sim.effects import SensorBandwidth
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "blind_discrepancy"))
+import generate  # noqa: E402  (the standalone generator)
+
+BASE = ["bias", "white_noise", "bias_random_walk"]  # the generator's baseline sensor model
+CANDIDATES = ["time_offset", "sensor_bandwidth", "scale_factor"]
+
+
+def _selection(root: Path, trial: str, seed: int = 3):
+    generate.make_trial(root, trial, 2, 40.0, seed)
+    fcs = [load_fit_context(root, f"seq{i:02d}") for i in range(2)]
+    return fcs, select_effects(fcs, base=BASE, candidates=CANDIDATES)
+
+
+def test_the_generator_low_pass_is_first_order():
+    """What the low-pass trials hide: a continuous first-order low-pass, then the sample mean."""
+    rng = np.random.default_rng(0)
+    t = np.arange(4000) / generate.IMU_HZ
+    for f0 in (5.0, 25.0, 60.0):
+        y = generate.lowpassed_gyro(
+            lambda tt, f0=f0: np.repeat(np.sin(2 * np.pi * f0 * tt)[:, None], 3, 1), rng, t, t[1], 25.0, 0.0
+        )[:, 0]
+        c = np.linalg.lstsq(np.stack([np.sin(2 * np.pi * f0 * t), np.cos(2 * np.pi * f0 * t)], 1), y, rcond=None)[0]
+        h = np.sinc(f0 / generate.IMU_HZ) / (1 + 1j * f0 / 25.0)
+        assert np.hypot(*c) == pytest.approx(abs(h), rel=2e-3)
+        assert np.arctan2(c[1], c[0]) == pytest.approx(np.angle(h), abs=1e-3)
+
+
+def test_time_offset_behind_a_noisy_mocap_is_named_a_time_offset(tmp_path):
+    fcs, sel = _selection(tmp_path, "time_offset")
+    assert sel.named == ["time_offset"], sel.steps
+    assert float(sel.params["time_offset"]["delta"]) == pytest.approx(4e-3, abs=2e-4)
+    d = sel.delay_or_lowpass
+    assert d["separable"] and d["kept"] == "time_offset" and d["delta_bic_lowpass_vs_offset"] < d["threshold"]
+    assert d["truth_error_smoothing_bic"] > 0  # the mocap's noise: what a low-pass would have gained from it
+    # the reconstruction error's level, refitted once the offset is named (the null trial's is ~1)
+    assert np.all(fcs[0].extra["nuisance_level"] < 1.5)
+
+
+def test_low_pass_behind_a_noisy_mocap_is_named_a_low_pass(tmp_path):
+    _, sel = _selection(tmp_path, "sensor_lowpass_40hz")
+    assert sel.named == ["sensor_bandwidth"], sel.steps
+    assert float(sel.params["sensor_bandwidth"]["corner_hz"]) == pytest.approx(40.0, rel=0.1)
+    assert sel.delay_or_lowpass["kept"] == "sensor_bandwidth"
+
+
+def test_truth_error_smoothing_is_the_error_power_the_low_pass_removes(tmp_path):
+    """The Monte Carlo gain equals its expectation: sum over the fit's rows of (1 - |H(f)|^2) times the
+    weighted reconstruction-error power of the row, kappa E(f) (rate / 2) / sigma^2 x w(f)^2."""
+    fcs, sel = _selection(tmp_path, "null")
+    corners = np.array([10.0, 40.0, 160.0])
+    mc = truth_error_smoothing(fcs, sel.sigma, corners, draws=64)
+    expected = np.zeros(len(corners))
+    for fc in fcs:
+        f = row_frequencies(len(fc.t), fc.rate_hz, fc.extra["band_hz"])
+        power = fc.extra["nuisance_level"] * fc.extra["band"].error_psd(f) * fc.rate_hz / 2 / sel.sigma**2
+        power = power * fc.extra["row_weights"] ** 2
+        for i, c in enumerate(corners):
+            b, a = SensorBandwidth._discrete(float(c), fc.rate_hz)
+            h2 = np.abs(signal.freqz(b, a, worN=f, fs=fc.rate_hz)[1]) ** 2
+            expected[i] += np.sum((1 - h2)[:, None] * power)
+    assert mc == pytest.approx(expected, rel=0.1)
+    assert mc[0] > mc[1] > mc[2] > 0
+    # an exact ground truth has no error of its own to smooth
+    exact = [load_fit_context(tmp_path / "exact", n) for n in make_measured(tmp_path / "exact", [], 1, 20.0, seed=1)]
+    assert np.all(truth_error_smoothing(exact, np.full(3, 1e-3), corners) == 0)
+
+
+@pytest.mark.parametrize(
+    ("kept", "dbic", "cautioned"),
+    [("sensor_bandwidth", 30.0, True), ("sensor_bandwidth", 200.0, False), ("time_offset", -20.0, True),
+     ("time_offset", -300.0, False)],
+)  # fmt: skip
+def test_caution_when_a_small_error_in_the_truths_noise_would_reverse_the_choice(kept, dbic, cautioned):
+    d = {
+        "kept": kept, "delta_bic_lowpass_vs_offset": dbic, "threshold": 10.0, "truth_error_smoothing_bic": 100.0,
+        "delay_s": 0.004, "lowpass_corner_hz": 39.8, "separable": True,
+    }  # fmt: skip
+    cautions = Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d))
+    assert bool(cautions) == cautioned
+    if cautioned:
+        share = abs(dbic - 10.0) / 100.0
+        other = "a time offset of 4.00 ms" if kept == "sensor_bandwidth" else "a sensor low-pass of corner 39.8 Hz"
+        assert f"{share:.0%}" in cautions[0] and cautions[0].endswith(f"it would be {other}")
+    # an exact ground truth (nothing smoothed): no caution whatever the margin
+    assert Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0})) == []
