@@ -62,3 +62,51 @@ def test_a_weak_line_is_found_only_when_it_stands_out(amp):
     less power) does not."""
     found = stretch_lines(_gyro(60, 6, line_hz=55.0, amp=amp), RATE, above_hz=8.0)
     assert bool(found) == (amp > 0.001)
+
+
+WHITE = {"white_noise": {"density": [2e-4] * 3}}
+
+
+def _fit_and_holdout(line_in_second_fit: bool = True):
+    fit = [
+        _stretch(_gyro(60, 7, line_hz=41.0), 8.0, "seq00"),
+        _stretch(_gyro(60, 8, line_hz=41.0 if line_in_second_fit else None), 8.0, "seq01"),
+    ]
+    holdout = [_stretch(_gyro(60, 9, line_hz=41.0), 8.0, "seq02")]
+    for fc in fit + holdout:
+        fc.t = np.arange(len(fc.gyro)) / RATE
+    return fit, holdout
+
+
+def test_a_line_in_every_fitted_recording_goes_into_the_simulator_model_and_transfers():
+    """Its vibration reproduces the held-out line: the same RMS read back from a simulation, and the spectral gap at
+    the line closes (from ~2 decades without it)."""
+    from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model
+    from gyrodenoise.discrepancy.sim_model import simulator_model
+    from gyrodenoise.sim.effects import effect_from_config
+
+    fit, holdout = _fit_and_holdout()
+    report = {"gyro_lines_above_band": gyro_lines(fit + holdout), "base_params": WHITE}
+    add_lines_to_model(report, fit, holdout)
+    (line,) = report["gyro_lines_above_band"]
+    sim = line["simulator_vibration"]
+    assert abs(sim["frequency_hz"] - 41.0) < 1.0 and sim["bandwidth_hz"] >= 0.5
+    # amplitude: sqrt(2) x the band RMS, here the drawn line's peak amplitude per axis
+    assert np.allclose(sim["amplitude"], 0.01 * np.array([1.0, 0.5, 0.8]), rtol=0.2)
+    (held,) = line["held_out"]["stretches"]
+    assert np.allclose(held["simulated_rms_rad_s"], held["measured_rms_rad_s"], rtol=0.15)
+    assert held["gap_before_log10"] > 1.5 and held["gap_after_log10"] < 0.3
+    (entry,) = [e for e in simulator_model(report)["error_model"] if e["name"] == "vibration"]
+    assert float(effect_from_config(entry).params["frequency_hz"]) == pytest.approx(sim["frequency_hz"])
+    assert "added to the simulator's model as band-limited vibration: 41" in sentence([line], 8.0)
+
+
+def test_a_line_missing_from_a_fitted_recording_stays_out_of_the_model():
+    from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model
+
+    fit, holdout = _fit_and_holdout(line_in_second_fit=False)
+    report = {"gyro_lines_above_band": gyro_lines(fit + holdout), "base_params": WHITE}
+    add_lines_to_model(report, fit, holdout)
+    (line,) = report["gyro_lines_above_band"]
+    assert "simulator_vibration" not in line and "held_out" not in line
+    assert "none in every fitted recording" in sentence([line], 8.0)

@@ -151,8 +151,8 @@ def lowpassed_gyro(fun, rng, t, dt, corner_hz, noise_density, warmup_s=1.5):
     """A gyro whose sense signal (true rate + white noise) passes a continuous first-order low-pass of corner
     corner_hz before the sample mean (a MEMS digital low-pass: the noise floor is shaped too). The filter is
     discretised exactly for a signal linear between the fine points (scipy's first-order hold) on the window_mean
-    grid, started warmup_s early (the motion starts 2 s before the record); the white noise is drawn on that grid so that, unfiltered, its sample mean has the
-    baseline's level noise_density sqrt(IMU_HZ)."""
+    grid, started warmup_s early (the motion starts 2 s before the record); the white noise is drawn on that grid so
+    that, unfiltered, its sample mean has the baseline's level noise_density sqrt(IMU_HZ)."""
     h = dt / OVERSAMPLE
     n_warm = int(round(warmup_s / h))
     grid = t[0] - dt / 2 + (np.arange(-n_warm, len(t) * OVERSAMPLE) + 0.5) * h

@@ -9,8 +9,8 @@ gyro's datasheet white noise as --gyro-noise-density), and scores what it named 
 - magnitude: per component z = (estimate - truth) / reported standard error, their chi-square and its p-value; a
   value reported without a standard error by its relative error (REL_TOL);
 - verdict: PASS = named exactly the hidden effect and its magnitude agrees (chi-square p >= 0.01, or relative error
-  under REL_TOL where no standard error is reported); MAGNITUDE OFF = named, disagrees; MISS = nothing named; WRONG = another
-  effect named (also with the right one: + EXTRA); the null trial: PASS or FALSE POSITIVE; CRASH = no report.
+  under REL_TOL where no standard error is reported); MAGNITUDE OFF = named, disagrees; MISS = nothing named; WRONG =
+  another effect named (also with the right one: + EXTRA); the null trial: PASS or FALSE POSITIVE; CRASH = no report.
 
 Writes benchmarks/results/blind_discrepancy.{md,json} (--results, --name). One trial at a time, OMP_NUM_THREADS=1:
 
@@ -167,6 +167,23 @@ def score(trial: str, key: dict, report: dict | None) -> dict:
     return out
 
 
+def _line_text(m: dict) -> str:
+    """A gyro line above the band: where, how large, and whether it went into the simulator's model."""
+    txt = (
+        f"gyro line {m['frequency_hz']:.2f} Hz, RMS {_arr(np.degrees(m['rms_rad_s']))} deg/s, in"
+        f" {len(m['recordings'])} recordings"
+    )
+    sim = m.get("simulator_vibration")
+    if sim:
+        held = (m.get("held_out") or {}).get("stretches") or []
+        gaps = ", ".join(f"{h['gap_before_log10']:.2f} -> {h['gap_after_log10']:.2f}" for h in held)
+        txt += (
+            f"; in the simulator's model (vibration, amplitude {_arr(np.degrees(sim['amplitude']))} deg/s)"
+            f"{f', held-out gap at the line {gaps}' if gaps else ''}"
+        )
+    return txt
+
+
 def _arr(v) -> str:
     a = np.atleast_1d(np.asarray(v, float)).ravel()
     s = ", ".join(f"{x:.4g}" for x in a)
@@ -292,8 +309,10 @@ def main(argv=None) -> None:
         " with the truth (chi-square of z = (estimate - truth) / reported SE, p >= 0.01); null: PASS = nothing named.",
         "",
         "The last column is what the report shows beside its verdict without naming an effect: narrow lines of the"
-        " raw gyro above the band the truth can judge (`gyrodenoise.discrepancy.gyro_lines`), and cautions (a low-pass"
-        " kept over a named delay). They do not change a verdict.",
+        " raw gyro above the band the truth can judge (`gyrodenoise.discrepancy.gyro_lines`; one in every fitted"
+        " recording goes into the simulator's model, with its held-out gap without -> with it), and cautions (the"
+        " choice between a delay and a low-pass, when a small error in the truth's noise would reverse it). They do"
+        " not change a verdict.",
         "",
         "| trial | hidden effect (truth) | named | fitted ± SE (datasheet units) | verdict | wall time (s) |"
         " seen, not named |",
@@ -301,11 +320,7 @@ def main(argv=None) -> None:
     ]
     for r in rows:
         named = "crash: " + r.get("error", "") if r["named"] is None else (", ".join(r["named"]) or "nothing")
-        seen = [
-            f"gyro line {m['frequency_hz']:.2f} Hz, RMS {_arr(np.degrees(m['rms_rad_s']))} deg/s, in"
-            f" {len(m['recordings'])} recordings"
-            for m in r.get("gyro_lines", [])
-        ] + [f"caution: {c}" for c in r.get("cautions", [])]
+        seen = [_line_text(m) for m in r.get("gyro_lines", [])] + [f"caution: {c}" for c in r.get("cautions", [])]
         lines.append(
             f"| {r['trial']} | {r['hidden']} | {named} | {r['fit'] or '-'} | {r['verdict']} | {r['wall_s']:.0f} |"
             f" {'; '.join(seen) or '-'} |"

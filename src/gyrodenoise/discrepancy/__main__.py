@@ -22,7 +22,7 @@ from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
-from gyrodenoise.discrepancy.gyro_lines import compared_band_hz, gyro_lines
+from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model, compared_band_hz, gyro_lines
 from gyrodenoise.discrepancy.gyro_lines import sentence as lines_sentence
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
@@ -259,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     report["data_warnings"] = data_warnings
     report["ground_truth_gaps"] = {"max_gap_s": MAX_GT_GAP_S, "min_stretch_s": MIN_STRETCH_S, "left_out": left_out}
     report["gyro_lines_above_band"] = gyro_lines(fit + holdout)  # after the selection: each stretch's band is set
+    add_lines_to_model(report, fit, holdout, args.seed)
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
 

@@ -89,8 +89,8 @@ class Selection:
         else:
             kept, other, way = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}", "smaller"
         return [
-            f"{kept} was preferred to {other} by delta BIC {dbic - thr:+.0f} beyond the threshold, after taking off the "
-            f"{smooth:.0f} that a low-pass gains by smoothing the ground truth's own error; if that error were "
+            f"{kept} was preferred to {other} by delta BIC {dbic - thr:+.0f} beyond the threshold, after taking off "
+            f"the {smooth:.0f} that a low-pass gains by smoothing the ground truth's own error; if that error were "
             f"{share:.0%} {way} than estimated, it would be {other}"
         ]
 

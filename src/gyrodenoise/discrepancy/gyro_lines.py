@@ -5,7 +5,12 @@ so a vibration line above it (a rotor's, a mount's) is never compared with the s
 41 Hz line, 290-1190 times the gyro's noise floor, went unseen (benchmarks/results/blind_discrepancy.md). The gyro's
 own spectrum shows such a line without any truth: power in a few bins far above the running median of the bins around
 it. That says the measured gyro has a line, not whether it is motion or sensor error (above the band the truth cannot
-tell); a simulator meant to reproduce this gyro misses it either way. Reported, not named: no effect is fitted.
+tell); a simulator meant to reproduce this gyro misses it either way. Reported, not named against the truth.
+
+A line in every fitted recording is a property of this sensor on this platform, motion or not: it goes into the
+simulator's model as a band-limited vibration (`simulator_vibration`: its frequency, width and the fitted recordings'
+mean RMS), and the held-out recordings say whether it transfers (`held_out_check`: the line's RMS measured there
+against the same line read from a simulation with that effect, the gap before and after).
 """
 
 from __future__ import annotations
@@ -13,6 +18,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import welch
+
+from gyrodenoise.sim.context import SignalContext
+from gyrodenoise.sim.effects import Vibration, WhiteNoise
 
 LINE_RATIO = 20.0  # a line: PSD at least this x the running median around it (white noise: ~1 +- 0.2 per bin)
 NEIGHBOURS_HZ = 5.0  # the running median spans this either side of a bin (a line of a few bins does not move it)
@@ -69,6 +77,7 @@ def gyro_lines(fcs: list, ratio: float = LINE_RATIO) -> list[dict]:
             continue
         for line in stretch_lines(np.asarray(fc.gyro), fc.rate_hz, float(band), ratio):
             line["recording"] = fc.extra.get("sequence", fc.name)
+            line["stretch"] = fc.name
             found.append(line)
     merged: list[dict] = []
     for line in sorted(found, key=lambda x: -max(x["ratio"])):
@@ -80,6 +89,8 @@ def gyro_lines(fcs: list, ratio: float = LINE_RATIO) -> list[dict]:
                     "recordings": [line["recording"]],
                     "ratio": line["ratio"],
                     "rms_rad_s": line["rms_rad_s"],
+                    "width_hz": line["width_hz"],
+                    "per_stretch": {line["stretch"]: line["rms_rad_s"]},
                 }
             )
             continue
@@ -87,7 +98,85 @@ def gyro_lines(fcs: list, ratio: float = LINE_RATIO) -> list[dict]:
             same["recordings"].append(line["recording"])
         same["ratio"] = np.maximum(same["ratio"], line["ratio"]).tolist()
         same["rms_rad_s"] = np.maximum(same["rms_rad_s"], line["rms_rad_s"]).tolist()
+        same["width_hz"] = max(same["width_hz"], line["width_hz"])
+        same["per_stretch"][line["stretch"]] = line["rms_rad_s"]
     return sorted(({**m, "recordings": sorted(m["recordings"])} for m in merged), key=lambda m: m["frequency_hz"])
+
+
+def simulator_vibration(line: dict, fit: list) -> dict | None:
+    """The band-limited vibration (`sim.effects.Vibration`, SI) a simulator needs to reproduce `line` (from
+    `gyro_lines`): None unless the line is in every fitted stretch. Amplitude A = sqrt(2) x the fitted stretches'
+    mean RMS per axis (the effect's band RMS is A / sqrt(2)); width: the line's flagged bins, at least two."""
+    names = [fc.name for fc in fit]
+    if not names or any(n not in line["per_stretch"] for n in names):
+        return None
+    rms = np.mean([line["per_stretch"][n] for n in names], axis=0)
+    df = 1.0 / SEGMENT_S
+    return {
+        "frequency_hz": line["frequency_hz"],
+        "amplitude": (np.sqrt(2.0) * rms).tolist(),
+        "bandwidth_hz": max(line["width_hz"], 2 * df),
+    }
+
+
+def held_out_check(line: dict, params: dict, holdout: list, noise_density: np.ndarray, seed: int = 0) -> dict:
+    """The line on the held-out stretches: its RMS there (measured), and the same line read the same way from a
+    simulated gyro of each stretch's length (white noise of the fitted density, plus the vibration `params`):
+    the spectral gap at the line, |log10(measured power / simulated power)| summed over the line's bins, before
+    (the model without the line) and after. A stretch without the line counts as measured RMS 0."""
+    rows = []
+    for s, fc in enumerate(holdout):
+        n, rate = len(fc.t), fc.rate_hz
+        sig = SignalContext(t=np.arange(n) / rate, omega=np.zeros((n, 3)), alpha=None, f=None, rate_hz=rate)
+        rng = np.random.default_rng([seed, s])
+        noise = WhiteNoise(density=np.asarray(noise_density)).apply(sig, np.zeros((n, 3)), rng)
+        with_line = Vibration(**{k: np.asarray(v) for k, v in params.items()}).apply(sig, noise, rng)
+        band = fc.extra.get("band_hz") or rate / 2
+        meas = _line_rms(np.asarray(fc.gyro), rate, band, line["frequency_hz"])
+        before = _line_power(np.asarray(fc.gyro), noise, rate, line)
+        after = _line_power(np.asarray(fc.gyro), with_line, rate, line)
+        rows.append(
+            {
+                "stretch": fc.name,
+                "measured_rms_rad_s": meas,
+                "simulated_rms_rad_s": _line_rms(with_line, rate, band, line["frequency_hz"]),
+                "gap_before_log10": before,
+                "gap_after_log10": after,
+            }
+        )
+    return {"stretches": rows}
+
+
+def _line_rms(gyro: np.ndarray, rate_hz: float, above_hz: float, frequency_hz: float) -> list[float]:
+    """RMS per axis of the line of `gyro` nearest `frequency_hz` (within MERGE_HZ), zeros if none is flagged."""
+    found = [m for m in stretch_lines(gyro, rate_hz, above_hz) if abs(m["frequency_hz"] - frequency_hz) <= MERGE_HZ]
+    if not found:
+        return [0.0, 0.0, 0.0]
+    return min(found, key=lambda m: abs(m["frequency_hz"] - frequency_hz))["rms_rad_s"]
+
+
+def _line_power(measured: np.ndarray, simulated: np.ndarray, rate_hz: float, line: dict) -> float:
+    """Mean over axes of |log10| of the measured over the simulated power in the line's bins (its width about its
+    frequency): the spectral gap there, 0 when the simulation holds the line's power."""
+    nper = int(round(SEGMENT_S * rate_hz))
+    f, pm = welch(measured - measured.mean(0), fs=rate_hz, nperseg=nper, axis=0)
+    _, ps = welch(simulated - simulated.mean(0), fs=rate_hz, nperseg=nper, axis=0)
+    half = max(line["width_hz"], 2.0 / SEGMENT_S) / 2
+    m = np.abs(f - line["frequency_hz"]) <= half
+    return float(np.mean(np.abs(np.log10(pm[m].sum(0) / np.maximum(ps[m].sum(0), 1e-300)))))
+
+
+def add_lines_to_model(report: dict, fit: list, holdout: list, seed: int = 0) -> None:
+    """Each line of `report['gyro_lines_above_band']` that is in every fitted stretch gets the vibration a simulator
+    needs (`simulator_vibration`, written into error_model.yaml by `sim_model`) and its held-out check."""
+    density = (report.get("base_params") or {}).get("white_noise", {}).get("density")
+    for line in report.get("gyro_lines_above_band") or []:
+        params = simulator_vibration(line, fit)
+        if params is None:
+            continue
+        line["simulator_vibration"] = params
+        if holdout and density is not None:
+            line["held_out"] = held_out_check(line, params, holdout, np.asarray(density, dtype=float), seed)
 
 
 def compared_band_hz(fcs: list) -> float | None:
@@ -107,7 +196,12 @@ def sentence(lines: list[dict], compared_hz: float | None) -> str | None:
     )
     more = f" and {len(lines) - 5} more" if len(lines) > 5 else ""
     band = f" (compared up to {compared_hz:.1f} Hz)" if compared_hz is not None else ""
-    return (
-        f"lines in the raw gyro above the band the truth can judge{band}: {listed}{more}; not compared with the "
-        "model: a simulator without them will not reproduce this gyro there"
-    )
+    added = [m for m in lines if m.get("simulator_vibration")]
+    if added:
+        what = "in every fitted recording, added to the simulator's model as band-limited vibration: " + ", ".join(
+            f"{m['frequency_hz']:.1f} Hz" for m in added
+        )
+    else:
+        what = "none in every fitted recording: a simulator of this model will not reproduce this gyro there"
+    head = f"lines in the raw gyro above the band the truth can judge{band}: {listed}{more}"
+    return f"{head}; not judged by the truth, {what}"

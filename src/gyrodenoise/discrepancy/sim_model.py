@@ -7,6 +7,8 @@ simulated dataset's `generation` settings, so the next simulation includes the e
     python -m gyrodenoise.train dataset=sim dataset.generation.error_model_file=REPORT_DIR/error_model.yaml
 
 The turn-on bias is the mean over the fit sequences, and its spread between them becomes `bias_jitter_rad_s`.
+Lines of the raw gyro above the compared band that are in every fitted recording are added as band-limited
+vibrations (`gyro_lines.simulator_vibration`): the truth cannot judge them, but a simulator of this gyro needs them.
 """
 
 from __future__ import annotations
@@ -34,6 +36,9 @@ def simulator_model(report: dict) -> dict:
         entries.append(_entry(name, params))
     for e in report.get("named_effects") or []:
         entries.append(_entry(e["name"], e["params"]))
+    for line in report.get("gyro_lines_above_band") or []:  # seen in the gyro alone, above the compared band
+        if line.get("simulator_vibration"):
+            entries.append(_entry("vibration", line["simulator_vibration"]))
     return {
         "error_model": entries,
         "bias_jitter_rad_s": jitter,
