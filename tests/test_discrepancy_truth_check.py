@@ -226,7 +226,7 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
         return SimpleNamespace(thresholds=lambda floor: {})
 
     monkeypatch.setattr(workflow, "null_distribution", fake_null)
-    monkeypatch.setattr(workflow, "select_effects", lambda *a, **k: "selection")
+    monkeypatch.setattr(workflow, "select_effects", lambda *a, **k: SimpleNamespace(nuisance_refit=None))
     monkeypatch.setattr(workflow, "apply_transfer_check", lambda sel, holdout: None)
     cache: dict = {}
     fit = _contexts("a")
@@ -237,6 +237,39 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
     workflow.decide(fit, _contexts("h"), null_draws=5, seed=1, null_cache=cache)
     workflow.decide(fit, _contexts("h"), null_draws=5)  # no cache: computed again
     assert nulls == [None, ["quantization"], None, None]
+
+
+def test_a_selection_that_refitted_the_truths_error_level_is_decided_again_on_a_null_drawn_at_that_level(
+    monkeypatch,
+):
+    """The null re-simulations draw the reconstruction error at the level the contexts hold: when the selection
+    refitted it (a missed time offset had swollen it), the null is drawn again and the selection rerun with its
+    thresholds; the cache keeps both nulls apart."""
+    from types import SimpleNamespace
+
+    from gyrodenoise.discrepancy import workflow
+
+    nulls, thresholds_seen = [], []
+
+    def fake_null(sel_base, fit, candidates, draws, seed):
+        nulls.append(len(nulls))
+        level = {"time_offset": float(len(nulls))}
+        return SimpleNamespace(thresholds=lambda floor: level)
+
+    def fake_select(*a, thresholds=None, **k):
+        if k.get("candidates", a[2] if len(a) > 2 else None) == []:
+            return SimpleNamespace(nuisance_refit=None)  # the base model
+        thresholds_seen.append(thresholds)
+        return SimpleNamespace(nuisance_refit={"first_fit": [9.0] * 3, "model": ["bias", "time_offset"]})
+
+    monkeypatch.setattr(workflow, "null_distribution", fake_null)
+    monkeypatch.setattr(workflow, "select_effects", fake_select)
+    monkeypatch.setattr(workflow, "apply_transfer_check", lambda sel, holdout: None)
+    cache: dict = {}
+    workflow.decide(_contexts("a"), _contexts("g"), null_draws=5, null_cache=cache)
+    assert nulls == [0, 1] and thresholds_seen == [{"time_offset": 1.0}, {"time_offset": 2.0}]
+    workflow.decide(_contexts("a"), _contexts("h"), null_draws=5, null_cache=cache)  # both from the cache
+    assert nulls == [0, 1] and thresholds_seen[-1] == {"time_offset": 2.0}
 
 
 def test_the_cli_sets_aside_a_held_out_flight_whose_truth_follows_the_gyro(tmp_path, capsys):

@@ -63,6 +63,9 @@ class Selection:
     lattice: dict | None = None
     # named sensor constants refitted on the held-out sequences (`transfer.transfer_check`): chi-square, Birge ratio
     transfer: dict[str, dict] = field(default_factory=dict)
+    # the reconstruction error's level of the first pass and the model whose residual moved it (`rank.select_effects`
+    # then selected again with the refitted level); None: no second pass
+    nuisance_refit: dict | None = None
 
     @property
     def equivalences(self) -> list[str]:
@@ -73,15 +76,15 @@ class Selection:
     @property
     def cautions(self) -> list[str]:
         """Named effects that another explanation may hide behind on this data (sentences for the report). Behind a
-        noisy ground truth, the choice between a time offset and a low-pass rests on taking off what the low-pass
-        gains by smoothing the truth's own error (`rank.truth_error_smoothing`); when an error of less than
-        CAUTION_SHARE in that estimate would reverse the choice, the report says so."""
+        noisy ground truth, the choice between a time offset and a low-pass rests on charging the low-pass what it
+        gains by smoothing the truth's own noise (`rank.truth_error_smoothing`); when an error of less than
+        CAUTION_SHARE in that charge (the noise's power) would reverse the choice, the report says so."""
         d = self.delay_or_lowpass
-        if d is None or not d.get("truth_error_smoothing_bic"):
+        if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0:
             return []
         smooth, dbic, thr = d["truth_error_smoothing_bic"], d["delta_bic_lowpass_vs_offset"], d["threshold"]
-        share = abs(dbic - thr) / smooth
-        if share >= CAUTION_SHARE:
+        margin = abs(dbic - thr)
+        if margin >= CAUTION_SHARE * smooth:
             return []
         delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
         if d["kept"] == "sensor_bandwidth":
@@ -89,9 +92,9 @@ class Selection:
         else:
             kept, other, way = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}", "smaller"
         return [
-            f"{kept} was preferred to {other} by delta BIC {dbic - thr:+.0f} beyond the threshold, after taking off "
-            f"the {smooth:.0f} that a low-pass gains by smoothing the ground truth's own error; if that error were "
-            f"{share:.0%} {way} than estimated, it would be {other}"
+            f"{kept} was preferred to {other} by a margin of {margin:.0f} in delta BIC (threshold {thr:g}), after "
+            f"charging the low-pass {smooth:.0f} for smoothing the ground truth's own noise; were that noise's power "
+            f"{margin / smooth:.0%} {way} than estimated, it would be {other}"
         ]
 
     @property

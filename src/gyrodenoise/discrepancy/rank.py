@@ -38,7 +38,6 @@ from gyrodenoise.discrepancy.design import (
     FitResult,
     band_edges,
     band_power,
-    fit_rows,
     n_rows,
     noise_weights,
     nuisance_of,
@@ -52,7 +51,7 @@ from gyrodenoise.discrepancy.design import (
 )
 from gyrodenoise.discrepancy.fitted_model import Selection, fill_params, predict
 from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiability
-from gyrodenoise.discrepancy.reconstruction import draw_error
+from gyrodenoise.discrepancy.reconstruction import row_frequencies
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
     BandFit,
@@ -161,8 +160,10 @@ def score_step(
         def motion_gain(corner: float) -> float:
             # the motion part of the low-pass (its delay and droop): the model seen through the
             # filter, as a Gaussian log-likelihood gain on the regression's rows
+            # less what smoothing the ground truth's own noise gains it (`truth_error_smoothing`)
             view = [sensor_view(fc, corner, rate_only) for fc in raw]
-            rss_of[corner] = Design(view, {n: effects[n] for n in selected}, sigma).fit(selected).rss
+            rss = Design(view, {n: effects[n] for n in selected}, sigma).fit(selected).rss
+            rss_of[corner] = rss + float(truth_error_smoothing(raw, sigma, np.array([corner]))[0])
             return 0.5 * cur.n * np.log(cur.rss / rss_of[corner])
 
         floor = fit_floor_shape(
@@ -321,8 +322,10 @@ def select_effects(
     The level of the reconstruction error that weights the rows is fitted on that residual too, where
     a missing effect whose residual is as blue as that error (a time offset's: delay x angular
     acceleration) is read as reconstruction error. So it is refitted on the selected model's
-    residual, and if it moved by more than KAPPA_TOLERANCE the selection is run once more with the
-    bands and weights of that residual (`nuisance_residuals`)."""
+    residual, and if it moved by more than KAPPA_TOLERANCE the selection is run once more with that
+    level and the rows' weights it gives (`nuisance_residuals`; the bands stay those of the base
+    residual). Not when a low-pass was named on the way: its residual carries the truth's error
+    filtered, which the error model does not describe."""
     base = list(base)
     for n in base + list(candidates or []):
         if n not in EFFECTS:
@@ -443,13 +446,18 @@ def select_effects(
             steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
             design = Design(view, {n: effects[n] for n in selected}, sigma)
             final = design.fit(selected)
-    if trusted_band and nuisance_residuals is None:
+    if trusted_band and nuisance_residuals is None and corner is None:
         resid = residuals_after(design, final, selected)
+        first = fcs[0].extra.get("nuisance_level")
         if _nuisance_moved(fcs, resid):
-            return select_effects(
-                fcs, base, candidates, bic_threshold, min_gain, min_drift_deg, max_added, rw_knot_spacing_s,
-                band_vibration, trusted_band, thresholds, holdout, nuisance_residuals=resid,
+            sel = select_effects(
+                fcs, base=base, candidates=candidates, bic_threshold=bic_threshold, min_gain=min_gain,
+                min_drift_deg=min_drift_deg, max_added=max_added, rw_knot_spacing_s=rw_knot_spacing_s,
+                band_vibration=band_vibration, trusted_band=trusted_band, thresholds=thresholds, holdout=holdout,
+                nuisance_residuals=resid,
             )  # fmt: skip
+            sel.nuisance_refit = {"first_fit": np.asarray(first).tolist(), "model": list(selected)}
+            return sel
     delay_lp = None
     if "time_offset" in selected and "sensor_bandwidth" in scorable and "sensor_bandwidth" not in selected:
         design, final, view, delay_lp = _delay_or_lowpass(
@@ -486,7 +494,6 @@ def _nuisance_moved(fcs: list[FitContext], residuals: list[np.ndarray]) -> bool:
     old, nu = fcs[0].extra.get("nuisance_level"), nuisance_of(fcs)
     if old is None or nu is None:
         return False
-    nu.floor = fcs[0].extra["sensor_floor"]
     fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nu)
     if fit is None:
         return False
@@ -594,7 +601,7 @@ def _recheck_after_lowpass(
         scored = []  # (delta BIC, name) of each named effect given the others
         for n in named:
             rest = [m for m in selected if m != n]
-            scored.append((float(design.fit(rest).bic - final.bic), n))
+            scored.append((float(design.fit(rest).bic - final.bic) - NONLINEAR_PARAMS.get(n, 0) * np.log(final.n), n))
         weak = [(d, n) for d, n in scored if d < thresholds.get(n, bic_threshold)]
         if not weak:
             return design, final
@@ -604,24 +611,27 @@ def _recheck_after_lowpass(
         final = design.fit(selected)
 
 
-def truth_error_smoothing(fcs: list[FitContext], sigma: np.ndarray, corners: np.ndarray, draws: int = 16) -> np.ndarray:
-    """(len(corners),) expected drop of a fit's weighted residual sum of squares when the
-    reconstructed true rate is seen through a first-order low-pass of each corner, from the
-    reconstruction's own error alone: E ||rows(e)||^2 - ||rows(H e)||^2, with e drawn from the
-    error model of each sequence (`reconstruction.draw_error`; fixed seed, so the decision is
-    repeatable) and rows those of the fit (`fit_rows`). Zeros for an exact ground truth."""
+def truth_error_smoothing(fcs: list[FitContext], sigma: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(len(corners),) expected drop of a fit's weighted residual sum of squares when the reconstructed true rate is
+    seen through a first-order low-pass of each corner (`SensorBandwidth`), from the ground truth's own noise alone:
+    E ||rows(e)||^2 - ||rows(H e)||^2 = sum over the fit's rows (`fit_rows`) and axes of (1 - |H(f)|^2) times the
+    row's weighted noise power kappa N(f) (rate / 2) / sigma^2 w(f)^2, N the ground-truth noise part of the
+    reconstruction error (`ReconstructionBand.noise_psd`). Motion the spline smoothed away is not counted: the gyro
+    has it and the truth lacks it under either explanation, so the low-pass gains nothing there. The rows' edge
+    projection and masked samples are neglected (a few rows). Zeros for an exact ground truth."""
+    from scipy.signal import freqz
+
     from gyrodenoise.sim.effects import SensorBandwidth
 
-    rng = np.random.default_rng(0)
     out = np.zeros(len(corners))
     for fc in fcs:
-        empty = np.zeros((3 * len(fc.t), 1))  # no columns of its own (fit_rows wants one)
-        for _ in range(draws):
-            e = draw_error(fc, rng)
-            if e is None:
-                break
-            base = np.sum(fit_rows(fc, empty, (e / sigma[None, :]).reshape(-1))[1] ** 2)
-            for i, c in enumerate(corners):
-                he = SensorBandwidth.filter_rate(e, float(c), fc.rate_hz)
-                out[i] += (base - np.sum(fit_rows(fc, empty, (he / sigma[None, :]).reshape(-1))[1] ** 2)) / draws
+        b, kappa, w = fc.extra.get("band"), fc.extra.get("nuisance_level"), fc.extra.get("row_weights")
+        if b is None or b.exact or kappa is None or w is None:
+            continue
+        f = row_frequencies(len(fc.t), fc.rate_hz, fc.extra.get("band_hz"))
+        power = np.sum(kappa * b.noise_psd(f) * (fc.rate_hz / 2) / sigma**2 * w**2, axis=1)
+        for i, c in enumerate(corners):
+            num, den = SensorBandwidth._discrete(float(c), fc.rate_hz)
+            h2 = np.abs(freqz(num, den, worN=f, fs=fc.rate_hz)[1]) ** 2
+            out[i] += float(np.sum((1.0 - h2) * power))
     return out

@@ -230,6 +230,14 @@ def _reconstruction_md(report: dict) -> list[str]:
             f"(rad/s)^2/Hz; fitted level of the reconstruction error relative to its estimate from the ground truth: "
             f"{_fmt_fixed(rec['nuisance_level'], 2)}.",
         ]
+    if refit := rec.get("nuisance_refit"):
+        lines += [
+            "",
+            f"That level was first fitted on the base model's residual as {_fmt_fixed(refit['first_fit'], 2)}: an "
+            "effect the base model misses had swollen it (a time offset's residual is as blue as the reconstruction "
+            f"error). Refitted on the residual of {' + '.join(refit['model'])}, the selection and its null "
+            "re-simulations were run again with the refitted level.",
+        ]
     return lines + [""] + _gt_gaps_md(report)
 
 

@@ -205,16 +205,23 @@ def decide(
     Returns (base selection, final selection, null distribution)."""
     base = list(base)
     sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold, holdout=holdout)
-    null = None
-    thresholds = None
-    if null_draws > 0:
-        key = (tuple(base), None if candidates is None else tuple(candidates), null_draws, seed)
-        cache = null_cache if null_cache is not None else {}
-        if key not in cache:
+    cache = null_cache if null_cache is not None else {}
+
+    def null_of(level: str) -> NullDistribution:
+        key = (tuple(base), None if candidates is None else tuple(candidates), null_draws, seed, level)
+        if key not in cache:  # drawn with the reconstruction error's level the contexts hold now
             cache[key] = null_distribution(sel_base, fit, candidates, null_draws, seed)
-        null = cache[key]
-        thresholds = null.thresholds(bic_threshold)
+        return cache[key]
+
+    null = null_of("base fit") if null_draws > 0 else None
+    thresholds = None if null is None else null.thresholds(bic_threshold)
     sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
+    if null is not None and sel.nuisance_refit is not None:
+        # the selection refitted the reconstruction error's level (a missed effect had swollen it): the null
+        # re-simulations drew the error at the swollen level, so they are drawn again at the refitted one
+        null = null_of("refitted")
+        thresholds = null.thresholds(bic_threshold)
+        sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
     apply_transfer_check(sel, holdout)
     return sel_base, sel, null
 
@@ -311,6 +318,7 @@ def run(
             "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],
             "sensor_floor_psd": _tolist(fit[0].extra.get("sensor_floor")),
             "nuisance_level": _tolist(fit[0].extra.get("nuisance_level")),
+            "nuisance_refit": sel.nuisance_refit,
         },
         "noise_sigma_per_axis_rad_s": sel.sigma.tolist(),
         "saturation_check": sel.saturation,
