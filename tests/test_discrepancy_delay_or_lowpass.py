@@ -64,6 +64,7 @@ def test_low_pass_behind_a_noisy_mocap_is_named_a_low_pass(tmp_path):
     assert sel.named == ["sensor_bandwidth"], sel.steps
     assert float(sel.params["sensor_bandwidth"]["corner_hz"]) == pytest.approx(40.0, rel=0.1)
     assert sel.delay_or_lowpass["kept"] == "sensor_bandwidth"
+    assert "sensor_bandwidth" not in sel.not_identifiable  # named, so not listed as untested
 
 
 def test_truth_error_smoothing_is_the_noise_power_the_low_pass_removes(tmp_path):

@@ -470,7 +470,7 @@ def select_effects(
         selected=selected,
         named=[n for n in selected if n not in base],
         steps=steps,
-        not_identifiable=sorted(st.not_identifiable),
+        not_identifiable=sorted(set(st.not_identifiable) - set(selected)),  # a low-pass may replace an offset
         saturation=saturation,
         effects=effects,
         sigma=sigma,
