@@ -5,7 +5,8 @@ their expected delta BIC against each other is ~25-50, a few times the threshold
 fresh seeds at two sizes (2 fitted sequences of 40 s, as the tests; 3 of 60 s, as the blind runner) and runs the
 selection in process (`rank.select_effects`, base bias + white noise + bias random walk, candidates time_offset,
 sensor_bandwidth, scale_factor; fixed threshold 10, no null re-simulations), recording which explanation is kept,
-its margin over the threshold, the charge for smoothing the truth's noise and whether the report cautions.
+its margin over the threshold, the charge for smoothing the truth's noise and whether the report cautions (a margin
+within the statistic's spread, 2 sqrt(expected delta BIC): `Selection.cautions`).
 
     python benchmarks/blind_discrepancy/close_calls.py [--seeds 300 320] [--work /tmp/close_calls]
 
@@ -97,8 +98,8 @@ def main(argv=None) -> None:
         "",
         "Selection in process, fixed threshold 10 (no null re-simulations), candidates time_offset, sensor_bandwidth,"
         " scale_factor. Margin: delta BIC of the low-pass against the offset minus the threshold (> 0: low-pass kept),"
-        " after the charge for smoothing the truth's noise. Cautioned: the report says the choice would reverse under"
-        " an error of less than half in that charge.",
+        " after the charge for smoothing the truth's noise. Cautioned: the report says the margin is within the"
+        " statistic's spread, 2 sqrt(expected delta BIC), so it may be the other explanation.",
         "",
         "| trial | size | right | wrong, cautioned | wrong, not cautioned | right, cautioned |"
         " margin: median [min, max] | expected delta BIC (median) | charge (median) |",

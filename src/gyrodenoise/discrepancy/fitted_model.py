@@ -34,9 +34,6 @@ QUANT_LATTICE_FRACTION = 0.95  # share of samples on one lattice for quantizatio
 __all__ = ["Selection", "fill_params", "per_sequence_refit", "predict"]
 
 
-CAUTION_SHARE = 0.5  # the delay-or-low-pass choice is cautioned when this error in the truth's noise would reverse it
-
-
 @dataclass
 class Selection:
     base: list[str]
@@ -77,24 +74,25 @@ class Selection:
     def cautions(self) -> list[str]:
         """Named effects that another explanation may hide behind on this data (sentences for the report). Behind a
         noisy ground truth, the choice between a time offset and a low-pass rests on charging the low-pass what it
-        gains by smoothing the truth's own noise (`rank.truth_error_smoothing`); when an error of less than
-        CAUTION_SHARE in that charge (the noise's power) would reverse the choice, the report says so."""
+        gains by smoothing the truth's own noise (`rank.truth_error_smoothing`), and its statistic has a sampling
+        spread of its own: the cross term of the two explanations' difference with the noise, of standard deviation
+        ~2 sqrt(lambda) for an expected delta BIC lambda. A margin over the threshold within that spread is said."""
         d = self.delay_or_lowpass
-        if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0:
+        if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0 or "delta_bic_lowpass_vs_offset" not in d:
             return []
-        smooth, dbic, thr = d["truth_error_smoothing_bic"], d["delta_bic_lowpass_vs_offset"], d["threshold"]
-        margin = abs(dbic - thr)
-        if margin >= CAUTION_SHARE * smooth:
+        dbic, thr = d["delta_bic_lowpass_vs_offset"], d["threshold"]
+        margin, spread = abs(dbic - thr), 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
+        if margin >= spread:
             return []
         delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
         if d["kept"] == "sensor_bandwidth":
-            kept, other, way = f"sensor_bandwidth ({corner})", f"a time offset of {delay}", "larger"
+            kept, other = f"sensor_bandwidth ({corner})", f"a time offset of {delay}"
         else:
-            kept, other, way = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}", "smaller"
+            kept, other = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}"
         return [
-            f"{kept} was preferred to {other} by a margin of {margin:.0f} in delta BIC (threshold {thr:g}), after "
-            f"charging the low-pass {smooth:.0f} for smoothing the ground truth's own noise; were that noise's power "
-            f"{margin / smooth:.0%} {way} than estimated, it would be {other}"
+            f"{kept} was preferred to {other} by a margin of {margin:.0f} in delta BIC (threshold {thr:g}, after "
+            f"charging the low-pass {d['truth_error_smoothing_bic']:.0f} for smoothing the ground truth's own noise), "
+            f"within the statistic's spread on this motion (~{spread:.0f}): it may be {other}"
         ]
 
     @property
