@@ -133,8 +133,9 @@ def held_out_check(line: dict, params: dict, holdout: list, noise_density: np.nd
         with_line = Vibration(**{k: np.asarray(v) for k, v in params.items()}).apply(sig, noise, rng)
         band = fc.extra.get("band_hz") or rate / 2
         meas = _line_rms(np.asarray(fc.gyro), rate, band, line["frequency_hz"])
-        before = _line_power(np.asarray(fc.gyro), noise, rate, line)
-        after = _line_power(np.asarray(fc.gyro), with_line, rate, line)
+        measured = _line_power(np.asarray(fc.gyro), rate, line)
+        before = _log_gap(measured, _line_power(noise, rate, line))
+        after = _log_gap(measured, _line_power(with_line, rate, line))
         rows.append(
             {
                 "stretch": fc.name,
@@ -155,15 +156,17 @@ def _line_rms(gyro: np.ndarray, rate_hz: float, above_hz: float, frequency_hz: f
     return min(found, key=lambda m: abs(m["frequency_hz"] - frequency_hz))["rms_rad_s"]
 
 
-def _line_power(measured: np.ndarray, simulated: np.ndarray, rate_hz: float, line: dict) -> float:
-    """Mean over axes of |log10| of the measured over the simulated power in the line's bins (its width about its
-    frequency): the spectral gap there, 0 when the simulation holds the line's power."""
-    nper = int(round(SEGMENT_S * rate_hz))
-    f, pm = welch(measured - measured.mean(0), fs=rate_hz, nperseg=nper, axis=0)
-    _, ps = welch(simulated - simulated.mean(0), fs=rate_hz, nperseg=nper, axis=0)
+def _line_power(x: np.ndarray, rate_hz: float, line: dict) -> np.ndarray:
+    """(3,) power of x (N, 3) in the line's bins (its width about its frequency), Welch as `stretch_lines`."""
+    f, p = welch(x - x.mean(0), fs=rate_hz, nperseg=int(round(SEGMENT_S * rate_hz)), axis=0)
     half = max(line["width_hz"], 2.0 / SEGMENT_S) / 2
-    m = np.abs(f - line["frequency_hz"]) <= half
-    return float(np.mean(np.abs(np.log10(pm[m].sum(0) / np.maximum(ps[m].sum(0), 1e-300)))))
+    return p[np.abs(f - line["frequency_hz"]) <= half].sum(0)
+
+
+def _log_gap(measured: np.ndarray, simulated: np.ndarray) -> float:
+    """Mean over axes of |log10| of the measured over the simulated power at a line: the spectral gap there, 0 when
+    the simulation holds the line's power."""
+    return float(np.mean(np.abs(np.log10(measured / np.maximum(simulated, 1e-300)))))
 
 
 def add_lines_to_model(report: dict, fit: list, holdout: list, seed: int = 0) -> None:
