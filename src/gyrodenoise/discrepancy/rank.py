@@ -31,6 +31,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import freqz
 
 from gyrodenoise.discrepancy.compare import window_drift_deg
 from gyrodenoise.discrepancy.design import (
@@ -61,7 +62,7 @@ from gyrodenoise.discrepancy.spectral import (
     fit_nuisance,
 )
 from gyrodenoise.sim.context import FitContext
-from gyrodenoise.sim.effects import EFFECTS, Effect, Saturation
+from gyrodenoise.sim.effects import EFFECTS, Effect, Saturation, SensorBandwidth
 
 # nonlinear parameters searched by `prepare` (counted in the BIC penalty)
 NONLINEAR_PARAMS = {"vibration": 1, "warmup_bias": 1, "bias_random_walk": 1}
@@ -619,10 +620,6 @@ def truth_error_smoothing(fcs: list[FitContext], sigma: np.ndarray, corners: np.
     reconstruction error (`ReconstructionBand.noise_psd`). Motion the spline smoothed away is not counted: the gyro
     has it and the truth lacks it under either explanation, so the low-pass gains nothing there. The rows' edge
     projection and masked samples are neglected (a few rows). Zeros for an exact ground truth."""
-    from scipy.signal import freqz
-
-    from gyrodenoise.sim.effects import SensorBandwidth
-
     out = np.zeros(len(corners))
     for fc in fcs:
         b, kappa, w = fc.extra.get("band"), fc.extra.get("nuisance_level"), fc.extra.get("row_weights")
