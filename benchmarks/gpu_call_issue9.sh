@@ -1,22 +1,46 @@
 #!/usr/bin/env bash
-# Issue 9's GPU measurements in one device call (~8 device minutes), for a session that is lent a GPU:
+# Issue 9's GPU measurements in one device call (~6 device minutes), for a session that is lent a GPU:
 #
 #   bash ../shared/tools/gpu-pack euroc                       # here, once: wheels + data into .gpu/
-#   device run, carry [".gpu"], timeout 600:
+#   pip download --no-deps --only-binary=:all: -d .gpu/whl termcolor==2.4.0     # the authors' code needs it
+#   git -C <checkout of mbrossar/denoise-imu-gyro> archive HEAD src | tar x -C .gpu/authors   # (mkdir first)
+#   device run, carry [".gpu"], timeout 480:
 #     source .gpu/env.sh && bash benchmarks/gpu_call_issue9.sh
 #
-# then copy what comes back under $OUT into the repository (results/ files and time_to_accuracy_runs/*.json) and run
-# `python benchmarks/time_to_accuracy.py report` here. Order: the loop overhead and the step variants first (short),
-# then the 1800-epoch runs one at a time with nothing else running (queues/gpu_alone.txt), stopped by a deadline so
-# that the call ends inside its 600 s.
-set -euo pipefail
+# Everything runs one thing at a time (the GPU machine to itself). Order: the step taken apart
+# (gpu_step_breakdown.py, short), gyrodenoise's 1800-epoch run (queues/gpu_alone.txt, first line), the authors'
+# code on the same data and schedule (authors_code_timing.py; skipped without .gpu/authors), then the queue's
+# further lines while the deadline allows. What it writes comes back as $OUT/results.tar (paths as in the
+# repository: unpack at its root, then `python benchmarks/time_to_accuracy.py report`) and $OUT/call.log.
+set -uo pipefail
 OUT=${OUT:-/tmp/gpu_call_out}
-mkdir -p "$OUT"
-nvidia-smi --query-gpu=name,memory.used,utilization.gpu --format=csv | tee "$OUT/gpu_before.csv"
-python benchmarks/epoch_overhead.py --device cuda --rounds 3 --label "GPU call (gpu_call_issue9.sh)" 2>&1 | tail -20
-python benchmarks/step_variants.py --device cuda 2>&1 | tail -20
-mkdir -p "$OUT/results"
-cp benchmarks/results/epoch_overhead.* benchmarks/results/step_variants* "$OUT/results/"
-# alone: one training at a time; the deadline leaves room for one 1800-epoch run (~80 s) and its test
-python benchmarks/run_queue.py benchmarks/queues/gpu_alone.txt --jobs 1 --threads 4 --out /tmp/gpu_runs \
-  --collect "$OUT" --deadline 330 --note "gpu_call_issue9.sh: one run at a time on the GPU machine, alone"
+DEADLINE=${DEADLINE:-300}  # seconds after which no further training starts
+mkdir -p "$OUT" /tmp/res/benchmarks/results/time_to_accuracy_runs
+start=$(date +%s)
+elapsed() { echo $(($(date +%s) - start)); }
+{
+  nvidia-smi --query-gpu=name,memory.used,utilization.gpu --format=csv
+  echo "== step breakdown ($(elapsed) s)"
+  python benchmarks/gpu_step_breakdown.py --steps 30 && cp benchmarks/results/gpu_step_breakdown.* /tmp/res/benchmarks/results/
+  echo "== gyrodenoise 1800 epochs alone ($(elapsed) s)"
+  head -n 4 benchmarks/queues/gpu_alone.txt > /tmp/first.txt
+  python benchmarks/run_queue.py /tmp/first.txt --jobs 1 --threads 4 --out /tmp/gpu_runs --collect /tmp/res \
+    --note "gpu_call_issue9.sh: one run at a time on the GPU machine, alone"
+  if [ -f .gpu/authors/src/learning.py ]; then
+    echo "== the authors' code, 1800 epochs alone ($(elapsed) s)"
+    python benchmarks/authors_code_timing.py --authors .gpu/authors --data "$GYRODENOISE_DATA/euroc" \
+      --epochs 1800 --json "/tmp/res/benchmarks/results/authors_code_timing_${CALL:-call7}.json"
+  fi
+  left=$((DEADLINE - $(elapsed)))
+  if [ "$left" -gt 0 ]; then
+    echo "== the rest of the queue, starting runs for ${left} more s ($(elapsed) s)"
+    python benchmarks/run_queue.py benchmarks/queues/gpu_alone.txt --jobs 1 --threads 4 --out /tmp/gpu_runs \
+      --collect /tmp/res --deadline "$left" --note "gpu_call_issue9.sh: one run at a time on the GPU machine, alone"
+  fi
+  echo "== done ($(elapsed) s)"
+} 2>&1 | tee "$OUT/call.log"
+mkdir -p /tmp/res/benchmarks/results/gpu_queue_logs
+for f in /tmp/gpu_runs/benchmarks/results/time_to_accuracy_runs/*.log; do
+  [ -e "$f" ] && cp "$f" "/tmp/res/benchmarks/results/gpu_queue_logs/${CALL:-call7}_$(basename "$f")"
+done
+tar cf "$OUT/results.tar" -C /tmp/res .
