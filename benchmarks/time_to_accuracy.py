@@ -31,6 +31,26 @@ from gyrodenoise.provenance import git_revision
 
 RUNS = Path("benchmarks/results/time_to_accuracy_runs")
 OUT = Path("benchmarks/results/time_to_accuracy")
+RESULTS = Path("benchmarks/results")
+
+
+def step_of(run: dict) -> str:
+    """'CUDA graph' or 'eager': how a GPU run stepped (summary.json's training_step; runs from before it: eager)."""
+    return run.get("training_step", "eager").split(" (")[0]
+
+
+def call_of(run: dict) -> str:
+    """The GPU call a run came from: its note ('GPU call 1 ...') or its log (gpu_queue_logs/callN_<run>.log)."""
+    q = run.get("queue", {})
+    if q.get("note", "").startswith("GPU call "):
+        return q["note"].split()[2]
+    logs = sorted((RESULTS / "gpu_queue_logs").glob(f"call*_{Path(q.get('id', '')).name}.log"))
+    return logs[0].name.split("_")[0].removeprefix("call") if logs else ""
+
+
+def authors_timings() -> list[tuple[Path, dict]]:
+    """The authors' code timed alone on a GPU machine (benchmarks/authors_code_timing.py), one JSON per call."""
+    return [(p, json.loads(p.read_text())) for p in sorted(RESULTS.glob("authors_code_timing_*.json"))]
 
 
 def ran_alone(run: dict) -> bool:
@@ -230,10 +250,16 @@ def cmd_report(args: argparse.Namespace) -> int:
         )
     alone = [r for r in runs if ran_alone(r)]
     alone_rows = [
-        f"| {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | "
-        f"{r['test']['test/aoe_deg']:.2f} | {r['machine']} |"
+        f"| gyrodenoise, {step_of(r)} | {epochs_of(r)} | {r['seed']} | {r['train_wall_time_s']:.1f} | "
+        f"{r['test']['test/aoe_deg']:.2f} | {call_of(r)} | {r['machine']} |"
         for r in alone
     ]
+    for path, a in authors_timings():
+        alone_rows.append(
+            f"| the authors' code ({path.name}) | {a['epochs']} | {a['seed']} | {a['loop_s']:.1f} "
+            f"(train call {a['train_call_wall_s']:.1f}) | - | {path.stem.rsplit('_', 1)[-1].removeprefix('call')} | "
+            f"{a.get('machine', a['device'])} |"
+        )
     cpu = [r for r in runs if r["_file"].startswith("cpu_default")]
     cpu_rows = [
         f"| {epochs_of(r)} | {r['seed']} | {r['queue']['process_wall_time_s']:.0f} | {r['train_wall_time_s']:.0f} | "
@@ -260,9 +286,15 @@ def cmd_report(args: argparse.Namespace) -> int:
         "",
         "## One run alone on the GPU machine (nothing else running)",
         "",
-        "| epochs | seed | fit wall (s) | test AOE (deg) | machine |",
-        "|---|---|---|---|---|",
-        *(alone_rows or ["| - | none yet | | | |"]),
+        "gyrodenoise: `train_wall_time_s` (the fit: 1800 epochs, its validations every 50 epochs, checkpoints), by",
+        "`benchmarks/gpu_call_issue9.sh` (queues `gpu_alone.txt`, `gpu_alone_graph.txt`); 'eager' steps one kernel at",
+        "a time, 'CUDA graph' replays the step as one graph (`optim.cuda_graph`, the default on a GPU since call 8).",
+        "The authors' code: `python benchmarks/authors_code_timing.py --authors CHECKOUT` in the same call, their",
+        "loop's own timer (1800 epochs and its 3 validations) and, in brackets, their whole `train` call.",
+        "",
+        "| code, step | epochs | seed | fit wall (s) | test AOE (deg) | call | machine |",
+        "|---|---|---|---|---|---|---|",
+        *(alone_rows or ["| - | - | none yet | | | | |"]),
         "",
         "## Many trainings at once on one GPU machine",
         "",

@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise import plots
 from gyrodenoise.cli_errors import TrainingDiverged
+from gyrodenoise.cuda_graph_step import GraphedTrainingStep, device_neutral
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.metrics import aoe_torch, orientation_errors
 from gyrodenoise.models.build import build_model
@@ -34,6 +35,8 @@ class DenoiserModule(L.LightningModule):
         self._val_outputs: list[dict] = []
         self._val_count = 0
         self._raw: dict[tuple[str, str], tuple[torch.Tensor, float]] = {}  # (group, sequence): _raw_reference
+        self._graph: GraphedTrainingStep | None = None  # the training step as one CUDA graph (on_fit_start)
+        self.step_kind = "eager (not fitted yet)"
         # Lightning's model summary runs this through the model (eval mode, no_grad) to print the FLOPs of one
         # second of IMU at 200 Hz and the in/out shapes; without it the summary reads "0 FLOPs"
         self.example_input_array = torch.zeros(1, 200, 6)
@@ -52,17 +55,66 @@ class DenoiserModule(L.LightningModule):
     def forward(self, imu: torch.Tensor) -> torch.Tensor:
         return self.model(imu)
 
+    def graph_step_refusal(self) -> str | None:
+        """Why this fit does not replay its training step as one CUDA graph (None: it does). The graph replaces
+        Lightning's zero_grad, backward and optimizer step, so whatever hooks into those runs eagerly."""
+        from lightning.pytorch.callbacks import WeightAveraging
+
+        t = self._trainer
+        if not self.hparams.optim.get("cuda_graph", True):
+            return "optim.cuda_graph is false"
+        if t is None or self.device.type != "cuda":
+            return "not on a CUDA device"
+        if t.world_size > 1:
+            return "several processes (DDP)"
+        if t.accumulate_grad_batches != 1 or t.gradient_clip_val:
+            return "gradient accumulation or clipping is set"
+        if str(t.precision) not in ("32-true", "32"):
+            return f"trainer.precision={t.precision}"
+        if any(isinstance(cb, WeightAveraging) for cb in t.callbacks):
+            return "a weight-averaging callback (EMA) reads the optimiser step"
+        return None
+
+    def on_fit_start(self) -> None:
+        refusal = self.graph_step_refusal()
+        self._graph = GraphedTrainingStep(self, self.trainer.optimizers[0]) if refusal is None else None
+        # what summary.json records ("training_step"): how this fit stepped, and why not as a graph
+        self.step_kind = "CUDA graph" if refusal is None else f"eager ({refusal})"
+
+    def on_fit_end(self) -> None:
+        self._graph = None  # frees the graph's memory pool before the test
+
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        w_hat = self.model(batch["imu"])
-        loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
+        if self._graph is not None:  # forward, loss, backward and Adam in one replay (optimizer_step below)
+            loss = self._graph(batch)
+        else:
+            w_hat = self.model(batch["imu"])
+            loss = self.loss_fn(w_hat, batch["dt"], batch["dR"], batch["dR_mask"])
         logs = self._logs_this_step()
         # a non-finite loss is checked every step on the CPU (no device sync to save) and on the logging steps
         # elsewhere (the logged value is read back there anyway)
         if (logs or loss.device.type == "cpu") and not torch.isfinite(loss):
             self._diverged(f"train/loss is {float(loss.detach())}")
         if logs:
-            self.log("train/loss", loss.float(), prog_bar=True, batch_size=w_hat.shape[0])
+            self.log("train/loss", loss.float(), prog_bar=True, batch_size=batch["imu"].shape[0])
         return loss
+
+    # With the graph step, the replay in training_step has already zeroed the gradients, back-propagated and
+    # stepped Adam: Lightning's own calls of these three hooks do nothing then (its closure still runs
+    # training_step, and its step counters advance as usual).
+    def optimizer_zero_grad(self, epoch: int, batch_idx: int, optimizer: torch.optim.Optimizer) -> None:
+        if self._graph is None:
+            super().optimizer_zero_grad(epoch, batch_idx, optimizer)
+
+    def backward(self, loss: torch.Tensor, *args, **kwargs) -> None:
+        if self._graph is None:
+            super().backward(loss, *args, **kwargs)
+
+    def optimizer_step(self, epoch: int, batch_idx: int, optimizer, optimizer_closure=None) -> None:
+        if self._graph is None:
+            super().optimizer_step(epoch, batch_idx, optimizer, optimizer_closure)
+        elif optimizer_closure is not None:
+            optimizer_closure()
 
     def _diverged(self, what: str) -> None:
         lr = self.hparams.optim.get("lr")
@@ -184,6 +236,7 @@ class DenoiserModule(L.LightningModule):
         # the random stream (crops, augmentation, dropout: all torch's generators) travels with the weights, so a
         # run resumed from last.ckpt continues on the uninterrupted run's path instead of a fresh draw
         checkpoint["rng_states"] = {"torch": torch.get_rng_state()}
+        device_neutral(checkpoint)  # a graph run's checkpoint resumes anywhere
         if torch.cuda.is_available() and torch.cuda.is_initialized():
             checkpoint["rng_states"]["cuda"] = torch.cuda.get_rng_state_all()
         dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None

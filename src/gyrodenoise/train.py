@@ -348,6 +348,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         (out_dir / "checkpoints" / "interrupted.ckpt").unlink(missing_ok=True)
         raise
     wall_s = time.time() - start
+    step_kind = module.step_kind  # before `module` may become the best checkpoint's
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
     raw_final = _raw_final_weights(trainer, module) if cfg.get("test_other_rule") else None
 
@@ -411,6 +412,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "dataset": cfg.dataset.name,
         "model": OmegaConf.to_container(cfg.model, resolve=True),
         "train_wall_time_s": wall_s,
+        "training_step": step_kind,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
         "torch_threads": torch.get_num_threads(),  # the figures reproduce to the digit at the same count
