@@ -39,6 +39,14 @@ def step_of(run: dict) -> str:
     return run.get("training_step", "eager").split(" (")[0]
 
 
+def command_of(kind: str, epochs: int, seeds: list[int]) -> str:
+    """The command behind a row of the schedule table."""
+    if "CUDA graph" in kind:  # GPU call 9: a queue, 8 at once
+        return "`python benchmarks/run_queue.py benchmarks/queues/gpu_graph_e600.txt --jobs 8 --threads 2` (call 9)"
+    cpu = "" if kind.startswith("GPU") else " --prefix cpu_"
+    return f"`python benchmarks/time_to_accuracy.py run --schedules {epochs} --seeds {' '.join(map(str, seeds))}{cpu}`"
+
+
 def call_of(run: dict) -> str:
     """The GPU call a run came from: its note ('GPU call 1 ...') or its log (gpu_queue_logs/callN_<run>.log)."""
     q = run.get("queue", {})
@@ -119,7 +127,9 @@ def code_version() -> str:
 def kind_of(summary: dict) -> str:
     m = summary.get("machine", "")
     if "no GPU" not in m:
-        return "GPU (H100)" if "H100" in m else "GPU"
+        card = next((c for c in ("H100", "H200") if c in m), "")
+        graph = step_of(summary) == "CUDA graph"
+        return f"GPU ({card}{', CUDA graph' if graph else ''})" if card or graph else "GPU"
     # CPU schedule runs share the 2-core VM with other work: their wall time is not a timing
     return "CPU (2-core VM, shared)"
 
@@ -245,8 +255,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         table.append(
             f"| {kind} | {epochs} | {len(rs)} ({','.join(map(str, seeds))}) | {stats(sel)} ({rule}) | "
             f"{stats(other)} ({other_rule}) | {stats(walls)} | "
-            f"`python benchmarks/time_to_accuracy.py run --schedules {epochs} --seeds "
-            f"{' '.join(map(str, seeds))}{'' if kind.startswith('GPU') else ' --prefix cpu_'}` |"
+            f"{command_of(kind, epochs, seeds)} |"
         )
     alone = [r for r in runs if ran_alone(r)]
     alone_rows = [
