@@ -26,13 +26,18 @@ DENSITY = 2e-3  # rad/s/sqrt(Hz)
 
 def recording(kind: str, seconds: float = 120.0, seed: int = 0):
     """(IMU, truth stamps, truth quaternions): slow motion, a gyro with white noise of DENSITY, and a truth that
-    is exact ('exact'), a tracker's noisy orientation ('mocap') or the gyro itself integrated ('follows')."""
+    is exact ('exact'), a tracker's noisy orientation ('mocap') or the gyro itself integrated ('follows');
+    'lowpassed': an exact truth and a gyro (motion and noise) through a first-order 25 Hz low-pass."""
     rng = np.random.default_rng(seed)
     n = int(seconds * RATE)
     t_ns = 1_000_000_000 + np.round(np.arange(n) * 1e9 / RATE).astype(np.int64)
     t = (t_ns - t_ns[0]) * 1e-9
     w = np.stack([0.4 * np.sin(2 * np.pi * 0.2 * t), 0.3 * np.cos(2 * np.pi * 0.3 * t), 0.2 * np.sin(0.5 * t)], 1)
     gyro = w + DENSITY * np.sqrt(RATE) * rng.standard_normal((n, 3))
+    if kind == "lowpassed":
+        from scipy import signal
+
+        gyro = signal.lfilter(*signal.butter(1, 25.0, fs=RATE), gyro, axis=0)
     # the truth's rate over [t_k, t_k+1]: the true motion's, or the gyro's own (a fused estimate dominated by it)
     step = 0.5 * (w[1:] + w[:-1]) if kind != "follows" else 0.5 * (gyro[1:] + gyro[:-1])
     if kind == "follows":  # a little of the estimate's own error
@@ -60,10 +65,27 @@ def test_an_exact_truth_leaves_the_gyro_noise_and_is_not_flagged():
     assert followed_bands(c) == []
 
 
+def test_a_low_passed_gyro_behind_an_exact_truth_is_not_taken_for_a_truth_that_follows_it():
+    """Above its corner the low-pass takes the gyro's noise below the datasheet's: against that figure the residual
+    looks too small; against the gyro's own floor it does not."""
+    c = run("lowpassed")
+    top = c["bands"][-1]
+    floor_share = np.array(top["own_floor_over_noise"])
+    assert top["band_hz"] == [40.0, 80.0] and np.all(floor_share < 0.5), floor_share
+    against_datasheet = np.array(top["residual_over_noise"]) * floor_share  # what the datasheet alone gave
+    assert np.all(against_datasheet < FOLLOWS_RATIO), against_datasheet
+    assert followed_bands(c) == []
+    ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
+    assert np.all((ratios > 0.7) & (ratios < 1.4)), ratios
+
+
 def test_a_truth_made_from_the_gyro_is_flagged_in_every_band():
     c = run("follows")
     ratios = np.array([b["residual_over_noise"] for b in c["bands"]])
     assert np.all(ratios < 0.1 * FOLLOWS_RATIO), ratios
+    # its gyro holds the datasheet's noise: its floor is that noise, so the reference stays about the datasheet's
+    floors = np.array([b["own_floor_over_noise"] for b in c["bands"]])
+    assert np.all((floors > 0.8) & (floors < 1.25)), floors
     assert followed_bands(c) == [b["band_hz"] for b in c["bands"]]
     assert min(c["bands"][0]["coherence"]) > 0.95  # the truth carries the gyro's noise
 

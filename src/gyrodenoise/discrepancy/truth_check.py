@@ -16,6 +16,10 @@ motion x delay in the residual and hide a truth that follows the gyro):
   over that of white noise of density sigma put through the same averaging (`white_reference`; flat
   at 2 sigma^2 one-sided before it): an independent truth leaves at least the gyro's noise in the
   residual (ratio >= ~1), so a ratio below FOLLOWS_RATIO says the truth follows the gyro in that band.
+  Where the gyro itself is quieter than that white noise (its `own_floor`: per frequency the median power
+  over its stretches, motion only adding to it, so not below its noise), the gyro cannot hold the
+  datasheet's noise there (a sensor low-pass above its corner, a datasheet figure set high): the
+  reference is that floor.
   Without sigma the check cannot tell a truth that follows the gyro from an exact one, and flags nothing.
 """
 
@@ -34,6 +38,7 @@ NPERSEG_S = 2.5  # Welch segment
 NYQUIST_SHARE = 0.9  # bands end below this share of the truth's Nyquist frequency
 MAX_LAG_S, LAG_GRID_S = 0.05, 0.002  # the time offsets the check aligns before it compares
 FOLLOWS_RATIO = 0.5  # residual PSD below half the datasheet noise: the gyro's noise is partly in the truth
+FLOOR_MIN_STRETCHES = 8  # stretches of NPERSEG_S the gyro's own floor needs (`own_floor`)
 # effects named from the gyro's own values (its lattice, its plateaus), not from its residual against the truth
 TRUTH_FREE = ("quantization", "saturation")
 
@@ -89,18 +94,33 @@ def white_reference(
     return interval_means(noise, imu_t_ns, inside)[run]
 
 
+def own_floor(gyro: np.ndarray, fs: float, nper: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """(frequencies, (F, 3) PSD): the gyro's power density over its quieter stretches. Per frequency, the median
+    over non-overlapping stretches of `nper` samples of their Hann periodograms, over ln 2 (a periodogram bin of
+    noise is exponential: its median is ln 2 times its mean), so noise alone gives its PSD, unbiased, and motion in
+    some stretches barely moves it; motion everywhere only raises it. None with fewer than FLOOR_MIN_STRETCHES."""
+    n_seg = len(gyro) // nper
+    if n_seg < FLOOR_MIN_STRETCHES:
+        return None
+    segs = gyro[: n_seg * nper].reshape(n_seg, nper, 3)
+    f, p = signal.periodogram(segs, fs, window="hann", detrend="constant", axis=1)
+    return f, np.median(p, axis=0) / np.log(2.0)
+
+
 def check_truth(
     gyro: np.ndarray, truth: np.ndarray, fs: float, white: np.ndarray | None = None, noise_density: float | None = None
 ) -> dict:
     """Per band (BANDS_HZ below NYQUIST_SHARE of fs/2): coherence per axis, reproduced share per axis and, with
-    the simulated white-noise residual `white` (`white_reference`), the residual's PSD over its PSD per axis and
-    whether the truth follows the gyro."""
+    the simulated white-noise residual `white` (`white_reference`), the residual's PSD over the reference per axis
+    (that white noise's PSD, or the gyro's own floor where that is lower: `own_floor`) and whether the truth follows
+    the gyro."""
     nper = min(int(NPERSEG_S * fs), len(gyro))
     f, coh = signal.coherence(gyro, truth, fs, nperseg=nper, axis=0)
     _, p_gyro = signal.welch(gyro - gyro.mean(0), fs, nperseg=nper, axis=0)
     res = gyro - truth
     _, p_res = signal.welch(res - res.mean(0), fs, nperseg=nper, axis=0)
     p_white = signal.welch(white, fs, nperseg=nper, axis=0)[1] if white is not None else None
+    floor = own_floor(gyro, fs, nper) if white is not None else None
     bands = []
     for lo, hi in BANDS_HZ:
         hi = float(min(hi, NYQUIST_SHARE * fs / 2))
@@ -113,11 +133,16 @@ def check_truth(
             "coherence": (w * coh[m]).sum(0).tolist(),
             "reproduced_share": (1 - p_res[m].sum(0) / p_gyro[m].sum(0)).tolist(),
             "residual_over_noise": None,
+            "own_floor_over_noise": None,
             "follows_gyro": None,
         }
         if p_white is not None:
-            ratio = np.median(p_res[m], axis=0) / np.median(p_white[m], axis=0)
+            noise = np.median(p_white[m], axis=0)
+            own = None if floor is None else np.median(floor[1][(floor[0] >= lo) & (floor[0] < hi)], axis=0)
+            reference = noise if own is None else np.minimum(noise, own)
+            ratio = np.median(p_res[m], axis=0) / reference
             band["residual_over_noise"] = ratio.tolist()
+            band["own_floor_over_noise"] = None if own is None else (own / noise).tolist()
             band["follows_gyro"] = bool(np.any(ratio < FOLLOWS_RATIO))
         bands.append(band)
     return {"truth_rate_hz": fs, "seconds": len(gyro) / fs, "noise_density": noise_density, "bands": bands}
