@@ -94,12 +94,31 @@ def test_a_graph_runs_checkpoint_resumes_anywhere():
     assert isinstance(opt.param_groups[0]["lr"], torch.Tensor)  # the optimiser itself is left as it was
 
 
-def test_the_graph_step_says_why_it_is_off():
+def test_the_graph_step_says_why_it_is_off(monkeypatch):
+    from lightning.pytorch.callbacks import Callback, GradientAccumulationScheduler
+    from lightning.pytorch.strategies import DDPStrategy, SingleDeviceStrategy
+
     module, _ = module_and_batch()
     trainer = SimpleNamespace(world_size=1, accumulate_grad_batches=1, gradient_clip_val=None, precision="32-true")
+    trainer.strategy, trainer.callbacks = SingleDeviceStrategy(device="cpu"), []
     module._trainer = trainer
-    trainer.callbacks = []
     assert module.graph_step_refusal() == "not on a CUDA device"
+    module._device = torch.device("cuda", 0)  # what a GPU fit sees (nothing here runs on it)
+    assert module.graph_step_refusal() is None
+
+    class GradientWatcher(Callback):
+        def on_after_backward(self, trainer, pl_module) -> None:
+            pass
+
+    trainer.callbacks = [GradientWatcher()]
+    assert module.graph_step_refusal() == "callback GradientWatcher hooks into the step (on_after_backward)"
+    trainer.callbacks = [GradientAccumulationScheduler({0: 1})]
+    assert "GradientAccumulationScheduler" in module.graph_step_refusal()
+    trainer.callbacks = []
+    with torch.autograd.set_detect_anomaly(True):
+        assert module.graph_step_refusal() == "autograd anomaly detection is on"
+    trainer.strategy = DDPStrategy()
+    assert module.graph_step_refusal() == "strategy DDPStrategy (one device only)"
     module.hparams.optim["cuda_graph"] = False
     assert module.graph_step_refusal() == "optim.cuda_graph is false"
 
@@ -148,7 +167,31 @@ def test_a_gpu_training_with_the_graph_ends_where_the_eager_one_does(tiny_asl_ro
     assert eager_summary["training_step"] == "eager (optim.cuda_graph is false)"
     for name, a in graphed.items():  # Adam's steps are ~lr (1e-2): float rounding stays far below
         torch.testing.assert_close(a, eager[name], rtol=1e-3, atol=1e-4, msg=name)
+    assert "eager steps" not in graph_summary["training_step"]  # every step was a replay
     # its last.ckpt resumes on the CPU (the capturable settings are not saved)
     last = tmp_path / "graph" / "checkpoints" / "last.ckpt"
     cpu = config(tiny_asl_root, tmp_path / "cpu", "seed=2", "trainer.max_epochs=7", f"ckpt_path={last}")
     assert train(cpu)["epochs"] == 7
+
+
+@needs_cuda
+def test_a_resumed_gpu_run_with_dropout_ends_on_the_uninterrupted_runs_weights(tiny_asl_root, tmp_path):
+    """The capture's warm-up draws dropout masks; the CUDA random state is put back, so a run resumed from its
+    last.ckpt (a second capture) draws what the uninterrupted run drew."""
+    from test_train import config
+
+    from gyrodenoise.train import train
+
+    def run(out: str, epochs: int, *extra: str) -> dict:
+        cfg = config(tiny_asl_root, tmp_path / out, "seed=5", "trainer.accelerator=gpu", "model.dropout=0.1", *extra)
+        cfg.trainer.max_epochs = epochs
+        cfg.optim.scheduler.T_0 = 4
+        cfg.callbacks.last_checkpoint.every_n_epochs = 1
+        assert train(cfg)["training_step"] == "CUDA graph"
+        return torch.load(tmp_path / out / "model.pt", weights_only=True)["state_dict"]
+
+    whole = run("whole", 4)
+    run("part", 2)
+    resumed = run("resumed", 4, f"ckpt_path={tmp_path / 'part' / 'checkpoints' / 'last.ckpt'}")
+    for name, a in whole.items():
+        torch.testing.assert_close(resumed[name], a, rtol=1e-5, atol=1e-6, msg=name)

@@ -9,8 +9,9 @@ so results agree with the eager step to float rounding, not bit for bit (tests/t
 Capture needs static tensors: the batch is copied into buffers of the captured shape, the gradients are never set
 to None, Adam's learning rate becomes a device tensor that the scheduler fills in place (torch's schedulers do),
 and its state lives on the device. The warm-up steps that a capture needs run on a snapshot: parameters, buffers
-(batch-norm statistics) and Adam's state are put back afterwards, so the run takes the same steps as an eager one.
-A batch of another shape runs eagerly (with the same optimiser).
+(batch-norm statistics), Adam's state and the CUDA random state are put back afterwards (also when the warm-up is
+interrupted), so the run takes the same steps as an eager one and a resumed run draws the masks the uninterrupted
+one drew. A batch of another shape runs eagerly (with the same optimiser); `replays` and `eager_steps` count both.
 """
 
 from __future__ import annotations
@@ -61,8 +62,10 @@ class GraphedTrainingStep:
         self.graph: torch.cuda.CUDAGraph | None = None
         self.static: dict[str, torch.Tensor] = {}
         self.static_loss: torch.Tensor | None = None
+        self.replays = self.eager_steps = 0
 
-    def _eager(self, batch: dict) -> torch.Tensor:
+    def _step(self, batch: dict) -> torch.Tensor:
+        """One eager step; also the body the graph captures."""
         self.optimizer.zero_grad(set_to_none=False)  # captured gradients keep their memory
         m = self.module
         loss = m.loss_fn(m.model(batch["imu"]), batch["dt"], batch["dR"], batch["dR_mask"])
@@ -75,8 +78,12 @@ class GraphedTrainingStep:
         tensors = list(self.module.parameters()) + list(self.module.buffers())
         saved = [t.detach().clone() for t in tensors]
         had_state = {p: {k: v.clone() for k, v in s.items()} for p, s in self.optimizer.state.items()}
+        device = tensors[0].device
+        rng = torch.cuda.get_rng_state(device) if device.type == "cuda" else None
 
         def restore() -> None:
+            if rng is not None:  # the dropout masks the warm-up drew are drawn again by the first replay
+                torch.cuda.set_rng_state(rng, device)
             with torch.no_grad():
                 for t, s in zip(tensors, saved, strict=True):
                     t.copy_(s)
@@ -94,22 +101,27 @@ class GraphedTrainingStep:
         restore = self._snapshot()
         side = torch.cuda.Stream(device)
         side.wait_stream(torch.cuda.current_stream(device))
-        with torch.cuda.stream(side):
-            for _ in range(WARMUP_STEPS):
-                self._eager(self.static)
-        torch.cuda.current_stream(device).wait_stream(side)
-        restore()
-        self.graph = torch.cuda.CUDAGraph()
-        with torch.cuda.graph(self.graph):
-            self.static_loss = self._eager(self.static)
+        try:
+            with torch.cuda.stream(side):
+                for _ in range(WARMUP_STEPS):
+                    self._step(self.static)
+        finally:  # an interruption inside the warm-up must not leave its steps in the weights a checkpoint saves
+            torch.cuda.current_stream(device).wait_stream(side)
+            restore()
+        graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(graph):
+            self.static_loss = self._step(self.static)
+        self.graph = graph
 
     def __call__(self, batch: dict) -> torch.Tensor:
         if self.graph is None:
             self._capture(batch)  # records the step into the graph without running it; the replay below runs it
         elif any(batch[k].shape != self.static[k].shape for k in BATCH_KEYS):
-            return self._eager(batch)
+            self.eager_steps += 1
+            return self._step(batch)
         else:
             for k in BATCH_KEYS:
                 self.static[k].copy_(batch[k], non_blocking=True)
         self.graph.replay()
+        self.replays += 1
         return self.static_loss.clone()

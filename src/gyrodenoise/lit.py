@@ -24,6 +24,10 @@ from gyrodenoise.models.build import build_model
 from gyrodenoise.run_loggers import log_figures, wants_figures
 from gyrodenoise.so3 import integrate_gyro_torch
 
+# Lightning hooks around the optimiser step: with the graph step, on_before_optimizer_step would not run and the
+# others would run after Adam has stepped, so a callback (or subclass) that has one trains eagerly
+STEP_HOOKS = ("on_before_zero_grad", "on_before_backward", "on_after_backward", "on_before_optimizer_step")
+
 
 class DenoiserModule(L.LightningModule):
     def __init__(self, model: dict, optim: dict, loss: dict, figure_every_n_val: int = 5) -> None:
@@ -58,22 +62,31 @@ class DenoiserModule(L.LightningModule):
     def graph_step_refusal(self) -> str | None:
         """Why this fit does not replay its training step as one CUDA graph (None: it does). The graph replaces
         Lightning's zero_grad, backward and optimizer step, so whatever hooks into those runs eagerly."""
-        from lightning.pytorch.callbacks import WeightAveraging
+        from lightning.pytorch.callbacks import Callback, GradientAccumulationScheduler, WeightAveraging
+        from lightning.pytorch.strategies import SingleDeviceStrategy
+        from lightning.pytorch.utilities.model_helpers import is_overridden
 
         t = self._trainer
         if not self.hparams.optim.get("cuda_graph", True):
             return "optim.cuda_graph is false"
         if t is None or self.device.type != "cuda":
             return "not on a CUDA device"
-        if t.world_size > 1:
-            return "several processes (DDP)"
+        if t.world_size > 1 or not isinstance(t.strategy, SingleDeviceStrategy):
+            return f"strategy {type(t.strategy).__name__} (one device only)"
         if t.accumulate_grad_batches != 1 or t.gradient_clip_val:
             return "gradient accumulation or clipping is set"
         if str(t.precision) not in ("32-true", "32"):
             return f"trainer.precision={t.precision}"
-        if any(isinstance(cb, WeightAveraging) for cb in t.callbacks):
-            return "a weight-averaging callback (EMA) reads the optimiser step"
-        return None
+        if torch.is_anomaly_enabled():
+            return "autograd anomaly detection is on"
+        for cb in t.callbacks:
+            if isinstance(cb, WeightAveraging | GradientAccumulationScheduler):
+                return f"callback {type(cb).__name__} acts on the optimiser step"
+            hooks = [h for h in STEP_HOOKS if is_overridden(h, cb, Callback)]
+            if hooks:
+                return f"callback {type(cb).__name__} hooks into the step ({', '.join(hooks)})"
+        hooks = [h for h in STEP_HOOKS if is_overridden(h, self, L.LightningModule)]
+        return f"the module hooks into the step ({', '.join(hooks)})" if hooks else None
 
     def on_fit_start(self) -> None:
         refusal = self.graph_step_refusal()
@@ -82,6 +95,8 @@ class DenoiserModule(L.LightningModule):
         self.step_kind = "CUDA graph" if refusal is None else f"eager ({refusal})"
 
     def on_fit_end(self) -> None:
+        if self._graph is not None and self._graph.eager_steps:  # batches of another shape than the first
+            self.step_kind = f"CUDA graph ({self._graph.replays} replays, {self._graph.eager_steps} eager steps)"
         self._graph = None  # frees the graph's memory pool before the test
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
@@ -101,7 +116,8 @@ class DenoiserModule(L.LightningModule):
 
     # With the graph step, the replay in training_step has already zeroed the gradients, back-propagated and
     # stepped Adam: Lightning's own calls of these three hooks do nothing then (its closure still runs
-    # training_step, and its step counters advance as usual).
+    # training_step, and its step counters advance as usual). Lightning's on_before_optimizer_step is then not
+    # called and on_after_backward sees the weights after the step: fits that use them step eagerly (STEP_HOOKS).
     def optimizer_zero_grad(self, epoch: int, batch_idx: int, optimizer: torch.optim.Optimizer) -> None:
         if self._graph is None:
             super().optimizer_zero_grad(epoch, batch_idx, optimizer)

@@ -21,6 +21,9 @@ NOISE_PREFIXES = {  # logger -> message starts to drop
     ONNX_REGISTRATION_LOGGER: ("torchvision is not installed",),
 }
 LEAFSPEC_DEPRECATION = r"`isinstance\(treespec, LeafSpec\)` is deprecated"
+# LearningRateMonitor wraps each logged rate in torch.tensor(); with the CUDA-graph step the rate is already a tensor
+# (Adam's capturable form), and torch says "To copy construct from a tensor ..." at every logged rate
+TENSOR_COPY_NOTICE = r"To copy construct from a tensor"
 
 
 class _DropNoise(logging.Filter):
@@ -39,6 +42,7 @@ def quiet_library_notices() -> None:
         if not any(isinstance(f, _DropNoise) for f in log.filters):
             log.addFilter(_DropNoise(prefixes))
     warnings.filterwarnings("ignore", message=LEAFSPEC_DEPRECATION)
+    warnings.filterwarnings("ignore", message=TENSOR_COPY_NOTICE, module=r"lightning\.pytorch\.callbacks\.lr_monitor")
 
 
 @contextlib.contextmanager

@@ -40,7 +40,9 @@ class MLflowRunLogger(MLFlowLogger):
                 self._run_id = _unfinished_run(self._mlflow_client, self._experiment_id, str(folder))
 
     def log_metrics(self, metrics: dict[str, float], step: int | None = None) -> None:
-        super().log_metrics({mlflow_metric_name(k): v for k, v in metrics.items()}, step)
+        # a tensor value (the CUDA-graph step's learning rate is a device tensor) as a plain number, for any store
+        plain = {k: float(v) if hasattr(v, "item") else v for k, v in metrics.items()}
+        super().log_metrics({mlflow_metric_name(k): v for k, v in plain.items()}, step)
 
 
 def _experiment_id(client: Any, uri: str, name: str) -> str:
