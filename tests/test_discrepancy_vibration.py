@@ -157,3 +157,18 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
     assert "cannot lower the held-out residual RMS" in md
     assert "## Is the ground truth independent of the gyro?" in md and "Caution: the ground truth" not in md
     assert "## Command" in md and "--holdout s2" in md
+
+
+@pytest.mark.parametrize("corner", [40.0, 25.0])
+def test_a_low_passed_noise_floor_is_a_broad_band_against_a_flat_floor_and_nothing_against_its_shape(corner):
+    """Why a named band is judged again once a low-pass is named (`rank._recheck_band`): against a flat floor the
+    droop of a low-passed noise floor fits as a broad band, against the floor shaped by the low-pass it does not."""
+    from gyrodenoise.discrepancy.workflow import shape_noise
+
+    rng = np.random.default_rng(0)
+    floor = [shape_noise(2e-4 * np.sqrt(RATE) * rng.standard_normal((12000, 3)), RATE, corner) for _ in range(3)]
+    n = 3 * sum(len(x) for x in floor)
+    flat = fit_band(floor, RATE)
+    assert flat is not None and flat.delta_bic(n) > 1e4 and flat.bandwidth_hz > 30.0
+    shaped = fit_band(floor, RATE, floor_corner_hz=corner)
+    assert shaped is None or shaped.delta_bic(n) < 10.0

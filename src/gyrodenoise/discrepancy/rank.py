@@ -424,29 +424,9 @@ def select_effects(
             effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best["corner_hz"])
         selected.append(best["effect"])
     final = design.fit(selected)  # the last step added nothing: its design holds the model
+    band_check = {"thresholds": thresholds, "bic_threshold": bic_threshold, "min_gain": min_gain, "steps": steps}
     if band_vibration and "vibration" in selected and effects["vibration"].stochastic:
-        # backward check: the band was scored on the residual of its step; once the effects added
-        # after it are fitted, it must still clear the threshold (colour that a deterministic
-        # effect explains is not vibration)
-        v = effects["vibration"].params
-        resid = residuals_after(design, final, selected)
-        band = fit_band(
-            resid,
-            fcs[0].rate_hz,
-            row_masks(fcs),
-            starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))],
-            bands=band_edges(fcs),
-            floor_corner_hz=corner,
-            nuisance=nuisance_of(fcs),
-        )
-        dbic = band.delta_bic(final.n) if band is not None else -np.inf
-        gain = band.explained(sigma, fcs[0].rate_hz) if band is not None else 0.0
-        if dbic < thresholds.get("vibration", bic_threshold) or gain < min_gain:
-            selected.remove("vibration")
-            v["bandwidth_hz"] = np.asarray(0.0)
-            steps.append({"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)})
-            design = Design(view, {n: effects[n] for n in selected}, sigma)
-            final = design.fit(selected)
+        design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, corner, **band_check)
     if trusted_band and nuisance_residuals is None and corner is None:
         resid = residuals_after(design, final, selected)
         first = fcs[0].extra.get("nuisance_level")
@@ -466,6 +446,9 @@ def select_effects(
         )
         if delay_lp is not None and delay_lp["kept"] == "sensor_bandwidth":
             design, final = _recheck_after_lowpass(design, final, selected, base, thresholds, bic_threshold, steps)
+            if "vibration" in selected and effects["vibration"].stochastic:  # the low-pass shapes the floor now
+                lp = float(effects["sensor_bandwidth"].params["corner_hz"])
+                design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, lp, **band_check)
     sel = Selection(
         base=base,
         selected=selected,
@@ -582,6 +565,48 @@ def _delay_or_lowpass(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+def _recheck_band(
+    design: Design,
+    final: FitResult,
+    view: list[FitContext],
+    effects: dict[str, Effect],
+    selected: list[str],
+    sigma: np.ndarray,
+    fcs: list[FitContext],
+    corner: float | None,
+    thresholds: Mapping[str, float],
+    bic_threshold: float,
+    min_gain: float,
+    steps: list[dict],
+) -> tuple[Design, FitResult]:
+    """Backward check of a named band-limited vibration: it was scored on the residual of its step; once the
+    effects added after it are fitted, and the floor shaped by a sensor low-pass of `corner` if one is named (a
+    low-pass shapes the gyro's noise too: a broad band can stand in for that shape before the low-pass is named),
+    it must still clear its threshold and practical minimum, or it is removed (colour that another effect
+    explains is not vibration)."""
+    v = effects["vibration"].params
+    resid = residuals_after(design, final, selected)
+    band = fit_band(
+        resid,
+        fcs[0].rate_hz,
+        row_masks(fcs),
+        starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))],
+        bands=band_edges(fcs),
+        floor_corner_hz=corner,
+        nuisance=nuisance_of(fcs),
+    )
+    dbic = band.delta_bic(final.n) if band is not None else -np.inf
+    gain = band.explained(sigma, fcs[0].rate_hz) if band is not None else 0.0
+    if dbic >= thresholds.get("vibration", bic_threshold) and gain >= min_gain:
+        return design, final
+    selected.remove("vibration")
+    v["bandwidth_hz"] = np.asarray(0.0)
+    step = {"model": list(selected), "removed": "vibration", "delta_bic_on_final_residual": float(dbic)}
+    steps.append(step | ({"floor_corner_hz": corner} if corner is not None else {}))
+    design = Design(view, {n: effects[n] for n in selected}, sigma)
+    return design, design.fit(selected)
 
 
 def _recheck_after_lowpass(

@@ -612,9 +612,11 @@ def markdown(report: dict) -> str:
     ]
     for s in report["selection_steps"]:
         if "removed" in s:
+            corner = s.get("floor_corner_hz")
+            shaped = f", the floor shaped by the {corner:.1f} Hz low-pass" if corner is not None else ""
             lines.append(
                 f"- backward check: {s['removed']} removed (delta BIC {s['delta_bic_on_final_residual']:+.0f} on the "
-                "final residual)"
+                f"final residual{shaped})"
             )
             continue
         parts = []
