@@ -9,6 +9,7 @@ TensorBoard or MLflow when one of those loggers is active (gyrodenoise.run_logge
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import lightning.pytorch as L
 import numpy as np
@@ -36,6 +37,11 @@ class DenoiserModule(L.LightningModule):
         self.model = build_model(**model)
         self.loss_fn = IncrementLoss(**loss)
         self.figure_every_n_val = figure_every_n_val
+        # validation figures are drawn in one background thread: ~1 s a set on a CPU core, and an 1800-epoch run
+        # draws 8 sets, beside a fit of 22-26 s on an H200 (GPU call 8; the saving there not measured yet);
+        # on_train_end waits for them
+        self._figure_pool: ThreadPoolExecutor | None = None
+        self._figure_jobs: list[Future] = []
         self._val_outputs: list[dict] = []
         self._val_count = 0
         self._raw: dict[tuple[str, str], tuple[torch.Tensor, float]] = {}  # (group, sequence): _raw_reference
@@ -234,19 +240,40 @@ class DenoiserModule(L.LightningModule):
             f"(epoch {self.current_epoch + 1}{of})"
         )
         b = o["batch"]
-        t, rot = b["t"][0].cpu().numpy(), b["rot"][0].cpu().numpy()
-        gt_mask = b["gt_mask"][0].cpu().numpy()
-        w_tilde = (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy()
-        # the raw IMU integrated the same way: the reference the correction has to beat
-        R_raw = self._raw_reference(b)[0].cpu().numpy()
-        R_est = o["R_est"].cpu().numpy()
-        errors = {"corrected": orientation_errors(rot, R_est), "raw IMU": orientation_errors(rot, R_raw)}
-        figures = {
-            f"{prefix}/orientation": plots.orientation_figure(t, rot, {"corrected": R_est}, title, gt_mask=gt_mask),
-            f"{prefix}/orientation_error": plots.error_figure(t, errors, title, gt_mask),
-            f"{prefix}/gyro_correction": plots.correction_figure(t, w_tilde, title),
+        arrays = {  # copies on the host, taken now: training goes on while the figures are drawn
+            "t": b["t"][0].cpu().numpy().copy(),
+            "rot": b["rot"][0].cpu().numpy().copy(),
+            "gt_mask": b["gt_mask"][0].cpu().numpy().copy(),
+            "w_tilde": (o["w_hat"].double() - b["imu"][0, :, :3].double()).cpu().numpy(),
+            # the raw IMU integrated the same way: the reference the correction has to beat
+            "R_raw": self._raw_reference(b)[0].cpu().numpy().copy(),
+            "R_est": o["R_est"].cpu().numpy().copy(),
         }
-        log_figures(self.loggers, figures, step)
+        if self._figure_pool is None:
+            self._figure_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gyrodenoise-figures")
+        job = self._figure_pool.submit(_draw_and_log, list(self.loggers), arrays, title, prefix, step)
+        self._figure_jobs.append(job)
+
+    def on_train_end(self) -> None:
+        # before Lightning closes the loggers (after on_train_end): every figure set drawn and logged, a drawing
+        # error raised here
+        self.wait_for_figures()
+
+    def on_validation_end(self) -> None:
+        if self._trainer is not None and self.trainer.state.fn != "fit":  # trainer.validate(): no on_train_end
+            self.wait_for_figures()
+
+    def wait_for_figures(self) -> None:
+        """Block until the figure sets handed to the drawing thread are logged (re-raises a drawing error), then
+        end the thread (a module holding none can be copied and pickled)."""
+        jobs, self._figure_jobs = self._figure_jobs, []
+        try:
+            for job in jobs:
+                job.result()
+        finally:
+            if self._figure_pool is not None:
+                self._figure_pool.shutdown()
+                self._figure_pool = None
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         # the random stream (crops, augmentation, dropout: all torch's generators) travels with the weights, so a
@@ -281,3 +308,18 @@ class DenoiserModule(L.LightningModule):
             raise ValueError(f"optim.scheduler.name={sched['name']!r}; choose 'cosine_warm_restarts' or 'constant'")
         # "name": LearningRateMonitor's tag, beside train/loss (its default is the optimiser's class, "lr-Adam")
         return {"optimizer": opt, "lr_scheduler": {"scheduler": s, "interval": "epoch", "name": "train/lr"}}
+
+
+def _draw_and_log(loggers: list, arrays: dict, title: str, prefix: str, step: int) -> None:
+    """A validation's figure set (orientation, its error against the raw IMU's, the correction), drawn from host
+    arrays and sent to `loggers` at `step`; runs in the module's drawing thread (matplotlib's Figure objects, no
+    pyplot state)."""
+    t, rot, gt_mask = arrays["t"], arrays["rot"], arrays["gt_mask"]
+    R_est, R_raw = arrays["R_est"], arrays["R_raw"]
+    errors = {"corrected": orientation_errors(rot, R_est), "raw IMU": orientation_errors(rot, R_raw)}
+    figures = {
+        f"{prefix}/orientation": plots.orientation_figure(t, rot, {"corrected": R_est}, title, gt_mask=gt_mask),
+        f"{prefix}/orientation_error": plots.error_figure(t, errors, title, gt_mask),
+        f"{prefix}/gyro_correction": plots.correction_figure(t, arrays["w_tilde"], title),
+    }
+    log_figures(loggers, figures, step)
