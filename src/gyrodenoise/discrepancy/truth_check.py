@@ -94,8 +94,9 @@ def white_reference(
     return interval_means(noise, imu_t_ns, inside)[run]
 
 
-def own_floor(gyro: np.ndarray, fs: float, nper: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """(frequencies, (F, 3) PSD): the gyro's power density over its quieter stretches. Per frequency, the median
+def own_floor(gyro: np.ndarray, fs: float, nper: int) -> np.ndarray | None:
+    """(F, 3) PSD on the frequencies of a Welch estimate with `nper`-sample segments: the gyro's power density over
+    its quieter stretches. Per frequency, the median
     over non-overlapping stretches of `nper` samples of their Hann periodograms, over ln 2 (a periodogram bin of
     noise is exponential: its median is ln 2 times its mean), so noise alone gives its PSD, unbiased, and motion in
     some stretches barely moves it; motion everywhere only raises it. None with fewer than FLOOR_MIN_STRETCHES."""
@@ -103,8 +104,8 @@ def own_floor(gyro: np.ndarray, fs: float, nper: int) -> tuple[np.ndarray, np.nd
     if n_seg < FLOOR_MIN_STRETCHES:
         return None
     segs = gyro[: n_seg * nper].reshape(n_seg, nper, 3)
-    f, p = signal.periodogram(segs, fs, window="hann", detrend="constant", axis=1)
-    return f, np.median(p, axis=0) / np.log(2.0)
+    _, p = signal.periodogram(segs, fs, window="hann", detrend="constant", axis=1)
+    return np.median(p, axis=0) / np.log(2.0)
 
 
 def check_truth(
@@ -138,7 +139,7 @@ def check_truth(
         }
         if p_white is not None:
             noise = np.median(p_white[m], axis=0)
-            own = None if floor is None else np.median(floor[1][(floor[0] >= lo) & (floor[0] < hi)], axis=0)
+            own = None if floor is None else np.median(floor[m], axis=0)
             reference = noise if own is None else np.minimum(noise, own)
             ratio = np.median(p_res[m], axis=0) / reference
             band["residual_over_noise"] = ratio.tolist()
