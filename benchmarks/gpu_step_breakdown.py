@@ -9,8 +9,8 @@ warm-up):
 - the step cut short: forward; + increment loss (float64); + backward; + Adam (torch's default, foreach);
 - the whole step with Adam fused (`fused=True`), with cudnn.benchmark, and back to back (no synchronisation
   between steps: the CPU may queue the next step while the GPU works);
-- the whole step replayed as one CUDA graph (capturable Adam, static input buffers): what the step costs when
-  the CPU's launches are taken out;
+- the whole step replayed as one CUDA graph (`gyrodenoise.cuda_graph_step`, the training's own: capturable Adam,
+  the batch copied into static buffers): what the step costs when the CPU's launches are taken out;
 and, under torch.profiler, the kernels launched per step, the GPU's busy time per step and the top kernels.
 If the GPU's busy time is far below the wall time, the step is bound by the CPU's launches, not the arithmetic.
 Writes benchmarks/results/gpu_step_breakdown.{md,json}. Needs a CUDA device and ../shared/data/euroc (or
@@ -81,30 +81,6 @@ def step_fns(module, opt, batch: dict) -> dict:
     return {"forward": forward, "forward + loss": loss, "+ backward": backward, "+ Adam (whole step)": full}
 
 
-def graph_step(module, batch: dict, lr: float, weight_decay: float):
-    """The whole step captured as one CUDA graph (PyTorch's 'whole network capture'): returns replay()."""
-    opt = torch.optim.Adam(
-        module.parameters(), lr=torch.tensor(lr, device="cuda"), weight_decay=weight_decay, capturable=True
-    )
-    static = {k: v.clone() for k, v in batch.items()}
-
-    def step():
-        opt.zero_grad(set_to_none=False)
-        module.loss_fn(module.model(static["imu"]), static["dt"], static["dR"], static["dR_mask"]).backward()
-        opt.step()
-
-    side = torch.cuda.Stream()
-    side.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(side):
-        for _ in range(3):  # warm-up on a side stream, as the capture needs
-            step()
-    torch.cuda.current_stream().wait_stream(side)
-    graph = torch.cuda.CUDAGraph()
-    with torch.cuda.graph(graph):
-        step()
-    return graph.replay
-
-
 def profile(fn, steps: int = 5) -> dict:
     from torch.profiler import ProfilerActivity
 
@@ -162,7 +138,16 @@ def main() -> int:
     torch.backends.cudnn.benchmark = False
     graph_error = None
     try:
-        replay = graph_step(module, batch, cfg.optim.lr, cfg.optim.weight_decay)
+        # the training's own graph step (gyrodenoise.cuda_graph_step), on a fresh Adam; calls 7-8 measured an
+        # inline capture of the same step before that module existed
+        from gyrodenoise.cuda_graph_step import GraphedTrainingStep
+
+        adam = torch.optim.Adam(module.parameters(), lr=cfg.optim.lr, weight_decay=cfg.optim.weight_decay)
+        graphed = GraphedTrainingStep(module, adam)
+
+        def replay():
+            return graphed(batch)
+
         rows["whole step, one CUDA graph"] = timed(replay, args.steps)
         back["CUDA graph, back to back"] = back_to_back(replay, args.steps)
         prof_graph = profile(replay)
