@@ -3,6 +3,7 @@
     python benchmarks/euroc_cv_screen.py nobn            # benchmarks/queues/euroc_nobn_cv.txt
     python benchmarks/euroc_cv_screen.py acc_input       # benchmarks/queues/euroc_acc_input_cv.txt
     python benchmarks/euroc_cv_screen.py acc_diff_round  # benchmarks/queues/euroc_acc_diff_round.txt
+    python benchmarks/euroc_cv_screen.py whole_diff_round  # benchmarks/queues/euroc_whole_diff_round.txt
 
 Per arm and fold k: d_k = the mean held-out-flight AOE of the arm's runs (seed 100+k in a screen; 100+k, 200+k and
 300+k in a round) minus the mean of ref's three CPU runs on that fold (rounds 2 and 3, seeds 100+k, 200+k, 300+k).
@@ -35,6 +36,9 @@ class Screen:
     decision: str  # the sentence the rule adds for an arm's interval
     runs: str = ""  # the runs' folder under RUNS (default: name)
     seeds: tuple[int, ...] = (100,)  # seed = s + k on fold k
+    training: str = "the first 50 s of the other five flights"
+    # other recipes' runs of the same seeds, set against the arm for information: label -> (folder, run-name prefix)
+    information: dict[str, tuple[str, str]] | None = None
 
 
 SCREENS = {
@@ -58,6 +62,16 @@ SCREENS = {
         runs="euroc_acc_input_cv",
         seeds=(100, 200, 300),
     ),
+    "whole_diff_round": Screen(
+        "euroc_whole_diff_round",
+        "EuRoC: whole training flights with the accelerometer's first difference, 3 seeds per fold",
+        {"wdiff": "whole training flights, the accelerometer's first difference"},
+        "a candidate is not shipped by this round (streaming/export support and the 8-seed ensemble come first)",
+        runs="euroc_whole_diff",
+        seeds=(100, 200, 300),
+        training="the other five flights whole",
+        information={"whole": ("euroc_cv{2|3}", "whole"), "diff": ("euroc_acc_input_cv", "diff")},
+    ),
 }
 
 
@@ -72,6 +86,14 @@ def read(path: Path) -> dict:
         "wall_s": s.get("queue", {}).get("process_wall_time_s"),
         "machine": s["machine"],
     }
+
+
+def run_path(folder: str, prefix: str, fold: int, seed: int) -> Path:
+    """The summary of run `<prefix>_f<fold>_s<seed + fold>`; folder "euroc_cv{2|3}": rounds 2 (seeds 100+k, 200+k)
+    and 3 (seeds 300+k), where ref's and whole's CPU runs are."""
+    if folder == "euroc_cv{2|3}":
+        folder = f"euroc_cv{2 if seed < 300 else 3}"
+    return RUNS / folder / f"{prefix}_f{fold}_s{seed + fold}.json"
 
 
 def _mean_run(runs: list[dict]) -> dict:
@@ -93,10 +115,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("screen", choices=sorted(SCREENS))
     screen = SCREENS[parser.parse_args().screen]
-    ref = {
-        k: [read(RUNS / f"euroc_cv{2 if s < 300 else 3}" / f"ref_f{k}_s{s + k}.json") for s in (100, 200, 300)]
-        for k in FOLDS
-    }
+    ref = {k: [read(run_path("euroc_cv{2|3}", "ref", k, s)) for s in (100, 200, 300)] for k in FOLDS}
     folder = RUNS / (screen.runs or screen.name)
     per_seed = {
         a: {k: [read(folder / f"{a}_f{k}_s{s + k}.json") for s in screen.seeds] for k in FOLDS} for a in screen.arms
@@ -136,7 +155,9 @@ def main() -> int:
         f"Rule and runs: `benchmarks/queues/{screen.name}.txt` (written before the runs). Figures:",
         f"`python benchmarks/euroc_cv_screen.py {parser.parse_args().screen}`. Held-out flight AOE (deg, 3D), final "
         "weights of 600-epoch runs",
-        "trained on the first 50 s of the other five flights; ref = rounds 2-3 of reports/accuracy.md (same protocol,",
+        f"trained on {screen.training}; ref = rounds 2-3 of reports/accuracy.md ("
+        + ("same protocol" if screen.training == Screen.training else "trained on the first 50 s of the other five")
+        + ",",
         "2-core VM, one thread per run).",
     ]
     if len(arms) > 1:
@@ -164,6 +185,20 @@ def main() -> int:
         ]
     if screen.decision:
         md.append(f"- the rule also says: {screen.decision}")
+    info = {}
+    for label, (other_folder, prefix) in (screen.information or {}).items():
+        other = {
+            str(k): float(np.mean([read(run_path(other_folder, prefix, k, s))["val"] for s in screen.seeds]))
+            for k in FOLDS
+        }
+        for a, runs in arms.items():
+            d = paired_diff({str(k): runs[k]["val"] for k in FOLDS}, other)[0]
+            info[f"d_val_{a}_vs_{label}"] = {"mean": d.mean, "t_ci": list(d.t_ci), label: other}
+            md.append(
+                f"- information, decides nothing: {a} - {label} (same seeds, per fold: "
+                + ", ".join(f"{runs[k]['val'] - other[str(k)]:+.2f}" for k in FOLDS)
+                + f") {interval(d)}"
+            )
     md.append(
         f"- machine: {'; '.join(machines)}; process wall per run {min(walls):.0f}-{max(walls):.0f} s "
         "(two runs at once, one thread each)"
@@ -179,6 +214,7 @@ def main() -> int:
             for key, d in ((f"d_val_{a}", d_val), (f"d_test_{a}", d_test))
         },
         "candidate": candidate,
+        **info,
     }
     write_json(out.with_suffix(".json"), summary)
     print("\n".join(md))

@@ -172,3 +172,34 @@ def test_a_low_passed_noise_floor_is_a_broad_band_against_a_flat_floor_and_nothi
     assert flat is not None and flat.delta_bic(n) > 1e4 and flat.bandwidth_hz > 30.0
     shaped = fit_band(floor, RATE, floor_corner_hz=corner)
     assert shaped is None or shaped.delta_bic(n) < 10.0
+
+
+@pytest.mark.parametrize("corner", [40.0, 25.0])
+def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
+    """Behind a ground truth with a reconstruction error the floor is fixed from the residual's PSD
+    (`reconstruction.sensor_floor`). Read flat, a low-passed floor gives its mid-band level, and a broad band
+    fills the gap up to the level at 0 Hz that the shaped spectrum is compared with (the band of the exact-mocap
+    blind trials); read through the low-pass's shape it is that 0-Hz level, and no band is left."""
+    from scipy import signal
+
+    from gyrodenoise.discrepancy.reconstruction import ReconstructionBand, sensor_floor
+    from gyrodenoise.discrepancy.spectral import Nuisance
+    from gyrodenoise.discrepancy.workflow import shape_noise
+
+    rng = np.random.default_rng(1)
+    floor = [shape_noise(2e-4 * np.sqrt(RATE) * rng.standard_normal((12000, 3)), RATE, corner) for _ in range(3)]
+    level = 2 * (2e-4) ** 2  # one-sided PSD at 0 Hz
+    bands = []
+    for i, x in enumerate(floor):
+        f, p = signal.welch(x, fs=RATE, nperseg=512, axis=0)
+        z = np.zeros((len(f), 3))
+        bands.append(ReconstructionBand(f"s{i}", 60.0, RATE, 120.0, 0.05, np.full(3, 1e-9), f, np.ones(len(f)), z, p))
+    flat, shaped = sensor_floor(bands), sensor_floor(bands, corner_hz=corner)
+    assert np.all(flat < 0.8 * level)
+    assert shaped == pytest.approx(np.full(3, level), rel=0.05)
+    n = 3 * sum(len(x) for x in floor)
+    error = [b.error_psd for b in bands]  # ~1e-13 of the floor: carried, not felt
+    with_flat = fit_band(floor, RATE, bands=[60.0] * 3, floor_corner_hz=corner, nuisance=Nuisance(error, flat))
+    assert with_flat is not None and with_flat.delta_bic(n) > 1e3
+    with_shaped = fit_band(floor, RATE, bands=[60.0] * 3, floor_corner_hz=corner, nuisance=Nuisance(error, shaped))
+    assert with_shaped is None or with_shaped.delta_bic(n) < 10.0

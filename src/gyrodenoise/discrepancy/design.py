@@ -116,15 +116,21 @@ def n_rows(fc: FitContext) -> int:
     return 3 * len(row_frequencies(len(fc.t), fc.rate_hz, f_max))
 
 
-def nuisance_of(fcs: list[FitContext]) -> Nuisance | None:
-    """The reconstruction error of `fcs` as a spectral nuisance term (None: exact ground truth)."""
+def nuisance_of(fcs: list[FitContext], corner_hz: float | None = None) -> Nuisance | None:
+    """The reconstruction error of `fcs` as a spectral nuisance term (None: exact ground truth).
+    `corner_hz`: a named sensor low-pass shapes the floor; the sensor floor, fixed in the nuisance fits,
+    is then read again through that shape (`sensor_floor`): the level at 0 Hz that a spectrum shaped by
+    the same corner is compared with."""
     psd = []
     for fc in fcs:
         b = fc.extra.get("band")
         psd.append(None if b is None or b.exact else b.error_psd)
     if all(p is None for p in psd):
         return None
-    return Nuisance(psd, fcs[0].extra.get("sensor_floor"))
+    floor = fcs[0].extra.get("sensor_floor")
+    if floor is not None and corner_hz is not None and np.isfinite(corner_hz):
+        floor = sensor_floor([fc.extra["band"] for fc in fcs], corner_hz=corner_hz)
+    return Nuisance(psd, floor)
 
 
 def set_row_weights(fcs: list[FitContext], floor: np.ndarray, kappa: np.ndarray) -> None:

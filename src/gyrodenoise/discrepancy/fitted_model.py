@@ -140,7 +140,8 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     if band_limited(fcs) or corner is not None or nuisance_of(fcs) is not None:
         # the level of the floor in the trusted band (at 0 Hz under a named low-pass): first
         # differences would read the reconstruction error or the low-pass's droop instead
-        c, c_se = fit_floor(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), corner, nuisance_of(fcs))
+        nu = nuisance_of(fcs, corner)
+        c, c_se = fit_floor(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), corner, nu)
         dens = np.sqrt(c / 2)
         sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
     if corner is not None:
@@ -164,7 +165,7 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
             starts=start,
             bands=band_edges(fcs),
             floor_corner_hz=corner,
-            nuisance=nuisance_of(fcs),
+            nuisance=nuisance_of(fcs, corner),
         )
         if band is not None:  # None: no excess left to start from; keep the selection step's fit
             sel.band = band

@@ -137,9 +137,8 @@ def score_step(
     band = None
     vib = effects.get("vibration")
     if band_vibration and "vibration" in remaining:
-        band = fit_band(
-            resid, rate, row_masks(fcs), bands=band_edges(fcs), floor_corner_hz=corner, nuisance=nuisance_of(fcs)
-        )
+        nu = nuisance_of(fcs, corner)
+        band = fit_band(resid, rate, row_masks(fcs), bands=band_edges(fcs), floor_corner_hz=corner, nuisance=nu)
         if band is not None:
             scores.append(
                 {
@@ -280,7 +279,7 @@ def _holdout_band_share(
         starts=[(band.frequency_hz, band.bandwidth_hz)],
         bands=band_edges(views),
         floor_corner_hz=corner,
-        nuisance=nuisance_of(views),
+        nuisance=nuisance_of(views, corner),
         fixed_band=True,
         fixed_power=band.power,
     )
@@ -595,7 +594,7 @@ def _recheck_band(
         starts=[(float(v["frequency_hz"]), float(v["bandwidth_hz"]))],
         bands=band_edges(fcs),
         floor_corner_hz=corner,
-        nuisance=nuisance_of(fcs),
+        nuisance=nuisance_of(fcs, corner),
     )
     dbic = band.delta_bic(final.n) if band is not None else -np.inf
     gain = band.explained(sigma, fcs[0].rate_hz) if band is not None else 0.0

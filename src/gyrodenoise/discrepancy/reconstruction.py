@@ -35,6 +35,7 @@ from scipy import signal
 from scipy.interpolate import make_lsq_spline
 
 from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import SensorBandwidth
 
 TRUST_RATIO = 0.5  # lost motion <= this fraction of the sensor's own PSD
 WELCH_SECONDS = 2.0  # Welch segment of the band estimate: 0.5 Hz resolution
@@ -192,12 +193,18 @@ def estimate_band(fc: FitContext, residual: np.ndarray, trust_ratio: float = TRU
     )
 
 
-def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1) -> np.ndarray:
+def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1, corner_hz: float | None = None) -> np.ndarray:
     """(3,) one-sided PSD of the sensor's noise floor: the median of the measured residual's PSD
     over the frequencies (>= MIN_BAND_HZ) where the estimated reconstruction error is below `share`
     of it, pooled over sequences: inside the compared band if there are enough such frequencies
     there (the level the comparison needs), else anywhere (where the spline rejects the ground
-    truth's noise); where there are none at all, its FLOOR_QUANTILE quantile."""
+    truth's noise); where there are none at all, its FLOOR_QUANTILE quantile.
+
+    `corner_hz`: the floor is shaped by a sensor low-pass of this corner (`SensorBandwidth.floor_shape`);
+    the PSD is divided by that shape first, so the result is the floor's level at 0 Hz, the level a
+    shaped spectrum (`spectral.Spectra.shaped`) is compared with. Read flat, a floor that droops
+    towards Nyquist gives its level in mid-band instead (0.58 of it for a 40 Hz corner at 200 Hz),
+    and a band-limited vibration then takes up the difference."""
     out = np.zeros(3)
     for a in range(3):
         inside, anywhere, low = [], [], []
@@ -205,6 +212,8 @@ def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1) -> np.ndar
             ok = (b.f_hz >= MIN_BAND_HZ) & (b.f_hz < b.rate_hz / 2)
             p = b.residual_psd[ok, a]
             clean = b.error_psd(b.f_hz[ok])[:, a] < share * p
+            if corner_hz is not None:
+                p = p / SensorBandwidth.floor_shape(b.f_hz[ok], corner_hz, b.rate_hz)
             inside.append(p[clean & (b.f_hz[ok] <= b.f_max_hz)])
             anywhere.append(p[clean])
             low.append(p)
