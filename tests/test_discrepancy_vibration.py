@@ -5,6 +5,7 @@ The null case (nothing hidden, also no vibration) is test_sim_discrepancy.test_n
 from __future__ import annotations
 
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -182,8 +183,8 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     blind trials); read through the low-pass's shape it is that 0-Hz level, and no band is left."""
     from scipy import signal
 
-    from gyrodenoise.discrepancy.reconstruction import ReconstructionBand, sensor_floor
-    from gyrodenoise.discrepancy.spectral import Nuisance
+    from gyrodenoise.discrepancy.reconstruction import ReconstructionBand, floor_read_in_band, sensor_floor
+    from gyrodenoise.discrepancy.spectral import Nuisance, fit_floor_shape
     from gyrodenoise.discrepancy.workflow import shape_noise
 
     rng = np.random.default_rng(1)
@@ -203,3 +204,10 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     assert with_flat is not None and with_flat.delta_bic(n) > 1e3
     with_shaped = fit_band(floor, RATE, bands=[60.0] * 3, floor_corner_hz=corner, nuisance=Nuisance(error, shaped))
     assert with_shaped is None or with_shaped.delta_bic(n) < 10.0
+    # the floor read in the band: the corner is read from the floor's shape, the fixed floor read through each
+    # corner; without that reading the shape is not judged at all
+    assert floor_read_in_band(bands)
+    assert fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=Nuisance(error, flat)) is None
+    fit = fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=Nuisance(error, flat, partial(sensor_floor, bands)))
+    assert fit.delta_bic(n) > 100 and np.isfinite(fit.corner_se_hz)
+    assert abs(fit.corner_hz - corner) < max(3 * fit.corner_se_hz, 0.1 * corner)

@@ -13,6 +13,7 @@ sees of the motion (`sensor_view`).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -23,6 +24,7 @@ from gyrodenoise.discrepancy.reconstruction import (
     edge_positions,
     edge_rows,
     estimate_band,
+    floor_read_in_band,
     row_frequencies,
     sensor_floor,
 )
@@ -127,10 +129,14 @@ def nuisance_of(fcs: list[FitContext], corner_hz: float | None = None) -> Nuisan
         psd.append(None if b is None or b.exact else b.error_psd)
     if all(p is None for p in psd):
         return None
-    floor = fcs[0].extra.get("sensor_floor")
-    if floor is not None and corner_hz is not None and np.isfinite(corner_hz):
-        floor = sensor_floor([fc.extra["band"] for fc in fcs], corner_hz=corner_hz)
-    return Nuisance(psd, floor)
+    floor, floor_at = fcs[0].extra.get("sensor_floor"), None
+    if floor is not None:
+        bands = [fc.extra["band"] for fc in fcs if fc.extra.get("band") is not None]
+        if corner_hz is not None and np.isfinite(corner_hz):
+            floor = sensor_floor(bands, corner_hz=corner_hz)
+        if floor_read_in_band(bands):
+            floor_at = partial(sensor_floor, bands)
+    return Nuisance(psd, floor, floor_at)
 
 
 def set_row_weights(fcs: list[FitContext], floor: np.ndarray, kappa: np.ndarray) -> None:

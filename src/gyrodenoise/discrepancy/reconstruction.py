@@ -209,12 +209,10 @@ def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1, corner_hz:
     for a in range(3):
         inside, anywhere, low = [], [], []
         for b in bands:
-            ok = (b.f_hz >= MIN_BAND_HZ) & (b.f_hz < b.rate_hz / 2)
-            p = b.residual_psd[ok, a]
-            clean = b.error_psd(b.f_hz[ok])[:, a] < share * p
+            f, p, clean = _floor_bins(b, a, share)
             if corner_hz is not None:
-                p = p / SensorBandwidth.floor_shape(b.f_hz[ok], corner_hz, b.rate_hz)
-            inside.append(p[clean & (b.f_hz[ok] <= b.f_max_hz)])
+                p = p / SensorBandwidth.floor_shape(f, corner_hz, b.rate_hz)
+            inside.append(p[clean & (f <= b.f_max_hz)])
             anywhere.append(p[clean])
             low.append(p)
         v_in, v_any = np.concatenate(inside), np.concatenate(anywhere)
@@ -225,6 +223,24 @@ def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1, corner_hz:
         else:
             out[a] = np.quantile(np.concatenate(low), FLOOR_QUANTILE)
     return out
+
+
+def floor_read_in_band(bands: list[ReconstructionBand], share: float = 0.1) -> bool:
+    """Whether `sensor_floor` reads the floor inside the compared band on every axis (enough frequencies there
+    where the reconstruction error is below `share` of the residual): then the floor's shape is visible there too,
+    and a sensor low-pass can be judged by it with the floor read again through each corner."""
+    return all(
+        sum(int((clean & (f <= b.f_max_hz)).sum()) for b in bands for f, _, clean in [_floor_bins(b, a, share)]) >= 10
+        for a in range(3)
+    )
+
+
+def _floor_bins(b: ReconstructionBand, axis: int, share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(f, residual PSD, clean) on the Welch bins in [MIN_BAND_HZ, Nyquist) of one axis; clean: the estimated
+    reconstruction error is below `share` of the residual there."""
+    ok = (b.f_hz >= MIN_BAND_HZ) & (b.f_hz < b.rate_hz / 2)
+    p = b.residual_psd[ok, axis]
+    return b.f_hz[ok], p, b.error_psd(b.f_hz[ok])[:, axis] < share * p
 
 
 def band_bins(n: int, rate_hz: float, f_max_hz: float | None) -> np.ndarray:

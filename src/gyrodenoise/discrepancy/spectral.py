@@ -32,7 +32,7 @@ Welch PSD of the residual exceeds the floor by more than half of its peak excess
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize, signal
@@ -55,6 +55,9 @@ class Nuisance:
 
     psd: list[Callable[[np.ndarray], np.ndarray] | None]
     floor: np.ndarray | None = None
+    # the fixed floor read again through a sensor low-pass of a given corner (keyword corner_hz; None: flat), where it
+    # was read inside the trusted band (`design.nuisance_of`): there its shape is visible too
+    floor_at: Callable[..., np.ndarray] | None = None
 
 
 @dataclass
@@ -560,9 +563,10 @@ class FloorShapeFit:
 class FloorShapeProfile:
     """Whittle log-likelihood of the residual spectra with the floor shaped by a sensor low-pass of
     a given corner (`SensorBandwidth.floor_shape`; with a named band-limited vibration `band` =
-    (f0, bw), its power refitted beside the floor). `ok` is False when the floor is known only
-    from outside the trusted band (the reconstruction error swamps it inside): its shape cannot
-    be read there."""
+    (f0, bw), its power refitted beside the floor). A floor fixed by the reconstruction's nuisance
+    term is read again through each corner's shape (`Nuisance.floor_at`). `ok` is False when the
+    floor is known only from outside the trusted band (the reconstruction error swamps it inside):
+    its shape cannot be read there."""
 
     def __init__(
         self,
@@ -575,16 +579,22 @@ class FloorShapeProfile:
     ) -> None:
         self.sp = spectra(residuals, rate_hz, masks, bands, nuisance)
         self.band, self.rate_hz = band, rate_hz
-        self.ok = len(self.sp.f) >= 20 and self.sp.floor is None
-        self.ll_flat = _fit_levels(self.sp, band)[1] if self.ok else float("nan")
+        self.floor_at = None if self.sp.floor is None or nuisance is None else nuisance.floor_at
+        self.ok = len(self.sp.f) >= 20 and (self.sp.floor is None or self.floor_at is not None)
+        self.ll_flat = _fit_levels(self._seen(None), band)[1] if self.ok else float("nan")
         self.f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
 
+    def _seen(self, corner_hz: float | None) -> Spectra:
+        """The spectra shaped by a low-pass of `corner_hz` (None: flat), a fixed floor read through the same shape."""
+        sp = self.sp.shaped(corner_hz)
+        return sp if self.floor_at is None else replace(sp, floor=self.floor_at(corner_hz=corner_hz))
+
     def loglik(self, corner_hz: float) -> float:
-        return _fit_levels(self.sp.shaped(corner_hz), self.band)[1]
+        return _fit_levels(self._seen(corner_hz), self.band)[1]
 
     def fit(self, corner_hz: float) -> FloorShapeFit:
         """The fit at `corner_hz`, with the standard error of the corner from the profile's curvature."""
-        theta, ll, _ = _fit_levels(self.sp.shaped(corner_hz), self.band)
+        theta, ll, _ = _fit_levels(self._seen(corner_hz), self.band)
         u, h = np.log(corner_hz), 0.02
         d2 = -(self.loglik(np.exp(u + h)) - 2 * ll + self.loglik(np.exp(u - h))) / h**2
         se = float(corner_hz / np.sqrt(d2)) if d2 > 0 else float("nan")
