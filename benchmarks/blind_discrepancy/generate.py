@@ -234,6 +234,8 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
     elif kind == "misalignment":
         m = np.asarray(p["matrix_mrad"], float) * 1e-3
         w_sensed = w_true @ (np.eye(3) + m).T
+    elif kind == "scale_factor":
+        w_sensed = w_true * (1.0 + np.asarray(p["scale_ppm"], float) * 1e-6)
     elif kind == "vibration":
         extra = vibration(rng, t, p["f0_hz"], p["wander_hz"], p["amp_rad_s"])
     elif kind == "temperature_drift":
@@ -245,6 +247,9 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
 
     gyro = w_sensed + b0 + rw + wn + extra
     acc = f_true + ab0 + an
+    if kind == "saturation":  # the output register's full scale: every sample beyond it reads the full-scale value
+        lim = p["range_deg_s"] * DEG
+        gyro = np.clip(gyro, -lim, lim)
     if kind == "quantization":
         gyro = np.round(gyro / p["gyro_lsb_rad_s"]) * p["gyro_lsb_rad_s"]
         acc = np.round(acc / p["acc_lsb_m_s2"]) * p["acc_lsb_m_s2"]
@@ -316,6 +321,11 @@ TRIALS = {
     "time_offset_8ms": HiddenEffect("time_offset", {"imu_stamp_late_ms": 8.0}),
     "sensor_lowpass_40hz": HiddenEffect("sensor_lowpass", {"corner_hz": 40.0}),
     "sensor_lowpass_25hz": HiddenEffect("sensor_lowpass", {"corner_hz": 25.0}),
+    # added at session 44, at the end (the trials above keep their seeds): effects the workflow models that no blind
+    # trial had hidden. Saturation at the smallest range of a BMI160 (+-125 deg/s): the hand-held motion goes beyond
+    # it on some axis in every sequence (tens to hundreds of samples)
+    "scale_factor": HiddenEffect("scale_factor", {"scale_ppm": [3000.0, -2000.0, 4000.0]}),
+    "saturation": HiddenEffect("saturation", {"range_deg_s": 125.0}),
 }
 
 

@@ -48,7 +48,7 @@ BASE = "bias,white_noise,bias_random_walk"  # the baseline sensor model of gener
 # a value reported without a standard error is compared by its relative error: a step read from the samples'
 # lattice must be exact; a low-pass corner (searched on a grid, no standard error reported) within 25 %
 # (fixed when the low-pass trials were added, before their first run)
-REL_TOL = {"step": 1e-4, "corner_hz": 0.25}
+REL_TOL = {"step": 1e-4, "corner_hz": 0.25, "limit": 1e-4}  # limit: a saturation's plateau (session 44, before its run)
 
 
 def expected(trial: str, key: dict) -> tuple[str | None, dict]:
@@ -70,6 +70,10 @@ def expected(trial: str, key: dict) -> tuple[str | None, dict]:
         return "vibration", {"frequency_hz": np.asarray(p["f0_hz"])}
     if kind == "quantization":
         return "quantization", {"step": np.asarray(p["gyro_lsb_rad_s"] / DEG)}
+    if kind == "scale_factor":
+        return "scale_factor", {"scale": np.asarray(p["scale_ppm"])}
+    if kind == "saturation":
+        return "saturation", {"limit": np.asarray(p["range_deg_s"])}
     if kind == "temperature_drift":
         # the exponential part as y = A exp(-t / tau): A = -c dT exp(-t_on / tau), mean over the fit sequences
         t_on = np.array([s["t_on_s"] for s in key["sequences"] if s["name"] in FIT])
@@ -90,6 +94,8 @@ def hidden_text(trial: str, key: dict) -> str:
         "misalignment": lambda: f"M = {np.asarray(p['matrix_mrad']).tolist()} mrad (off-diagonal)",
         "vibration": lambda: f"line {p['f0_hz']:g} Hz +-{p['wander_hz']:g} Hz, peak {p['amp_rad_s']} rad/s",
         "quantization": lambda: f"LSB {p['gyro_lsb_rad_s'] / DEG:.6g} deg/s",
+        "scale_factor": lambda: f"scale-factor error {p['scale_ppm']} ppm",
+        "saturation": lambda: f"output saturates at +-{p['range_deg_s']:g} deg/s",
         "temperature_drift": lambda: (
             f"bias {p['coeff_deg_s_per_k']} deg/s/K x ({p['delta_k']:g} K (1 - exp(-(t + t_on) / {p['tau_s']:g} s))"
             f" + {p['osc_k']:g} K sin(2 pi t / {p['osc_period_s']:g} s))"
