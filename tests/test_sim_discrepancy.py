@@ -10,7 +10,7 @@ import pytest
 
 from gyrodenoise.discrepancy.__main__ import build_parser, main
 from gyrodenoise.discrepancy.compare import load_fit_context
-from gyrodenoise.discrepancy.hidden import CASES, make_measured, run_case
+from gyrodenoise.discrepancy.hidden import BASE_NOISE, CASES, make_measured, run_case
 from gyrodenoise.discrepancy.rank import select_effects
 from gyrodenoise.sim.effects import GSensitivity, TimeOffset, Vibration
 
@@ -107,3 +107,19 @@ def test_help_explains_every_option_and_ends_with_an_example(capsys):
     assert "(default: 0.05 s)" in text  # units and defaults filled in
     example = text.rstrip().split("\n\n")[-1]
     assert example.startswith("example") and "python -m gyrodenoise.discrepancy --root" in example
+
+
+def test_a_clipped_output_leaves_every_models_fits_and_noise_level(tmp_path):
+    """A plateau at the largest magnitude is a property of the data: the samples near it leave the base model's fits
+    too (no saturation among its effects), so the noise level that weights them is the sensor's, not the clipped
+    stretches' (their first differences are the true rate's changes)."""
+    from gyrodenoise.sim.effects import Saturation
+
+    names = make_measured(tmp_path, [Saturation(limit=1.5)], n_seqs=3, duration_s=DURATION, seed=11)
+    fcs = [load_fit_context(tmp_path, n) for n in names]
+    clipped = sum(int((np.abs(fc.gyro) >= np.abs(fc.gyro).max() - 1e-12).sum()) for fc in fcs)
+    assert clipped > 50  # the premise: a plateau
+    sel = select_effects(fcs, base=["bias", "white_noise"], candidates=[])
+    per_sample = BASE_NOISE * np.sqrt(fcs[0].rate_hz)
+    assert np.allclose(sel.sigma, per_sample, rtol=0.1), (sel.sigma, per_sample)
+    assert all(fc.extra.get("row_mask") is not None and not fc.extra["row_mask"].all() for fc in fcs)

@@ -58,11 +58,23 @@ def band_edges(fcs: list[FitContext]) -> list[float | None]:
 
 
 def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
-    """Estimate each sequence's trusted band from its base-model residual (once; kept in extra)."""
+    """Estimate each sequence's trusted band from its base-model residual (once; kept in extra). Samples outside
+    `row_mask` (near a saturation limit: the truth beyond the range, the output clipped) are left out of its
+    spectrum, as `spectral.spectra` leaves them out: clipped peaks would raise the whole floor."""
     for fc, r in zip(fcs, residuals, strict=True):
         if "band_hz" not in fc.extra:
-            b = estimate_band(fc, r)
+            b = estimate_band(fc, masked_residual(r, row_mask(fc)))
             fc.extra["band"], fc.extra["band_hz"] = b, b.f_max_hz
+
+
+def masked_residual(r: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """r (N, 3) with the samples outside `mask` set to the kept samples' mean, scaled so that its power per
+    sample is that of the kept samples (what a periodogram of the kept samples alone would read)."""
+    if mask.all():
+        return r
+    keep = np.maximum(mask.sum(0), 1)
+    mean = np.where(mask, r, 0.0).sum(0) / keep
+    return np.where(mask, r - mean, 0.0) * np.sqrt(len(r) / keep) + mean
 
 
 # what `set_reconstruction_model` keeps in a context's extra
@@ -173,10 +185,19 @@ def set_reconstruction_model(fcs: list[FitContext], residuals: list[np.ndarray])
     return np.maximum(np.sqrt(floor * fcs[0].rate_hz / 2), 1e-12)
 
 
-def noise_weights(residuals: list[np.ndarray]) -> np.ndarray:
-    """Per-axis white-noise std from first differences (insensitive to slow effects)."""
-    d = np.concatenate([np.diff(r, axis=0) for r in residuals])
-    return np.maximum(d.std(0) / np.sqrt(2), 1e-12)
+def noise_weights(residuals: list[np.ndarray], masks: list[np.ndarray | None] | None = None) -> np.ndarray:
+    """Per-axis white-noise std from first differences (insensitive to slow effects); with `masks`, only the
+    differences of two kept samples (a clipped stretch differences the true rate's changes, not the noise)."""
+    out = np.zeros(3)
+    for a in range(3):
+        d = []
+        for s, r in enumerate(residuals):
+            m = None if masks is None or masks[s] is None else masks[s][:, a]
+            da = np.diff(r[:, a])
+            d.append(da if m is None else da[m[1:] & m[:-1]])
+        d = np.concatenate(d)
+        out[a] = d.std() / np.sqrt(2) if len(d) > 1 else 0.0
+    return np.maximum(out, 1e-12)
 
 
 class Design:

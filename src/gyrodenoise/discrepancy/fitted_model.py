@@ -19,6 +19,7 @@ from gyrodenoise.discrepancy.design import (
     band_edges,
     band_limited,
     fit_rows,
+    noise_weights,
     nuisance_of,
     residuals_after,
     row_masks,
@@ -134,8 +135,7 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     resid_no_rw = residuals_after(design, res, no_rw)
     resid_all = residuals_after(design, res, sel.selected)
     # stochastic effects: white noise always (base or named); random walk if selected; quantisation
-    wn = EFFECTS["white_noise"]()
-    sel.params["white_noise"], sel.se["white_noise"] = wn.estimate(fcs, resid_all)
+    sel.params["white_noise"], sel.se["white_noise"] = _white_noise(fcs, resid_all)
     corner = sel.corner_hz
     if band_limited(fcs) or corner is not None or nuisance_of(fcs) is not None:
         # the level of the floor in the trusted band (at 0 Hz under a named low-pass): first
@@ -242,6 +242,19 @@ def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
     k = np.sqrt(k2)
     se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
     return {"density": k}, {"density": se}
+
+
+def _white_noise(fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
+    """White-noise density from first differences (`WhiteNoise.estimate`), of kept samples only where a saturation
+    mask leaves some out."""
+    masks = row_masks(fcs)
+    if all(m is None for m in masks):
+        return EFFECTS["white_noise"]().estimate(fcs, residuals)
+    n = sum(
+        len(r) - 1 if m is None else int((m[1:] & m[:-1]).sum(0).min()) for m, r in zip(masks, residuals, strict=True)
+    )
+    dens = noise_weights(residuals, masks) / np.sqrt(fcs[0].rate_hz)
+    return {"density": dens}, {"density": dens / np.sqrt(2 * max(n, 1))}
 
 
 def predict(

@@ -345,15 +345,21 @@ def select_effects(
 
     # the white-noise level per axis weights the rows
     sigma = noise_weights([fc.residual for fc in fcs])
+    # a plateau at the largest magnitude is a property of the data, whatever the model: the samples near it leave
+    # every model's fits (base included) and the trusted band's spectra, whose floor clipped peaks would raise
+    plateau = Saturation.detect(fcs, sigma)
+    clipped = plateau["plateau_samples"] >= Saturation.MIN_PLATEAU
+    if clipped:
+        set_saturation_mask(fcs, plateau["limit"], sigma)
+        # the noise level again without the clipped stretches (their differences are the true rate's changes)
+        sigma = noise_weights([fc.residual for fc in fcs], row_masks(fcs))
+        set_saturation_mask(fcs, plateau["limit"], sigma)
+        plateau = Saturation.detect(fcs, sigma)
     saturation = None
     if "saturation" in effects:
-        saturation = Saturation.detect(fcs, sigma)
+        saturation = plateau
         effects["saturation"].params["limit"] = np.asarray(saturation["limit"])
-        if saturation["plateau_samples"] >= Saturation.MIN_PLATEAU:
-            set_saturation_mask(fcs, saturation["limit"], sigma)
-    sat_limit = None
-    if saturation is not None and saturation["plateau_samples"] >= Saturation.MIN_PLATEAU:
-        sat_limit = float(saturation["limit"])
+    sat_limit = float(plateau["limit"]) if saturation is not None and clipped else None
     if trusted_band:
         # the band where the reconstructed true rate can be trusted, from the base model's residual
         d0 = Design(fcs, {n: effects[n] for n in selected}, sigma)
