@@ -184,7 +184,7 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     from scipy import signal
 
     from gyrodenoise.discrepancy.reconstruction import ReconstructionBand, floor_read_in_band, sensor_floor
-    from gyrodenoise.discrepancy.spectral import Nuisance, fit_floor_shape
+    from gyrodenoise.discrepancy.spectral import FloorShapeProfile, Nuisance, fit_floor_shape
     from gyrodenoise.discrepancy.workflow import shape_noise
 
     rng = np.random.default_rng(1)
@@ -204,10 +204,12 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     assert with_flat is not None and with_flat.delta_bic(n) > 1e3
     with_shaped = fit_band(floor, RATE, bands=[60.0] * 3, floor_corner_hz=corner, nuisance=Nuisance(error, shaped))
     assert with_shaped is None or with_shaped.delta_bic(n) < 10.0
-    # the floor read in the band: the corner is read from the floor's shape, the fixed floor read through each
-    # corner; without that reading the shape is not judged at all
+    # a fixed floor does not judge a low-pass (detection), but a named corner gets its standard error from the
+    # floor's shape, the fixed floor read through each corner (the floor was read in the band)
     assert floor_read_in_band(bands)
-    assert fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=Nuisance(error, flat)) is None
-    fit = fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=Nuisance(error, flat, partial(sensor_floor, bands)))
-    assert fit.delta_bic(n) > 100 and np.isfinite(fit.corner_se_hz)
-    assert abs(fit.corner_hz - corner) < max(3 * fit.corner_se_hz, 0.1 * corner)
+    nu = Nuisance(error, flat, partial(sensor_floor, bands))
+    assert fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=nu) is None
+    prof = FloorShapeProfile(floor, RATE, bands=[60.0] * 3, nuisance=nu, named=True)
+    fit = prof.fit(corner)
+    assert np.isfinite(fit.corner_se_hz) and fit.corner_se_hz < 0.1 * corner
+    assert prof.loglik(corner) > max(prof.loglik(0.8 * corner), prof.loglik(1.25 * corner))

@@ -147,7 +147,9 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     if corner is not None:
         # the corner stays the selection's (spectrum and motion together); its standard error from
         # the curvature of the floor's profile on the final residual
-        prof = FloorShapeProfile(resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs))
+        prof = FloorShapeProfile(
+            resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs), named=True
+        )
         sel.floor_shape = prof.fit(corner) if prof.ok else None
         se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
         sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}

@@ -563,10 +563,12 @@ class FloorShapeFit:
 class FloorShapeProfile:
     """Whittle log-likelihood of the residual spectra with the floor shaped by a sensor low-pass of
     a given corner (`SensorBandwidth.floor_shape`; with a named band-limited vibration `band` =
-    (f0, bw), its power refitted beside the floor). A floor fixed by the reconstruction's nuisance
-    term is read again through each corner's shape (`Nuisance.floor_at`). `ok` is False when the
-    floor is known only from outside the trusted band (the reconstruction error swamps it inside):
-    its shape cannot be read there."""
+    (f0, bw), its power refitted beside the floor). `ok` is False when the floor is fixed by the
+    reconstruction's nuisance term: its shape is not judged there (the error rises with frequency
+    as the floor's droop falls, and a fixed level cannot tell them apart). `named`: the corner is
+    already named by the motion (`rank._delay_or_lowpass`), and the profile is read only for its
+    standard error: the fixed floor is then read again through each corner's shape
+    (`Nuisance.floor_at`), where it was read inside the trusted band."""
 
     def __init__(
         self,
@@ -576,10 +578,11 @@ class FloorShapeProfile:
         bands: list[float | None] | None = None,
         band: tuple[float, float] | None = None,
         nuisance: Nuisance | None = None,
+        named: bool = False,
     ) -> None:
         self.sp = spectra(residuals, rate_hz, masks, bands, nuisance)
         self.band, self.rate_hz = band, rate_hz
-        self.floor_at = None if self.sp.floor is None or nuisance is None else nuisance.floor_at
+        self.floor_at = None if self.sp.floor is None or nuisance is None or not named else nuisance.floor_at
         self.ok = len(self.sp.f) >= 20 and (self.sp.floor is None or self.floor_at is not None)
         self.ll_flat = _fit_levels(self._seen(None), band)[1] if self.ok else float("nan")
         self.f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
