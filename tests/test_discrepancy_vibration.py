@@ -183,7 +183,12 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     blind trials); read through the low-pass's shape it is that 0-Hz level, and no band is left."""
     from scipy import signal
 
-    from gyrodenoise.discrepancy.reconstruction import ReconstructionBand, floor_read_in_band, sensor_floor
+    from gyrodenoise.discrepancy.reconstruction import (
+        ReconstructionBand,
+        floor_read_in_band,
+        floor_through_corner,
+        sensor_floor,
+    )
     from gyrodenoise.discrepancy.spectral import FloorShapeProfile, Nuisance, fit_floor_shape
     from gyrodenoise.discrepancy.workflow import shape_noise
 
@@ -207,7 +212,7 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     # a fixed floor does not judge a low-pass (detection), but a named corner gets its standard error from the
     # floor's shape, the fixed floor read through each corner (the floor was read in the band)
     assert floor_read_in_band(bands)
-    nu = Nuisance(error, flat, partial(sensor_floor, bands))
+    nu = Nuisance(error, flat, partial(floor_through_corner, bands))
     assert fit_floor_shape(floor, RATE, bands=[60.0] * 3, nuisance=nu) is None
     prof = FloorShapeProfile(floor, RATE, bands=[60.0] * 3, nuisance=nu, named=True)
     fit = prof.fit(corner)

@@ -24,7 +24,7 @@ from gyrodenoise.discrepancy.reconstruction import (
     edge_positions,
     edge_rows,
     estimate_band,
-    floor_read_in_band,
+    floor_through_corner,
     row_frequencies,
     sensor_floor,
 )
@@ -146,8 +146,7 @@ def nuisance_of(fcs: list[FitContext], corner_hz: float | None = None) -> Nuisan
         bands = [fc.extra["band"] for fc in fcs if fc.extra.get("band") is not None]
         if corner_hz is not None and np.isfinite(corner_hz):
             floor = sensor_floor(bands, corner_hz=corner_hz)
-        if floor_read_in_band(bands):
-            floor_at = partial(sensor_floor, bands)
+        floor_at = partial(floor_through_corner, bands)
     return Nuisance(psd, floor, floor_at)
 
 

@@ -227,12 +227,17 @@ def sensor_floor(bands: list[ReconstructionBand], share: float = 0.1, corner_hz:
 
 def floor_read_in_band(bands: list[ReconstructionBand], share: float = 0.1) -> bool:
     """Whether `sensor_floor` reads the floor inside the compared band on every axis (enough frequencies there
-    where the reconstruction error is below `share` of the residual): then the floor's shape is visible there too,
-    and a sensor low-pass can be judged by it with the floor read again through each corner."""
+    where the reconstruction error is below `share` of the residual): then the floor's shape is visible there too."""
     return all(
         sum(int((clean & (f <= b.f_max_hz)).sum()) for b in bands for f, _, clean in [_floor_bins(b, a, share)]) >= 10
         for a in range(3)
     )
+
+
+def floor_through_corner(bands: list[ReconstructionBand], corner_hz: float | None) -> np.ndarray | None:
+    """The sensor floor read through a low-pass of `corner_hz` (`sensor_floor`; None: flat) where it is read inside
+    the compared band (`floor_read_in_band`), else None: outside the band its shape says nothing of the band's."""
+    return sensor_floor(bands, corner_hz=corner_hz) if floor_read_in_band(bands) else None
 
 
 def _floor_bins(b: ReconstructionBand, axis: int, share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

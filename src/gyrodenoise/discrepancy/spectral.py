@@ -55,9 +55,9 @@ class Nuisance:
 
     psd: list[Callable[[np.ndarray], np.ndarray] | None]
     floor: np.ndarray | None = None
-    # the fixed floor read again through a sensor low-pass of a given corner (keyword corner_hz; None: flat), where it
-    # was read inside the trusted band (`design.nuisance_of`): there its shape is visible too
-    floor_at: Callable[..., np.ndarray] | None = None
+    # the fixed floor read again through a sensor low-pass of a given corner (keyword corner_hz; None: flat); None
+    # where it was not read inside the trusted band (`reconstruction.floor_through_corner`)
+    floor_at: Callable[..., np.ndarray | None] | None = None
 
 
 @dataclass
@@ -583,6 +583,8 @@ class FloorShapeProfile:
         self.sp = spectra(residuals, rate_hz, masks, bands, nuisance)
         self.band, self.rate_hz = band, rate_hz
         self.floor_at = None if self.sp.floor is None or nuisance is None or not named else nuisance.floor_at
+        if self.floor_at is not None and self.floor_at(corner_hz=None) is None:
+            self.floor_at = None  # the floor was read outside the band: its shape is not seen there
         self.ok = len(self.sp.f) >= 20 and (self.sp.floor is None or self.floor_at is not None)
         self.ll_flat = _fit_levels(self._seen(None), band)[1] if self.ok else float("nan")
         self.f_hi = min(_band_edge(bands, s, rate_hz) for s in range(len(residuals)))
