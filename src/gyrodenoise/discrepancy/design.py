@@ -28,7 +28,7 @@ from gyrodenoise.discrepancy.reconstruction import (
     row_frequencies,
     sensor_floor,
 )
-from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, spectra
+from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, masked_samples, spectra
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect, SensorBandwidth
 
@@ -63,18 +63,9 @@ def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
     spectrum, as `spectral.spectra` leaves them out: clipped peaks would raise the whole floor."""
     for fc, r in zip(fcs, residuals, strict=True):
         if "band_hz" not in fc.extra:
-            b = estimate_band(fc, masked_residual(r, row_mask(fc)))
+            x, scale = masked_samples(r, fc.extra.get("row_mask"))
+            b = estimate_band(fc, x * np.sqrt(scale))
             fc.extra["band"], fc.extra["band_hz"] = b, b.f_max_hz
-
-
-def masked_residual(r: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """r (N, 3) with the samples outside `mask` set to the kept samples' mean, scaled so that its power per
-    sample is that of the kept samples (what a periodogram of the kept samples alone would read)."""
-    if mask.all():
-        return r
-    keep = np.maximum(mask.sum(0), 1)
-    mean = np.where(mask, r, 0.0).sum(0) / keep
-    return np.where(mask, r - mean, 0.0) * np.sqrt(len(r) / keep) + mean
 
 
 # what `set_reconstruction_model` keeps in a context's extra

@@ -247,11 +247,9 @@ def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
 
 
 def _white_noise(fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
-    """White-noise density from first differences (`WhiteNoise.estimate`), of kept samples only where a saturation
-    mask leaves some out."""
+    """White-noise density from first differences (as `WhiteNoise.estimate`), of kept samples only where a
+    saturation mask leaves some out."""
     masks = row_masks(fcs)
-    if all(m is None for m in masks):
-        return EFFECTS["white_noise"]().estimate(fcs, residuals)
     n = sum(
         len(r) - 1 if m is None else int((m[1:] & m[:-1]).sum(0).min()) for m, r in zip(masks, residuals, strict=True)
     )

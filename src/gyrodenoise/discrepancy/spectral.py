@@ -179,6 +179,14 @@ class BandFit:
         return p, se
 
 
+def masked_samples(r: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(x, scale): r (N, 3) less the kept samples' mean, zero outside `mask` (None: all kept), and per axis the
+    factor N / kept that gives a periodogram of x the power per sample of the kept samples alone."""
+    m = np.ones(r.shape, dtype=bool) if mask is None else mask
+    keep = np.maximum(m.sum(0), 1)
+    return np.where(m, r - np.where(m, r, 0).sum(0) / keep, 0.0), len(r) / keep
+
+
 def spectra(
     residuals: list[np.ndarray],
     rate_hz: float,
@@ -193,14 +201,12 @@ def spectra(
     fs, Is, seqs, Es = [], [], [], []
     with_e = nuisance is not None and any(e is not None for e in nuisance.psd)
     for s, r in enumerate(residuals):
-        m = np.ones(r.shape, dtype=bool) if masks is None or masks[s] is None else masks[s]
-        keep = np.maximum(m.sum(0), 1)
-        x = np.where(m, r - np.where(m, r, 0).sum(0) / keep, 0.0)
+        x, scale = masked_samples(r, None if masks is None else masks[s])
         n = len(x)
         w = signal.windows.tukey(n, TAPER)
         X = np.fft.rfft(x * w[:, None], axis=0)
         f = np.fft.rfftfreq(n, 1 / rate_hz)
-        I = 2 * np.abs(X) ** 2 / (rate_hz * np.sum(w**2)) * (n / keep)
+        I = 2 * np.abs(X) ** 2 / (rate_hz * np.sum(w**2)) * scale
         ok = (f >= F_MIN_HZ) & (f < rate_hz / 2) & (f <= _band_edge(bands, s, rate_hz))
         fs.append(f[ok])
         Is.append(I[ok])
