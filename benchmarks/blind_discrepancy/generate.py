@@ -236,6 +236,9 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
         w_sensed = w_true @ (np.eye(3) + m).T
     elif kind == "scale_factor":
         w_sensed = w_true * (1.0 + np.asarray(p["scale_ppm"], float) * 1e-6)
+    elif kind == "scale_asymmetry":  # scale factor +a on positive rates, -a on negative ones, before the sample mean
+        a = np.asarray(p["asymmetry_ppm"], float) * 1e-6
+        w_sensed = window_mean(lambda tt: (w := motion.body_rate(tt)) + a * np.abs(w), t_meas, dt)
     elif kind == "vibration":
         extra = vibration(rng, t, p["f0_hz"], p["wander_hz"], p["amp_rad_s"])
     elif kind == "temperature_drift":
@@ -326,6 +329,10 @@ TRIALS = {
     # it on some axis in every sequence (tens to hundreds of samples)
     "scale_factor": HiddenEffect("scale_factor", {"scale_ppm": [3000.0, -2000.0, 4000.0]}),
     "saturation": HiddenEffect("saturation", {"range_deg_s": 125.0}),
+    # added at session 45, at the end (the trials above keep their seeds): a scale factor that differs between
+    # positive and negative rates, +a and -a (so no symmetric scale-factor error beside it), an effect the
+    # workflow's vocabulary did not have when the trial was written; run first on the vocabulary without it
+    "scale_asymmetry": HiddenEffect("scale_asymmetry", {"asymmetry_ppm": [1500.0, -1000.0, 2500.0]}),
 }
 
 

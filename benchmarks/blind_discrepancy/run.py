@@ -74,6 +74,8 @@ def expected(trial: str, key: dict) -> tuple[str | None, dict]:
         return "scale_factor", {"scale": np.asarray(p["scale_ppm"])}
     if kind == "saturation":
         return "saturation", {"limit": np.asarray(p["range_deg_s"])}
+    if kind == "scale_asymmetry":
+        return "scale_asymmetry", {"asymmetry": np.asarray(p["asymmetry_ppm"])}
     if kind == "temperature_drift":
         # the exponential part as y = A exp(-t / tau): A = -c dT exp(-t_on / tau), mean over the fit sequences
         t_on = np.array([s["t_on_s"] for s in key["sequences"] if s["name"] in FIT])
@@ -96,6 +98,7 @@ def hidden_text(trial: str, key: dict) -> str:
         "quantization": lambda: f"LSB {p['gyro_lsb_rad_s'] / DEG:.6g} deg/s",
         "scale_factor": lambda: f"scale-factor error {p['scale_ppm']} ppm",
         "saturation": lambda: f"output saturates at +-{p['range_deg_s']:g} deg/s",
+        "scale_asymmetry": lambda: f"scale factor +a on positive rates, -a on negative, a = {p['asymmetry_ppm']} ppm",
         "temperature_drift": lambda: (
             f"bias {p['coeff_deg_s_per_k']} deg/s/K x ({p['delta_k']:g} K (1 - exp(-(t + t_on) / {p['tau_s']:g} s))"
             f" + {p['osc_k']:g} K sin(2 pi t / {p['osc_period_s']:g} s))"
