@@ -18,7 +18,7 @@ import pytest
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.fitted_model import Selection
 from gyrodenoise.discrepancy.hidden import make_measured
-from gyrodenoise.discrepancy.rank import select_effects, truth_error_smoothing
+from gyrodenoise.discrepancy.rank import _corner_se, select_effects, truth_error_smoothing
 from gyrodenoise.sim.effects import SensorBandwidth
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "blind_discrepancy"))
@@ -62,8 +62,11 @@ def test_time_offset_behind_a_noisy_mocap_is_named_a_time_offset(tmp_path):
 def test_low_pass_behind_a_noisy_mocap_is_named_a_low_pass(tmp_path):
     _, sel = _selection(tmp_path, "sensor_lowpass_40hz")
     assert sel.named == ["sensor_bandwidth"], sel.steps
-    assert float(sel.params["sensor_bandwidth"]["corner_hz"]) == pytest.approx(40.0, rel=0.1)
+    corner, se = float(sel.params["sensor_bandwidth"]["corner_hz"]), float(sel.se["sensor_bandwidth"]["corner_hz"])
+    assert corner == pytest.approx(40.0, rel=0.1)
     assert sel.delay_or_lowpass["kept"] == "sensor_bandwidth"
+    # behind a noisy mocap the floor's shape is not read in the band: the SE is the motion fit's own
+    assert np.isfinite(se) and 0 < se < 0.05 * corner and abs(corner - 40.0) < 4 * se
     assert "sensor_bandwidth" not in sel.not_identifiable  # named, so not listed as untested
 
 
@@ -135,3 +138,14 @@ def test_caution_when_the_margin_is_within_the_statistics_spread(kept, dbic, cau
         assert cautions[0].endswith(f"it may be {other}")
     # an exact ground truth (nothing smoothed): no caution whatever the margin
     assert Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0})) == []
+
+
+def test_corner_se_is_the_curvature_of_the_profile_log_likelihood():
+    """-(n/2) log rss(u) = -(u - u0)^2 / (2 s^2) + const in u = log corner: the corner's SE is corner * s."""
+    n, u0, s = 5000, np.log(40.0), 0.01
+
+    def rss_at(u: float) -> float:
+        return 3.0 * np.exp((u - u0) ** 2 / (n * s**2))
+
+    assert _corner_se(rss_at, u0, n) == pytest.approx(40.0 * s, rel=1e-6)
+    assert np.isnan(_corner_se(lambda u: 3.0 * np.exp(-((u - u0) ** 2)), u0, n))  # a maximum: no SE

@@ -145,13 +145,17 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         dens = np.sqrt(c / 2)
         sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
     if corner is not None:
-        # the corner stays the selection's (spectrum and motion together); its standard error from
-        # the curvature of the floor's profile on the final residual
+        # the corner stays the selection's. Its standard error: where the motion alone chose it (it replaced a time
+        # offset, `rank._delay_or_lowpass`), from that fit's profile; else (spectrum and motion together) from the
+        # curvature of the floor's profile on the final residual, also kept for the report in the first case
         prof = FloorShapeProfile(
             resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs), named=True
         )
         sel.floor_shape = prof.fit(corner) if prof.ok else None
         se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
+        by_motion = sel.delay_or_lowpass or {}
+        if by_motion.get("kept") == "sensor_bandwidth":
+            se = by_motion["lowpass_corner_se_hz"]
         sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}
         sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(se)}
     if sel.band_vibration:

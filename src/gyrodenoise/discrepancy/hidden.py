@@ -25,6 +25,7 @@ from gyrodenoise.sim.effects import (
     Nonlinearity,
     Quantization,
     Saturation,
+    ScaleAsymmetry,
     ScaleFactor,
     TimeOffset,
     Vibration,
@@ -100,6 +101,9 @@ CASES: dict[str, Callable[[int], Case]] = {
         WarmupBias(amplitude=[4e-3, 1.5e-2][m] * _P3, tau=[15.0, 30.0][m]), ("bias", "white_noise"), "amplitude", 0.15
     ),
     "nonlinearity": lambda m: Case(Nonlinearity(k=[5e-4, 2e-3][m] * _P3), ("bias", "white_noise"), "k", 0.1),
+    "scale_asymmetry": lambda m: Case(
+        ScaleAsymmetry(asymmetry=[1e-3, 5e-3][m] * _P3), ("bias", "white_noise"), "asymmetry", 0.1
+    ),
     "saturation": lambda m: Case(Saturation(limit=[2.5, 1.5][m]), ("bias", "white_noise"), "limit", 0.01),
     "bias_random_walk": lambda m: Case(
         BiasRandomWalk(density=np.full(3, [1.5e-4, 5e-4][m])), ("bias", "white_noise"), "density", 0.3

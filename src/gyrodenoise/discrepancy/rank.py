@@ -27,10 +27,11 @@ BIC at a stated reference magnitude is reported (`identifiability`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import optimize
 from scipy.signal import freqz
 
 from gyrodenoise.discrepancy.compare import window_drift_deg
@@ -545,21 +546,36 @@ def _delay_or_lowpass(
     if not dol.separable:
         return design, final, view, out
     others = [n for n in selected if n != "time_offset"]
-    corners = dol.corner_hz * np.geomspace(0.25, 4.0, 17)
-    smoothing = truth_error_smoothing(fcs, sigma, corners)
-    best = (np.inf, None, None, 0.0)
-    for c, g in zip(corners, smoothing, strict=True):
-        v = [sensor_view(fc, float(c)) for fc in fcs]
-        # the design kept if the low-pass wins holds it too (stochastic: no columns), as every
-        # selected effect's design does: `fill_params` asks it for the columns of all of them
-        d = Design(v, {n: effects[n] for n in [*others, "sensor_bandwidth"]}, sigma)
-        r = d.fit(others)
-        if r.rss + g < best[0]:
-            best = (r.rss + g, float(c), (d, r, v), float(g))
+    fits: dict[float, tuple] = {}
+
+    def lowpass(u: float) -> float:
+        """rss + truth-error smoothing of the low-pass of corner exp(u), no time offset (fits cached)."""
+        if u not in fits:
+            c = float(np.exp(u))
+            v = [sensor_view(fc, c) for fc in fcs]
+            # the design kept if the low-pass wins holds it too (stochastic: no columns), as every
+            # selected effect's design does: `fill_params` asks it for the columns of all of them
+            d = Design(v, {n: effects[n] for n in [*others, "sensor_bandwidth"]}, sigma)
+            r = d.fit(others)
+            g = float(truth_error_smoothing(fcs, sigma, np.array([c]))[0])
+            fits[u] = (r.rss + g, c, (d, r, v), g)
+        return fits[u][0]
+
+    # a coarse grid around the delay's equivalent corner, then a bounded search between its neighbours
+    grid = np.log(dol.corner_hz * np.geomspace(0.25, 4.0, 17))
+    k = int(np.argmin([lowpass(float(u)) for u in grid]))
+    res = optimize.minimize_scalar(
+        lowpass, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
+        options={"xatol": 2e-3},
+    )  # fmt: skip
+    u = float(res.x) if lowpass(float(res.x)) < lowpass(float(grid[k])) else float(grid[k])
+    best = fits[u]
+    se = _corner_se(lowpass, u, final.n)
     dbic = final.n * np.log(final.rss / best[0])
     out |= {
         "delta_bic_lowpass_vs_offset": float(dbic),
         "lowpass_corner_hz": best[1],
+        "lowpass_corner_se_hz": se,
         # what the low-pass's smoothing of the truth's error alone would have been worth (0: exact truth)
         "truth_error_smoothing_bic": float(final.n * np.log(best[0] / (best[0] - best[3]))),
     }
@@ -570,6 +586,13 @@ def _delay_or_lowpass(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+def _corner_se(rss_at: Callable[[float], float], u: float, n: int, h: float = 0.02) -> float:
+    """Standard error (Hz) of a corner exp(u) fitted by least squares on n rows: the curvature in log corner of the
+    profile log-likelihood -(n/2) log rss (the scale of the selection's BIC), by central differences."""
+    d2 = 0.5 * n * (np.log(rss_at(u + h)) - 2 * np.log(rss_at(u)) + np.log(rss_at(u - h))) / h**2
+    return float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
 
 
 def _recheck_band(

@@ -280,6 +280,29 @@ class Nonlinearity(Effect):
 
 
 @register
+class ScaleAsymmetry(Effect):
+    """Scale factor that differs between positive and negative rates: y_i = w_i + a_i |w_i|, i.e. a scale-factor
+    error of +a_i on positive rates and -a_i on negative ones (a symmetric part is `scale_factor`). Even in the
+    rate, so a rectifier: on a vehicle that turns both ways it adds a motion-dependent bias."""
+
+    name = "scale_asymmetry"
+    stage = 1
+    DATASHEET = {"asymmetry": ("ppm", 1e6)}
+    PRIOR = (1e-4, 0.05)
+    DEFAULTS = {"asymmetry": np.zeros(3)}
+    REFERENCE = 1e-3  # 1000 ppm
+
+    def apply(self, sig, y, rng):
+        return y + self.params["asymmetry"] * np.abs(sig.omega)
+
+    def columns(self, fc):
+        return _axis_columns(np.abs(fc.omega))
+
+    def params_from_fit(self, coef, se):
+        return {"asymmetry": coef}, {"asymmetry": se}
+
+
+@register
 class WarmupBias(Effect):
     """Bias settling after power-on: y = w + A exp(-t / tau), t from the sequence start."""
 
