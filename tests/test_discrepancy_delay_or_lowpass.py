@@ -19,7 +19,7 @@ from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.fitted_model import Selection
 from gyrodenoise.discrepancy.hidden import make_measured
 from gyrodenoise.discrepancy.rank import _corner_se, select_effects, truth_error_smoothing
-from gyrodenoise.sim.effects import SensorBandwidth
+from gyrodenoise.sim.effects import SensorBandwidth, WarmupBias
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "blind_discrepancy"))
 import generate  # noqa: E402  (the standalone generator)
@@ -130,14 +130,15 @@ def test_caution_when_the_margin_is_within_the_statistics_spread(kept, dbic, cau
         "kept": kept, "delta_bic_lowpass_vs_offset": dbic, "threshold": 10.0, "truth_error_smoothing_bic": 100.0,
         "expected_delta_bic": 49.0, "delay_s": 0.004, "lowpass_corner_hz": 39.8, "separable": True,
     }  # fmt: skip
-    cautions = Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d))
+    cautions = Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d, named=[], effects={}))
     assert bool(cautions) == cautioned
     if cautioned:
         other = "a time offset of 4.00 ms" if kept == "sensor_bandwidth" else "a sensor low-pass of corner 39.8 Hz"
         assert f"margin of {abs(dbic - 10):.0f}" in cautions[0] and "(~14)" in cautions[0]
         assert cautions[0].endswith(f"it may be {other}")
     # an exact ground truth (nothing smoothed): no caution whatever the margin
-    assert Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0})) == []
+    exact = SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0}, named=[], effects={})
+    assert Selection.cautions.fget(exact) == []
 
 
 def test_corner_se_is_the_curvature_of_the_profile_log_likelihood():
@@ -149,3 +150,19 @@ def test_corner_se_is_the_curvature_of_the_profile_log_likelihood():
 
     assert _corner_se(rss_at, u0, n) == pytest.approx(40.0 * s, rel=1e-6)
     assert np.isnan(_corner_se(lambda u: 3.0 * np.exp(-((u - u0) ** 2)), u0, n))  # a maximum: no SE
+
+
+@pytest.mark.parametrize(("tau", "edge"), [(2.0, "shortest"), (300.0, "longest"), (30.0, None)])
+def test_caution_when_a_searched_parameter_ends_at_the_end_of_its_search(tau, edge):
+    """A blind trial's scale asymmetry, before the vocabulary had it, was named a warm-up bias of tau 2 s (the first
+    value of its grid): the report says so beside the name."""
+    tau = float(WarmupBias.TAU_GRID[0 if tau == 2.0 else -1]) if edge else tau
+    sel = SimpleNamespace(delay_or_lowpass=None, named=["warmup_bias"], effects={"warmup_bias": WarmupBias(tau=tau)})
+    cautions = Selection.cautions.fget(sel)
+    if edge is None:
+        assert cautions == []
+    else:
+        assert cautions == [
+            f"warmup_bias was named with tau {tau:g} s, the {edge} searched: its best value may lie beyond the search, "
+            "and it may stand in for an effect the vocabulary lacks"
+        ]

@@ -77,20 +77,29 @@ class Selection:
         noisy ground truth, the choice between a time offset and a low-pass rests on charging the low-pass what it
         gains by smoothing the truth's own noise (`rank.truth_error_smoothing`), and its statistic has a sampling
         spread of its own: the cross term of the two explanations' difference with the noise, of standard deviation
-        ~2 sqrt(lambda) for an expected delta BIC lambda. A margin over the threshold within that spread is said."""
+        ~2 sqrt(lambda) for an expected delta BIC lambda. A margin over the threshold within that spread is said.
+        A named effect whose searched parameter ended at an end of its search (`Effect.at_search_edge`) is said too:
+        a blind trial's scale asymmetry, before the vocabulary had it, was named a warm-up bias of tau 2 s."""
+        edges = [(n, self.effects[n].at_search_edge()) for n in self.named if n in self.effects]
+        out = [
+            f"{n} was named with {edge}: its best value may lie beyond the search, and it may stand in for an effect "
+            "the vocabulary lacks"
+            for n, edge in edges
+            if edge is not None
+        ]
         d = self.delay_or_lowpass
         if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0 or "delta_bic_lowpass_vs_offset" not in d:
-            return []
+            return out
         dbic, thr = d["delta_bic_lowpass_vs_offset"], d["threshold"]
         margin, spread = abs(dbic - thr), 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
         if margin >= spread:
-            return []
+            return out
         delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
         if d["kept"] == "sensor_bandwidth":
             kept, other = f"sensor_bandwidth ({corner})", f"a time offset of {delay}"
         else:
             kept, other = f"time_offset ({delay})", f"a sensor low-pass of corner {corner}"
-        return [
+        return out + [
             f"{kept} was preferred to {other} by a margin of {margin:.0f} in delta BIC (threshold {thr:g}, after "
             f"charging the low-pass {d['truth_error_smoothing_bic']:.0f} for smoothing the ground truth's own noise), "
             f"within the statistic's spread on this motion (~{spread:.0f}): it may be {other}"

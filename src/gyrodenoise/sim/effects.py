@@ -101,6 +101,11 @@ class Effect:
         v = next(iter(self.params.values()))
         return float(np.max(np.abs(v)))
 
+    def at_search_edge(self) -> str | None:
+        """A parameter `prepare` searched that ended at an end of its search (e.g. "tau 2 s, the shortest searched"):
+        the best value may lie beyond it. None: no searched parameter, or not at an end."""
+        return None
+
 
 def _axis_columns(values: np.ndarray) -> np.ndarray:
     """(N, 3) per-axis regressor -> (N, 3, 3) with column i acting on axis i only."""
@@ -331,6 +336,13 @@ class WarmupBias(Effect):
 
     def columns(self, fc):
         return _axis_columns(np.repeat(np.exp(-fc.t / float(self.params["tau"]))[:, None], 3, 1))
+
+    def at_search_edge(self) -> str | None:
+        tau = float(self.params["tau"])
+        for end, word in ((self.TAU_GRID[0], "shortest"), (self.TAU_GRID[-1], "longest")):
+            if np.isclose(tau, end, rtol=1e-9):
+                return f"tau {tau:g} s, the {word} searched"
+        return None
 
     def params_from_fit(self, coef, se):
         return {"amplitude": coef, "tau": self.params["tau"]}, {"amplitude": se}
