@@ -46,8 +46,8 @@ FIT = ["seq00", "seq01", "seq02"]
 HOLDOUT = ["seq03", "seq04"]
 BASE = "bias,white_noise,bias_random_walk"  # the baseline sensor model of generate.py
 # a value reported without a standard error is compared by its relative error: a step read from the samples'
-# lattice must be exact; a low-pass corner (searched on a grid, no standard error reported) within 25 %
-# (fixed when the low-pass trials were added, before their first run)
+# lattice must be exact; a low-pass corner within 25 % (fixed when the low-pass trials were added, before their first
+# run, when a corner had no standard error; since session 45 a named corner has one and is scored by its z)
 REL_TOL = {"step": 1e-4, "corner_hz": 0.25, "limit": 1e-4}  # limit: a saturation's plateau (session 44, before its run)
 
 
