@@ -5,10 +5,11 @@ their expected delta BIC against each other is ~25-50, a few times the threshold
 fresh seeds at two sizes (2 fitted sequences of 40 s, as the tests; 3 of 60 s, as the blind runner) and runs the
 selection in process (`rank.select_effects`, base bias + white noise + bias random walk, candidates time_offset,
 sensor_bandwidth, scale_factor; fixed threshold 10, no null re-simulations), recording which explanation is kept,
-its margin over the threshold, the charge for smoothing the truth's noise and whether the report cautions (a margin
-within the statistic's spread, 2 sqrt(expected delta BIC): `Selection.cautions`).
+its margin over the threshold, the charge for smoothing the truth's noise, whether the report cautions (a margin
+within the statistic's spread, 2 sqrt(expected delta BIC): `Selection.cautions`) and, where the right effect is named,
+its value's z against its standard error.
 
-    python benchmarks/blind_discrepancy/close_calls.py [--seeds 300 320] [--work /tmp/close_calls]
+    python benchmarks/blind_discrepancy/close_calls.py [--seeds 300 320] [--work /tmp/close_calls] [--name NAME]
 
 Writes benchmarks/results/blind_close_calls.{md,json}. One process, OMP_NUM_THREADS=1 recommended.
 """
@@ -37,6 +38,20 @@ BASE = ["bias", "white_noise", "bias_random_walk"]
 CANDIDATES = ["time_offset", "sensor_bandwidth", "scale_factor"]
 TRIALS = {"time_offset": "time_offset", "sensor_lowpass_40hz": "sensor_bandwidth"}  # trial -> the right answer
 SIZES = [(2, 40.0), (3, 60.0)]
+TRUTH = {"time_offset": ("delta", 4e-3), "sensor_lowpass_40hz": ("corner_hz", 40.0)}  # parameter, SI value
+
+
+def _z_row(trial: str, size: str, rs: list[dict]) -> str:
+    """How well the SE of the right effect's value describes its error, over the seeds where it was named."""
+    z = np.array([r["z"] for r in rs if r.get("z") is not None], dtype=float)
+    if not len(z):
+        return f"| {trial} | {size} | 0 | - | - | - | - | - |"
+    se = np.median([r["se"] for r in rs if r.get("z") is not None])
+    unit, k = ("ms", 1e3) if TRUTH[trial][0] == "delta" else ("Hz", 1.0)
+    return (
+        f"| {trial} | {size} | {len(z)} | {np.sqrt(np.mean(z**2)):.2f} | {np.mean(z):+.2f}"
+        f" | {np.mean(np.abs(z) < 1):.0%} | {np.mean(np.abs(z) < 2):.0%} | {k * se:.3g} {unit} |"
+    )
 
 
 def one(work: Path, trial: str, n: int, duration: float, seed: int) -> dict:
@@ -45,6 +60,10 @@ def one(work: Path, trial: str, n: int, duration: float, seed: int) -> dict:
     fcs = [load_fit_context(root, f"seq{i:02d}") for i in range(n)]
     sel = select_effects(fcs, base=BASE, candidates=CANDIDATES)
     d = sel.delay_or_lowpass or {}
+    value = TRUTH[trial]  # the right effect's value and the SE the selection gives it, where it is named alone
+    est = se = None
+    if sel.named == [TRIALS[trial]]:
+        est, se = (float(np.ravel(x[value[0]])[0]) for x in (sel.params[TRIALS[trial]], sel.se[TRIALS[trial]]))
     return {
         "trial": trial,
         "size": f"{n} x {duration:g} s",
@@ -56,6 +75,9 @@ def one(work: Path, trial: str, n: int, duration: float, seed: int) -> dict:
         "charge": d.get("truth_error_smoothing_bic"),
         "expected": d.get("expected_delta_bic"),
         "cautioned": bool(sel.cautions),
+        "estimate": est,
+        "se": se,
+        "z": None if est is None or not se else (est - value[1]) / se,
     }
 
 
@@ -80,6 +102,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", type=int, nargs=2, default=[300, 320], metavar=("FIRST", "END"))
     ap.add_argument("--work", type=Path, default=Path("/tmp/close_calls"))
     ap.add_argument("--results", type=Path, default=RESULTS)
+    ap.add_argument("--name", default="blind_close_calls", help="results file stem (NAME.md, NAME.json)")
     a = ap.parse_args(argv)
     t0 = time.time()
     rows = []
@@ -93,7 +116,8 @@ def main(argv=None) -> None:
     lines = [
         "# Delay or low-pass: the close calls over fresh seeds (blind generator)",
         "",
-        f"Command: `python benchmarks/blind_discrepancy/close_calls.py --seeds {a.seeds[0]} {a.seeds[1]}`  ",
+        f"Command: `python benchmarks/blind_discrepancy/close_calls.py --seeds {a.seeds[0]} {a.seeds[1]}"
+        f"{'' if a.name == 'blind_close_calls' else ' --name ' + a.name}`  ",
         f"Machine: {platform.node()} ({platform.machine()}), one process; wall time {wall:.0f} s. Code: {_git()}.",
         "",
         "Selection in process, fixed threshold 10 (no null re-simulations), candidates time_offset, sensor_bandwidth,"
@@ -109,14 +133,27 @@ def main(argv=None) -> None:
         for n, duration in SIZES:
             rs = [r for r in rows if r["trial"] == trial and r["size"] == f"{n} x {duration:g} s"]
             lines.append(_summary_row(trial, f"{n} x {duration:g} s", rs))
+    lines += [
+        "",
+        "Standard errors, where the right effect is named alone: z = (estimate - truth) / SE (a time offset: the"
+        " regression's SE; a corner: the motion fit's profile, `rank._corner_se`). Calibrated: RMS z ~1, ~68 % within"
+        " 1 and ~95 % within 2.",
+        "",
+        "| trial | size | named | RMS z | mean z | within 1 | within 2 | median SE |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for trial in TRIALS:
+        for n, duration in SIZES:
+            rs = [r for r in rows if r["trial"] == trial and r["size"] == f"{n} x {duration:g} s"]
+            lines.append(_z_row(trial, f"{n} x {duration:g} s", rs))
     wrong = [r for r in rows if not r["right"]]
     lines += ["", "Wrong answers: " + ("none" if not wrong else "; ".join(
         f"{r['trial']} {r['size']} seed {r['seed']}: named {', '.join(r['named']) or 'nothing'}, margin "
         f"{'-' if r['margin'] is None else format(r['margin'], '+.1f')}"
         f"{', cautioned' if r['cautioned'] else ''}" for r in wrong)), ""]  # fmt: skip
     a.results.mkdir(parents=True, exist_ok=True)
-    write_text(a.results / "blind_close_calls.md", "\n".join(lines))
-    write_text(a.results / "blind_close_calls.json", json.dumps({"rows": rows, "wall_time_s": wall}, indent=1))
+    write_text(a.results / f"{a.name}.md", "\n".join(lines))
+    write_text(a.results / f"{a.name}.json", json.dumps({"rows": rows, "wall_time_s": wall}, indent=1))
     print("\n".join(lines))
 
 
