@@ -97,6 +97,16 @@ def _summary_row(trial: str, size: str, rs: list[dict]) -> str:
     )
 
 
+def _per_group(rows: list[dict], row_of) -> list[str]:
+    """One table row per trial and size: row_of(trial, size, that group's rows)."""
+    out = []
+    for trial in TRIALS:
+        for n, duration in SIZES:
+            size = f"{n} x {duration:g} s"
+            out.append(row_of(trial, size, [r for r in rows if r["trial"] == trial and r["size"] == size]))
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs=2, default=[300, 320], metavar=("FIRST", "END"))
@@ -129,10 +139,7 @@ def main(argv=None) -> None:
         " margin: median [min, max] | expected delta BIC (median) | charge (median) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for trial in TRIALS:
-        for n, duration in SIZES:
-            rs = [r for r in rows if r["trial"] == trial and r["size"] == f"{n} x {duration:g} s"]
-            lines.append(_summary_row(trial, f"{n} x {duration:g} s", rs))
+    lines += _per_group(rows, _summary_row)
     lines += [
         "",
         "Standard errors, where the right effect is named alone: z = (estimate - truth) / SE (a time offset: the"
@@ -142,10 +149,7 @@ def main(argv=None) -> None:
         "| trial | size | named | RMS z | mean z | within 1 | within 2 | median SE |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for trial in TRIALS:
-        for n, duration in SIZES:
-            rs = [r for r in rows if r["trial"] == trial and r["size"] == f"{n} x {duration:g} s"]
-            lines.append(_z_row(trial, f"{n} x {duration:g} s", rs))
+    lines += _per_group(rows, _z_row)
     wrong = [r for r in rows if not r["right"]]
     lines += ["", "Wrong answers: " + ("none" if not wrong else "; ".join(
         f"{r['trial']} {r['size']} seed {r['seed']}: named {', '.join(r['named']) or 'nothing'}, margin "

@@ -146,25 +146,40 @@ class Bias(Effect):
         return {"bias": m, "bias_per_sequence": coef}, {"bias": s}
 
 
+class _RateShapeEffect(Effect):
+    """An error c_i g(w_i) per axis, one coefficient per axis (`PARAM`), g = `shape` of the true rate."""
+
+    stage = 1
+    PARAM: ClassVar[str] = ""
+
+    @staticmethod
+    def shape(omega: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def apply(self, sig, y, rng):
+        return y + self.params[self.PARAM] * self.shape(sig.omega)
+
+    def columns(self, fc):
+        return _axis_columns(self.shape(fc.omega))
+
+    def params_from_fit(self, coef, se):
+        return {self.PARAM: coef}, {self.PARAM: se}
+
+
 @register
-class ScaleFactor(Effect):
+class ScaleFactor(_RateShapeEffect):
     """Scale-factor error s per axis: y_i = (1 + s_i) w_i."""
 
     name = "scale_factor"
-    stage = 1
+    PARAM = "scale"
     DATASHEET = {"scale": ("ppm", 1e6)}
     PRIOR = (1e-4, 0.05)
     DEFAULTS = {"scale": np.zeros(3)}
     REFERENCE = 1e-3  # 1000 ppm
 
-    def apply(self, sig, y, rng):
-        return y + self.params["scale"] * sig.omega
-
-    def columns(self, fc):
-        return _axis_columns(fc.omega)
-
-    def params_from_fit(self, coef, se):
-        return {"scale": coef}, {"scale": se}
+    @staticmethod
+    def shape(omega: np.ndarray) -> np.ndarray:
+        return omega
 
 
 @register
@@ -263,48 +278,38 @@ class TimeOffset(Effect):
 
 
 @register
-class Nonlinearity(Effect):
+class Nonlinearity(_RateShapeEffect):
     """Quadratic scale-factor nonlinearity: y_i = w_i + k_i w_i |w_i|."""
 
     name = "nonlinearity"
-    stage = 1
+    PARAM = "k"
     # k |w| is a relative error: ppm per deg/s of rate
     DATASHEET = {"k": ("ppm/(deg/s)", 1e6 * DEG)}
     PRIOR = (1e-5, 0.02)
     DEFAULTS = {"k": np.zeros(3)}
     REFERENCE = 5e-4  # 8.7 ppm/(deg/s)
 
-    def apply(self, sig, y, rng):
-        return y + self.params["k"] * sig.omega * np.abs(sig.omega)
-
-    def columns(self, fc):
-        return _axis_columns(fc.omega * np.abs(fc.omega))
-
-    def params_from_fit(self, coef, se):
-        return {"k": coef}, {"k": se}
+    @staticmethod
+    def shape(omega: np.ndarray) -> np.ndarray:
+        return omega * np.abs(omega)
 
 
 @register
-class ScaleAsymmetry(Effect):
+class ScaleAsymmetry(_RateShapeEffect):
     """Scale factor that differs between positive and negative rates: y_i = w_i + a_i |w_i|, i.e. a scale-factor
     error of +a_i on positive rates and -a_i on negative ones (a symmetric part is `scale_factor`). Even in the
     rate, so a rectifier: on a vehicle that turns both ways it adds a motion-dependent bias."""
 
     name = "scale_asymmetry"
-    stage = 1
+    PARAM = "asymmetry"
     DATASHEET = {"asymmetry": ("ppm", 1e6)}
     PRIOR = (1e-4, 0.05)
     DEFAULTS = {"asymmetry": np.zeros(3)}
     REFERENCE = 1e-3  # 1000 ppm
 
-    def apply(self, sig, y, rng):
-        return y + self.params["asymmetry"] * np.abs(sig.omega)
-
-    def columns(self, fc):
-        return _axis_columns(np.abs(fc.omega))
-
-    def params_from_fit(self, coef, se):
-        return {"asymmetry": coef}, {"asymmetry": se}
+    @staticmethod
+    def shape(omega: np.ndarray) -> np.ndarray:
+        return np.abs(omega)
 
 
 @register
