@@ -12,7 +12,7 @@ from gyrodenoise.discrepancy.__main__ import build_parser, main
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.hidden import BASE_NOISE, CASES, make_measured, run_case
 from gyrodenoise.discrepancy.rank import select_effects
-from gyrodenoise.sim.effects import GSensitivity, TimeOffset, Vibration
+from gyrodenoise.sim.effects import GSensitivity, ScaleAsymmetry, ScaleFactor, TimeOffset, Vibration
 
 DURATION = 30.0
 
@@ -43,6 +43,19 @@ def test_two_hidden_effects(tmp_path):
     assert sorted(sel.named) == ["g_sensitivity", "vibration"]
     assert np.allclose(np.diag(sel.params["g_sensitivity"]["matrix"]), [1.5e-4, -1e-4, 2e-4], atol=2e-5)
     assert sel.params["vibration"]["frequency_hz"] == pytest.approx(31.0, abs=0.05)
+
+
+def test_a_scale_factor_that_differs_by_sign_is_named_as_its_two_parts(tmp_path):
+    """A datasheet's positive- and negative-rate scale factors s+ and s- are scale_factor (s+ + s-) / 2 and
+    scale_asymmetry (s+ - s-) / 2: both named, each with its value."""
+    scale, asym = np.array([2e-3, -1e-3, 1.5e-3]), np.array([1e-3, 2e-3, -1.5e-3])
+    names = make_measured(tmp_path, [ScaleFactor(scale=scale), ScaleAsymmetry(asymmetry=asym)], 3, DURATION, seed=5)
+    sel = select_effects([load_fit_context(tmp_path, n) for n in names])
+    assert sorted(sel.named) == ["scale_asymmetry", "scale_factor"]
+    for name, key, truth in (("scale_factor", "scale", scale), ("scale_asymmetry", "asymmetry", asym)):
+        est, se = sel.params[name][key], sel.se[name][key]
+        assert np.all(np.abs(est - truth) < 4 * se), (name, est, se)
+        assert np.all(se < 1e-4)
 
 
 @pytest.mark.parametrize(
