@@ -239,6 +239,9 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
     elif kind == "scale_asymmetry":  # scale factor +a on positive rates, -a on negative ones, before the sample mean
         a = np.asarray(p["asymmetry_ppm"], float) * 1e-6
         w_sensed = window_mean(lambda tt: (w := motion.body_rate(tt)) + a * np.abs(w), t_meas, dt)
+    elif kind == "nonlinearity_even":  # an even quadratic error k w^2 of the instantaneous rate, before the sample mean
+        k = np.asarray(p["k_ppm_per_deg_s"], float) * 1e-6 / DEG  # per rad/s
+        w_sensed = window_mean(lambda tt: (w := motion.body_rate(tt)) + k * w**2, t_meas, dt)
     elif kind == "vibration":
         extra = vibration(rng, t, p["f0_hz"], p["wander_hz"], p["amp_rad_s"])
     elif kind == "temperature_drift":
@@ -333,6 +336,9 @@ TRIALS = {
     # positive and negative rates, +a and -a (so no symmetric scale-factor error beside it), an effect the
     # workflow's vocabulary did not have when the trial was written; run first on the vocabulary without it
     "scale_asymmetry": HiddenEffect("scale_asymmetry", {"asymmetry_ppm": [1500.0, -1000.0, 2500.0]}),
+    # added at session 45 after it, at the end: the other even error, quadratic in the rate (k w^2), which the
+    # independent test world showed named as a bias random walk by the vocabulary without it
+    "nonlinearity_even": HiddenEffect("nonlinearity_even", {"k_ppm_per_deg_s": [20.0, -15.0, 30.0]}),
 }
 
 

@@ -76,6 +76,8 @@ def expected(trial: str, key: dict) -> tuple[str | None, dict]:
         return "saturation", {"limit": np.asarray(p["range_deg_s"])}
     if kind == "scale_asymmetry":
         return "scale_asymmetry", {"asymmetry": np.asarray(p["asymmetry_ppm"])}
+    if kind == "nonlinearity_even":
+        return "nonlinearity_even", {"k": np.asarray(p["k_ppm_per_deg_s"])}
     if kind == "temperature_drift":
         # the exponential part as y = A exp(-t / tau): A = -c dT exp(-t_on / tau), mean over the fit sequences
         t_on = np.array([s["t_on_s"] for s in key["sequences"] if s["name"] in FIT])
@@ -99,6 +101,7 @@ def hidden_text(trial: str, key: dict) -> str:
         "scale_factor": lambda: f"scale-factor error {p['scale_ppm']} ppm",
         "saturation": lambda: f"output saturates at +-{p['range_deg_s']:g} deg/s",
         "scale_asymmetry": lambda: f"scale factor +a on positive rates, -a on negative, a = {p['asymmetry_ppm']} ppm",
+        "nonlinearity_even": lambda: f"even quadratic error k w^2, k = {p['k_ppm_per_deg_s']} ppm/(deg/s)",
         "temperature_drift": lambda: (
             f"bias {p['coeff_deg_s_per_k']} deg/s/K x ({p['delta_k']:g} K (1 - exp(-(t + t_on) / {p['tau_s']:g} s))"
             f" + {p['osc_k']:g} K sin(2 pi t / {p['osc_period_s']:g} s))"
