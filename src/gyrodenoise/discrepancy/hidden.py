@@ -23,6 +23,7 @@ from gyrodenoise.sim.effects import (
     GSensitivity,
     Misalignment,
     Nonlinearity,
+    NonlinearityEven,
     Quantization,
     Saturation,
     ScaleAsymmetry,
@@ -101,6 +102,7 @@ CASES: dict[str, Callable[[int], Case]] = {
         WarmupBias(amplitude=[4e-3, 1.5e-2][m] * _P3, tau=[15.0, 30.0][m]), ("bias", "white_noise"), "amplitude", 0.15
     ),
     "nonlinearity": lambda m: Case(Nonlinearity(k=[5e-4, 2e-3][m] * _P3), ("bias", "white_noise"), "k", 0.1),
+    "nonlinearity_even": lambda m: Case(NonlinearityEven(k=[5e-4, 2e-3][m] * _P3), ("bias", "white_noise"), "k", 0.1),
     "scale_asymmetry": lambda m: Case(
         ScaleAsymmetry(asymmetry=[1e-3, 5e-3][m] * _P3), ("bias", "white_noise"), "asymmetry", 0.1
     ),

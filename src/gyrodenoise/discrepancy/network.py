@@ -25,6 +25,7 @@ DETERMINISTIC = [
     "vibration",
     "warmup_bias",
     "nonlinearity",
+    "nonlinearity_even",
     "scale_asymmetry",
     "bias_random_walk",
 ]

@@ -51,6 +51,8 @@ def _truth_value(truth: dict, effect: str, param: str) -> np.ndarray:
         return np.sqrt(2) * np.asarray(e["vibration"]["level_si"])
     if effect == "sensor_bandwidth":
         return np.asarray(truth["imu"]["bandwidth"]["corner_hz"])
+    if effect == "nonlinearity_even":  # the world's nonlinearity with shape=even: k w^2
+        return np.asarray(e["nonlinearity"]["value_si"])
     key = "density_si" if effect == "bias_random_walk" else "value_si"
     return np.asarray(e[effect][key])
 
@@ -62,6 +64,11 @@ WORLD_CASES: dict[str, WorldCase] = {
     "g_sensitivity": WorldCase(("g_sensitivity=0.5deg/s/g", "g_sensitivity=1deg/s/g"), "matrix", 0.3),
     "time_offset": WorldCase(("time_offset=2ms", "time_offset=5ms"), "delta", 0.1),
     "nonlinearity": WorldCase(("nonlinearity=150ppm/(deg/s)", "nonlinearity=400ppm/(deg/s)"), "k", 0.3),
+    "nonlinearity_even": WorldCase(
+        ("nonlinearity=150ppm/(deg/s),nonlinearity.shape=even", "nonlinearity=400ppm/(deg/s),nonlinearity.shape=even"),
+        "k",
+        0.3,
+    ),
     # a vibration line and a band inside the trusted band (below the ~6 Hz where the 0.2-deg mocap's
     # reconstruction loses the motion); above it a vibration cannot be told from motion
     "vibration": WorldCase(

@@ -295,6 +295,23 @@ class Nonlinearity(_RateShapeEffect):
 
 
 @register
+class NonlinearityEven(_RateShapeEffect):
+    """Even quadratic nonlinearity: y_i = w_i + k_i w_i^2 (a rectifier, like `scale_asymmetry`, but growing with
+    the rate's square; `nonlinearity` is the odd k w |w|)."""
+
+    name = "nonlinearity_even"
+    PARAM = "k"
+    DATASHEET = {"k": ("ppm/(deg/s)", 1e6 * DEG)}
+    PRIOR = (1e-5, 0.02)
+    DEFAULTS = {"k": np.zeros(3)}
+    REFERENCE = 5e-4  # 8.7 ppm/(deg/s)
+
+    @staticmethod
+    def shape(omega: np.ndarray) -> np.ndarray:
+        return omega**2
+
+
+@register
 class ScaleAsymmetry(_RateShapeEffect):
     """Scale factor that differs between positive and negative rates: y_i = w_i + a_i |w_i|, i.e. a scale-factor
     error of +a_i on positive rates and -a_i on negative ones (a symmetric part is `scale_factor`). Even in the
