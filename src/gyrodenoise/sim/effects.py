@@ -295,16 +295,11 @@ class Nonlinearity(_RateShapeEffect):
 
 
 @register
-class NonlinearityEven(_RateShapeEffect):
+class NonlinearityEven(Nonlinearity):
     """Even quadratic nonlinearity: y_i = w_i + k_i w_i^2 (a rectifier, like `scale_asymmetry`, but growing with
-    the rate's square; `nonlinearity` is the odd k w |w|)."""
+    the rate's square; `nonlinearity` is the odd k w |w|, with the same units and ranges)."""
 
     name = "nonlinearity_even"
-    PARAM = "k"
-    DATASHEET = {"k": ("ppm/(deg/s)", 1e6 * DEG)}
-    PRIOR = (1e-5, 0.02)
-    DEFAULTS = {"k": np.zeros(3)}
-    REFERENCE = 5e-4  # 8.7 ppm/(deg/s)
 
     @staticmethod
     def shape(omega: np.ndarray) -> np.ndarray:
