@@ -51,7 +51,7 @@ class Selection:
     design: Design | None = None
     result: FitResult | None = None
     band: BandFit | None = None  # band-limited vibration (spectral fit on the final residual)
-    floor_shape: FloorShapeFit | None = None  # named sensor low-pass
+    floor_shape: FloorShapeFit | None = None  # named sensor low-pass, where the floor's profile gave its standard error
     identifiability: dict[str, dict] = field(default_factory=dict)  # candidate -> numbers (first step)
     thresholds: dict[str, float] = field(default_factory=dict)  # candidate -> delta BIC it had to clear
     # a named time offset against a sensor low-pass of the same delay (`identifiability.delay_or_lowpass`):
@@ -156,15 +156,16 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
     if corner is not None:
         # the corner stays the selection's. Its standard error: where the motion alone chose it (it replaced a time
         # offset, `rank._delay_or_lowpass`), from that fit's profile; else (spectrum and motion together) from the
-        # curvature of the floor's profile on the final residual, also kept for the report in the first case
-        prof = FloorShapeProfile(
-            resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs), named=True
-        )
-        sel.floor_shape = prof.fit(corner) if prof.ok else None
-        se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
+        # curvature of the floor's profile on the final residual
         by_motion = sel.delay_or_lowpass or {}
         if by_motion.get("kept") == "sensor_bandwidth":
             se = by_motion["lowpass_corner_se_hz"]
+        else:
+            prof = FloorShapeProfile(
+                resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs), named=True
+            )
+            sel.floor_shape = prof.fit(corner) if prof.ok else None
+            se = sel.floor_shape.corner_se_hz if sel.floor_shape is not None else np.nan
         sel.params["sensor_bandwidth"] = {"corner_hz": np.asarray(corner)}
         sel.se["sensor_bandwidth"] = {"corner_hz": np.asarray(se)}
     if sel.band_vibration:

@@ -572,10 +572,10 @@ class FloorShapeProfile:
     (f0, bw), its power refitted beside the floor). `ok` is False when the floor is fixed by the
     reconstruction's nuisance term: its shape is not judged there (the error rises with frequency
     as the floor's droop falls, and a fixed level cannot tell them apart). `named`: the corner is
-    already named, and the profile is read only for its standard error (the reported one unless the
-    motion alone chose the corner, `rank._delay_or_lowpass`, whose fit gives its own): the fixed floor
-    is then read again through each corner's shape (`Nuisance.floor_at`), where it was read inside
-    the trusted band."""
+    already named, and the profile is read only for its standard error (not asked where the motion
+    alone chose the corner, `rank._delay_or_lowpass`, whose fit gives its own): the fixed floor is
+    then read again through each corner's shape (`Nuisance.floor_at`), where it was read inside the
+    trusted band."""
 
     def __init__(
         self,
