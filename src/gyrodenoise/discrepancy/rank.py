@@ -56,8 +56,10 @@ from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiab
 from gyrodenoise.discrepancy.reconstruction import row_frequencies
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
+    CORNER_STEP,
     BandFit,
     FloorShapeFit,
+    corner_se,
     fit_band,
     fit_floor_shape,
     fit_nuisance,
@@ -588,11 +590,11 @@ def _delay_or_lowpass(
     return d, r, v, out | {"kept": "sensor_bandwidth"}
 
 
-def _corner_se(rss_at: Callable[[float], float], u: float, n: int, h: float = 0.02) -> float:
-    """Standard error (Hz) of a corner exp(u) fitted by least squares on n rows: the curvature in log corner of the
-    profile log-likelihood -(n/2) log rss (the scale of the selection's BIC), by central differences."""
-    d2 = 0.5 * n * (np.log(rss_at(u + h)) - 2 * np.log(rss_at(u)) + np.log(rss_at(u - h))) / h**2
-    return float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
+def _corner_se(rss_at: Callable[[float], float], u: float, n: int) -> float:
+    """Standard error (Hz) of a corner exp(u) fitted by least squares on n rows (`spectral.corner_se`) from the
+    profile log-likelihood -(n/2) log rss, the scale of the selection's BIC."""
+    ll = [-0.5 * n * np.log(rss_at(u + d)) for d in (-CORNER_STEP, 0.0, CORNER_STEP)]
+    return corner_se(*ll, u)
 
 
 def _recheck_band(

@@ -542,6 +542,14 @@ def psd_gap(
 # ----------------------------------------------------------------------------- sensor bandwidth
 
 FLOOR_SHAPE_PARAMS = 1  # the corner frequency (the level is the base model's white noise)
+CORNER_STEP = 0.02  # step in log corner of the central differences of a profile's curvature
+
+
+def corner_se(ll_minus: float, ll: float, ll_plus: float, u: float, h: float = CORNER_STEP) -> float:
+    """Standard error (Hz) of a corner exp(u) from a profile log-likelihood at u - h, u, u + h (u = log corner):
+    exp(u) / sqrt(-d2 ll / du2), by central differences; nan where the profile is not curved down."""
+    d2 = -(ll_plus - 2 * ll + ll_minus) / h**2
+    return float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
 
 
 @dataclass
@@ -607,9 +615,8 @@ class FloorShapeProfile:
     def fit(self, corner_hz: float) -> FloorShapeFit:
         """The fit at `corner_hz`, with the standard error of the corner from the profile's curvature."""
         theta, ll, _ = _fit_levels(self._seen(corner_hz), self.band)
-        u, h = np.log(corner_hz), 0.02
-        d2 = -(self.loglik(np.exp(u + h)) - 2 * ll + self.loglik(np.exp(u - h))) / h**2
-        se = float(corner_hz / np.sqrt(d2)) if d2 > 0 else float("nan")
+        u, h = np.log(corner_hz), CORNER_STEP
+        se = corner_se(self.loglik(np.exp(u - h)), ll, self.loglik(np.exp(u + h)), u, h)
         return FloorShapeFit(float(corner_hz), theta[0], ll, self.ll_flat, self.f_hi, se)
 
     def corner_grid(self) -> np.ndarray:
