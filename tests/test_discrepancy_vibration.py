@@ -164,7 +164,7 @@ def test_cli_report_names_band_limited_vibration_in_words(tmp_path):
 def test_a_low_passed_noise_floor_is_a_broad_band_against_a_flat_floor_and_nothing_against_its_shape(corner):
     """Why a named band is judged again once a low-pass is named (`rank._recheck_band`): against a flat floor the
     droop of a low-passed noise floor fits as a broad band, against the floor shaped by the low-pass it does not."""
-    from gyrodenoise.discrepancy.workflow import shape_noise
+    from gyrodenoise.discrepancy.resimulate import shape_noise
 
     rng = np.random.default_rng(0)
     floor = [shape_noise(2e-4 * np.sqrt(RATE) * rng.standard_normal((12000, 3)), RATE, corner) for _ in range(3)]
@@ -189,8 +189,8 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
         floor_through_corner,
         sensor_floor,
     )
+    from gyrodenoise.discrepancy.resimulate import shape_noise
     from gyrodenoise.discrepancy.spectral import FloorShapeProfile, Nuisance, fit_floor_shape
-    from gyrodenoise.discrepancy.workflow import shape_noise
 
     rng = np.random.default_rng(1)
     floor = [shape_noise(2e-4 * np.sqrt(RATE) * rng.standard_normal((12000, 3)), RATE, corner) for _ in range(3)]

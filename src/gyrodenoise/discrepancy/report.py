@@ -193,6 +193,39 @@ def _gyro_lines_md(report: dict) -> list[str]:
     return [*out, ""]
 
 
+def _lack_of_fit_md(report: dict) -> list[str]:
+    """Error the named effects leave unexplained (`lack_of_fit`): the table of the binned held-out residual."""
+    lof = report.get("lack_of_fit")
+    if not lof:
+        return []
+    lines = [
+        "## Error the named effects leave unexplained",
+        "",
+        f"The held-out residual after the final model (compared band), split into {lof['bins']} quantile bins of "
+        "each sensor reading (gyro rate, its time derivative, specific force) per axis; score = sum of n x bin "
+        f"mean^2 / variance, set against {lof['draws']} re-simulations of the final model along the same motion "
+        "(scaled chi-square fitted to their mean and variance; p corrected for the "
+        f"{len(lof['rows'])} tests). Flagged: p < {lof['alpha']:g} and a share of the in-band residual power of at "
+        f"least {100 * lof['min_share']:g}% (the size an effect needs to be named). A flag says the vocabulary "
+        "lacks what the data hold, or a named effect has the wrong shape; it names nothing. `unexplained.png`: the "
+        "bin means with the re-simulations' 95% band.",
+        "",
+        "| reading | axis | score | re-simulated (mean +- sd) | p (corrected) | share of in-band power | flagged |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in lof["rows"]:
+        lines.append(
+            f"| {row['signal']} | {row['axis']} | {row['score']:.1f} | {row['null_mean']:.1f} +- {row['null_sd']:.1f} "
+            f"| {row['p_corrected']:.2g} | {100 * row['share']:.2f}% | {'**yes**' if row['flagged'] else 'no'} |"
+        )
+    lines += [
+        "",
+        f"**{lof['caution'][0].upper() + lof['caution'][1:]}.**" if lof["caution"] else "Nothing flagged.",
+        "",
+    ]
+    return lines
+
+
 def _reconstruction_md(report: dict) -> list[str]:
     """Which band was compared, and why (`reconstruction`)."""
     rec = report.get("reconstruction")
@@ -579,6 +612,7 @@ def markdown(report: dict) -> str:
             "",
         ]
     lines += _gyro_lines_md(report)
+    lines += _lack_of_fit_md(report)
     lines += _reconstruction_md(report) + _truth_check_md(report)
     lines += _decisions_md(report) + _identifiability_md(report)
     gb, ga = report["gap_before"], report["gap_after"]
@@ -633,6 +667,7 @@ def markdown(report: dict) -> str:
         "",
         "![Allan deviation](allan.png) ![spectrum](spectrum.png)",
         "![residual](residual.png) ![drift](drift.png) ![gap](gap.png)",
+        *(["![unexplained](unexplained.png)"] if report.get("lack_of_fit") else []),
         "",
     ]
     if report.get("network"):
@@ -731,7 +766,36 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     fig.tight_layout()
     save_figure(fig, out / "gap.png", dpi=90)
     files.append("gap.png")
+    if report.get("lack_of_fit"):
+        files.append(_lack_of_fit_plot(out, report["lack_of_fit"], held_out))
     return files
+
+
+def _lack_of_fit_plot(out: Path, lof: dict, held_out: str) -> str:
+    """Bin means of the held-out residual against each reading, with the re-simulations' 95% band."""
+    signals = list(dict.fromkeys(row["signal"] for row in lof["rows"]))
+    fig, axs = subplots(len(signals), 3, figsize=(12, 3.0 * len(signals)), squeeze=False)
+    for row in lof["rows"]:
+        ax = axs[signals.index(row["signal"]), AXES.index(row["axis"])]
+        x = np.asarray(row["bin_centres"])
+        lo, hi = (1e3 * np.asarray(b) for b in row["null_band_rad_s"])
+        ax.fill_between(x, lo, hi, color="0.8", label="re-simulated final model, 95%")
+        ax.plot(
+            x, 1e3 * np.asarray(row["bin_means_rad_s"]), "C3o-" if row["flagged"] else "ko-", ms=3, label="measured"
+        )
+        ax.axhline(0.0, color="0.5", lw=0.5)
+        ax.set_title(
+            f"{row['signal']} {row['axis']}: p {row['p_corrected']:.2g}" + (" (flagged)" if row["flagged"] else ""),
+            fontsize=9,
+        )
+        ax.set_xlabel(row["unit"])
+    for ax in axs[:, 0]:
+        ax.set_ylabel("mean residual (mrad/s)")
+    axs[0, 0].legend(fontsize=7)
+    fig.suptitle(f"held-out residual after the final model, by sensor reading ({held_out})", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, out / "unexplained.png", dpi=90)
+    return "unexplained.png"
 
 
 def write_report(out_dir: str | Path, report: dict, arrays: dict, make_plots: bool = True) -> Path:

@@ -18,57 +18,20 @@ from gyrodenoise.allan import allan_taus, pooled_allan
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
 from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
+from gyrodenoise.discrepancy.lack_of_fit import lack_of_fit
 from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG, MIN_GAIN, Selection, residuals_after, select_effects
-from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
+from gyrodenoise.discrepancy.reconstruction import band_limit
+from gyrodenoise.discrepancy.resimulate import simulate_like
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.discrepancy.transfer import apply_transfer_check
-from gyrodenoise.sim.context import FitContext, SignalContext
-from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import EFFECTS
 
 DRIFT_WINDOWS_S = (1.0, 10.0, 60.0)
 SIM_DRAWS = 4  # re-simulations per held-out sequence for the Allan and spectral gaps
 NO_EFFECT = "no missing effect found"
 NOT_IDENTIFIABLE = "not identifiable from this motion"
-
-
-def simulate_like(
-    sel: Selection, fc: FitContext, rng: np.random.Generator, pred: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Re-simulate the gyro of sequence `fc` with the selected model: deterministic part (sensor
-    constants + refitted nuisances; `pred` if already computed) plus the stochastic effects drawn
-    from their fitted levels. Returns (simulated gyro, deterministic prediction of the residual).
-
-    The white noise is drawn first, so two models simulated with generators of the same seed share
-    its draws (common random numbers: their gaps differ by the models, not by the draws)."""
-    if pred is None:
-        pred = per_sequence_refit(sel, fc)
-    y = fc.omega + pred
-    sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
-    for name in ("white_noise", "bias_random_walk"):
-        if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
-            noise = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, np.zeros_like(y), rng)
-            if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
-                noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
-            y = y + noise
-    err = draw_error(fc, rng)  # the reconstruction error, as the measured residual carries it
-    if err is not None:
-        y = y + err
-    if sel.band_vibration:  # band-limited vibration: noise, drawn like the white noise
-        y = Vibration(**sel.params["vibration"]).apply(sig, y, rng)
-    if "saturation" in sel.params:
-        lim = float(sel.params["saturation"]["limit"])
-        y = np.clip(y, -lim, lim)
-    if "quantization" in sel.params:
-        y = Quantization(step=sel.params["quantization"]["step"]).apply(sig, y, rng)
-    return y, pred
-
-
-def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:
-    """White noise x (N, 3) given the PSD shape of a sensor low-pass (`SensorBandwidth.floor_shape`)."""
-    f = np.fft.rfftfreq(len(x), 1.0 / rate_hz)
-    gain = np.sqrt(SensorBandwidth.floor_shape(f, corner_hz, rate_hz))
-    return np.fft.irfft(np.fft.rfft(x, axis=0) * gain[:, None], len(x), axis=0)
 
 
 def allan_gap(
@@ -237,9 +200,12 @@ def run(
     null_draws: int = DRAWS,
     null_cache: dict | None = None,
 ) -> tuple[dict, dict]:
-    """Steps (1)-(5). Returns (report dict, arrays for the plots). `null_cache`: see `decide`."""
+    """Steps (1)-(5), then the check for error the named effects leave unexplained (`lack_of_fit`, a caution when
+    found). Returns (report dict, arrays for the plots). `null_cache`: see `decide`."""
     base = list(base)
     sel_base, sel, null = decide(fit, holdout, base, candidates, bic_threshold, min_gain, null_draws, seed, null_cache)
+    unexplained = lack_of_fit(sel, holdout, seed, min_share=min_gain)
+    cautions = sel.cautions + ([unexplained["caution"]] if unexplained["caution"] else [])
     gap_before = gap(sel_base, holdout, seed)
     gap_after = gap(sel, holdout, seed)
     named = []
@@ -283,8 +249,8 @@ def run(
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)
-    if sel.equivalences or sel.cautions:
-        verdict += " (" + "; ".join(sel.equivalences + sel.cautions) + ")"
+    if sel.equivalences or cautions:
+        verdict += " (" + "; ".join(sel.equivalences + cautions) + ")"
     fit_resid = residuals_after(sel_base.design, sel_base.result, sel_base.selected)
     report = {
         "verdict": verdict,
@@ -312,7 +278,8 @@ def run(
         "identifiability": sel.identifiability,
         "delay_or_lowpass": sel.delay_or_lowpass,
         "equivalences": sel.equivalences,
-        "cautions": sel.cautions,
+        "cautions": cautions,
+        "lack_of_fit": unexplained,
         "reconstruction": {
             "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
             "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],

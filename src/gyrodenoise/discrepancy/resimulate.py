@@ -1,0 +1,62 @@
+"""Re-simulate a measured sequence's gyro under a selected error model (the held-out gap, the residual checks).
+
+The sensor's deterministic part (sensor constants and refitted per-sequence nuisances) along the measured motion, its
+fitted noise (through a named low-pass), a fresh draw of the reconstructed truth's error, then the output stage
+(band-limited vibration, saturation, quantization).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
+from gyrodenoise.discrepancy.rank import Selection
+from gyrodenoise.discrepancy.reconstruction import draw_error
+from gyrodenoise.sim.context import FitContext, SignalContext
+from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
+
+
+def simulate_like(
+    sel: Selection,
+    fc: FitContext,
+    rng: np.random.Generator,
+    pred: np.ndarray | None = None,
+    truth_error: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Re-simulate the gyro of sequence `fc` with the selected model: deterministic part (sensor
+    constants + refitted nuisances; `pred` if already computed) plus the stochastic effects drawn
+    from their fitted levels. Returns (simulated gyro, deterministic prediction of the residual).
+
+    The white noise is drawn first, so two models simulated with generators of the same seed share
+    its draws (common random numbers: their gaps differ by the models, not by the draws).
+    truth_error=False: the sensor's reading alone, without the reconstructed truth's error (which the measured
+    residual carries on the truth's side, not in the gyro)."""
+    if pred is None:
+        pred = per_sequence_refit(sel, fc)
+    y = fc.omega + pred
+    sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
+    for name in ("white_noise", "bias_random_walk"):
+        if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
+            noise = EFFECTS[name](density=sel.params[name]["density"]).apply(sig, np.zeros_like(y), rng)
+            if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
+                noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
+            y = y + noise
+    if truth_error:  # the reconstruction error, as the measured residual carries it
+        err = draw_error(fc, rng)
+        if err is not None:
+            y = y + err
+    if sel.band_vibration:  # band-limited vibration: noise, drawn like the white noise
+        y = Vibration(**sel.params["vibration"]).apply(sig, y, rng)
+    if "saturation" in sel.params:
+        lim = float(sel.params["saturation"]["limit"])
+        y = np.clip(y, -lim, lim)
+    if "quantization" in sel.params:
+        y = Quantization(step=sel.params["quantization"]["step"]).apply(sig, y, rng)
+    return y, pred
+
+
+def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:
+    """White noise x (N, 3) given the PSD shape of a sensor low-pass (`SensorBandwidth.floor_shape`)."""
+    f = np.fft.rfftfreq(len(x), 1.0 / rate_hz)
+    gain = np.sqrt(SensorBandwidth.floor_shape(f, corner_hz, rate_hz))
+    return np.fft.irfft(np.fft.rfft(x, axis=0) * gain[:, None], len(x), axis=0)
