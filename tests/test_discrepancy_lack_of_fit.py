@@ -60,9 +60,9 @@ def test_a_sensor_without_a_missing_effect_leaves_nothing(tmp_path):
 
 def test_the_caution_names_each_signal_its_axes_and_the_largest_share():
     rows = [
-        {"signal": "rate", "axis": "x", "share": 0.02},
-        {"signal": "rate", "axis": "z", "share": 0.05},
-        {"signal": "specific force", "axis": "y", "share": 0.011},
+        {"signal": "rate", "axis": "x", "share_beyond_chance": 0.02},
+        {"signal": "rate", "axis": "z", "share_beyond_chance": 0.05},
+        {"signal": "specific force", "axis": "y", "share_beyond_chance": 0.011},
     ]
     text = caution(rows, ["warmup_bias"])
     assert "the rate (x, z; up to 5.0% of the in-band residual)" in text

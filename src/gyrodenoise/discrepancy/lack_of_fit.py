@@ -13,7 +13,9 @@ rest it dominates the rate). The same score on re-simulations of the final model
 (`resimulate.simulate_like`: fitted noise, per-sequence refit, a fresh draw of the truth's error, on the truth's
 side) gives the null; its mean and variance fit a scaled chi-square (Satterthwaite), whose tail is the p-value,
 Bonferroni-corrected over the signals and axes. Flagged: corrected p below ALPHA and a share of the in-band residual
-power of at least the workflow's practical minimum (`rank.MIN_GAIN`), the size an effect needs to be named.
+power of at least the workflow's practical minimum (`rank.MIN_GAIN`), the size an effect needs to be named. The share
+counted is the bins' power beyond what chance puts there (the score's excess over the re-simulations' mean): the
+shorter the held-out data, the more of its power chance alone puts into the bins.
 """
 
 from __future__ import annotations
@@ -121,6 +123,8 @@ def lack_of_fit(
     rows, tests = [], len(observed)
     for (name, a), o in observed.items():
         p = min(1.0, tests * _tail(o["score"], null_scores[(name, a)]))
+        chance = float(np.mean(null_scores[(name, a)]))
+        beyond = o["share"] * max(0.0, 1.0 - chance / o["score"]) if o["score"] > 0 else 0.0
         lo, hi = np.percentile(null_means[(name, a)], [2.5, 97.5], axis=0)
         rows.append(
             {
@@ -128,11 +132,12 @@ def lack_of_fit(
                 "axis": AXES[a],
                 "unit": SIGNALS[name],
                 "score": o["score"],
-                "null_mean": float(np.mean(null_scores[(name, a)])),
+                "null_mean": chance,
                 "null_sd": float(np.std(null_scores[(name, a)], ddof=1)),
                 "p_corrected": p,
                 "share": o["share"],
-                "flagged": bool(p < ALPHA and o["share"] >= min_share),
+                "share_beyond_chance": beyond,
+                "flagged": bool(p < ALPHA and beyond >= min_share),
                 "bin_centres": o["centres"].tolist(),
                 "bin_means_rad_s": o["means"].tolist(),
                 "null_band_rad_s": [lo.tolist(), hi.tolist()],
@@ -158,9 +163,11 @@ def caution(flagged: list[dict], named: list[str]) -> str:
     for name in SIGNALS:
         mine = [row for row in flagged if row["signal"] == name]
         if mine:
-            worst = max(mine, key=lambda row: row["share"])
+            worst = max(mine, key=lambda row: row["share_beyond_chance"])
             axes = ", ".join(row["axis"] for row in mine)
-            parts.append(f"the {name} ({axes}; up to {100 * worst['share']:.1f}% of the in-band residual)")
+            parts.append(
+                f"the {name} ({axes}; up to {100 * worst['share_beyond_chance']:.1f}% of the in-band residual)"
+            )
     stand_in = f"; {', '.join(named)} may stand in for it" if named else ""
     return (
         "the held-out residual still depends on " + " and ".join(parts) + ": an effect the vocabulary lacks may be "

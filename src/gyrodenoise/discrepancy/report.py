@@ -205,18 +205,21 @@ def _lack_of_fit_md(report: dict) -> list[str]:
         "each sensor reading (gyro rate, its time derivative, specific force) per axis; score = sum of n x bin "
         f"mean^2 / variance, set against {lof['draws']} re-simulations of the final model along the same motion "
         "(scaled chi-square fitted to their mean and variance; p corrected for the "
-        f"{len(lof['rows'])} tests). Flagged: p < {lof['alpha']:g} and a share of the in-band residual power of at "
-        f"least {100 * lof['min_share']:g}% (the size an effect needs to be named). A flag says the vocabulary "
+        f"{len(lof['rows'])} tests). Flagged: p < {lof['alpha']:g} and a share of the in-band residual power beyond "
+        f"what chance puts in the bins of at least {100 * lof['min_share']:g}% (the size an effect needs to be "
+        "named). A flag says the vocabulary "
         "lacks what the data hold, or a named effect has the wrong shape; it names nothing. `unexplained.png`: the "
         "bin means with the re-simulations' 95% band.",
         "",
-        "| reading | axis | score | re-simulated (mean +- sd) | p (corrected) | share of in-band power | flagged |",
+        "| reading | axis | score | re-simulated (mean +- sd) | p (corrected) | share of in-band power (beyond chance) "
+        "| flagged |",
         "|---|---|---|---|---|---|---|",
     ]
     for row in lof["rows"]:
         lines.append(
             f"| {row['signal']} | {row['axis']} | {row['score']:.1f} | {row['null_mean']:.1f} +- {row['null_sd']:.1f} "
-            f"| {row['p_corrected']:.2g} | {100 * row['share']:.2f}% | {'**yes**' if row['flagged'] else 'no'} |"
+            f"| {row['p_corrected']:.2g} | {100 * row['share']:.2f}% ({100 * row['share_beyond_chance']:.2f}%) "
+            f"| {'**yes**' if row['flagged'] else 'no'} |"
         )
     lines += [
         "",
