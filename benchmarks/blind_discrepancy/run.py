@@ -234,6 +234,11 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--mocap-noise-scale", type=float, default=1.0, help="control runs: the mocap's noise x this (0: exact poses)"
     )
+    ap.add_argument(
+        "--candidates",
+        default=None,
+        help="passed to the workflow: a narrower vocabulary (comma-separated), e.g. one without the hidden effect",
+    )
     ap.add_argument("--results", type=Path, default=RESULTS, help="folder of the results")
     ap.add_argument("--name", default="blind_discrepancy", help="results file stem (NAME.md, NAME.json)")
     a = ap.parse_args(argv)
@@ -255,6 +260,8 @@ def main(argv=None) -> None:
         cmd = [sys.executable, "-m", "gyrodenoise.discrepancy", "--root", str(root), "--fit", *FIT]
         cmd += ["--holdout", *holdout, "--base", BASE, "--null-draws", str(a.null_draws)]
         cmd += ["--gyro-noise-density", str(generate.BASELINE["gyro_noise_density_rad_s_sqrtHz"]), "--out", str(out)]
+        if a.candidates:
+            cmd += ["--candidates", a.candidates]
         t0 = time.time()
         proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
         wall = time.time() - t0
@@ -293,12 +300,14 @@ def main(argv=None) -> None:
         "code": _git(),
         "wall_time_s": time.time() - t_all,
         "settings": {"n_seqs": a.n_seqs, "duration_s": a.duration, "fit": FIT, "holdout": holdout, "base": BASE}
-        | {"null_draws": a.null_draws, "baseline": generate.BASELINE},
+        | {"null_draws": a.null_draws, "candidates": a.candidates, "baseline": generate.BASELINE},
         "trials": rows,
     }
     wf = f"python -m gyrodenoise.discrepancy --root WORK/data/TRIAL --fit {' '.join(FIT)} --holdout {' '.join(holdout)}"
     wf += f" --base {BASE} --null-draws {a.null_draws} --gyro-noise-density"
     wf += f" {generate.BASELINE['gyro_noise_density_rad_s_sqrtHz']:g} --out WORK/reports/TRIAL"
+    if a.candidates:
+        wf += f" --candidates {a.candidates}"
     lines = [
         "# Blind trials of the discrepancy workflow (independent generator)",
         "",
@@ -323,8 +332,9 @@ def main(argv=None) -> None:
         "The last column is what the report shows beside its verdict without naming an effect: narrow lines of the"
         " raw gyro above the band the truth can judge (`gyrodenoise.discrepancy.gyro_lines`; one in every fitted"
         " recording goes into the simulator's model, with its held-out gap without -> with it), and cautions (the"
-        " choice between a delay and a low-pass, when a small error in the truth's noise would reverse it). They do"
-        " not change a verdict.",
+        " choice between a delay and a low-pass, when a small error in the truth's noise would reverse it; a searched"
+        " parameter at the end of its search; error the named effects leave, `gyrodenoise.discrepancy.lack_of_fit`)."
+        " They do not change a verdict.",
         "",
         "| trial | hidden effect (truth) | named | fitted ± SE (datasheet units) | verdict | wall time (s) |"
         " seen, not named |",
