@@ -96,8 +96,11 @@ def test_cli_writes_report(tmp_path):
     assert rep["named_effects"][0]["params"]["delta"] == pytest.approx(0.005, rel=0.05)
     assert rep["gap_after"]["residual_rms_rad_s"] < rep["gap_before"]["residual_rms_rad_s"]
     assert rep["gap_after"]["drift_10s_median_deg"] < rep["gap_before"]["drift_10s_median_deg"]
-    for f in ("report.md", "allan.png", "spectrum.png", "residual.png", "drift.png", "gap.png"):
+    for f in ("report.md", "allan.png", "spectrum.png", "residual.png", "drift.png", "gap.png", "unexplained.png"):
         assert (out / f).is_file()
+    # the named offset leaves nothing the binned readings see (`lack_of_fit`): a table, no caution
+    assert len(rep["lack_of_fit"]["rows"]) == 9 and rep["lack_of_fit"]["caution"] == ""
+    assert "## Error the named effects leave unexplained" in (out / "report.md").read_text()
 
 
 def test_cli_rejects_overlapping_split(tmp_path):
