@@ -29,7 +29,7 @@ from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_report
 from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
-from gyrodenoise.discrepancy.truth_rule import with_truth_rule
+from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.sim.effects import EFFECTS
@@ -250,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
 
     checks = truth_checks(args, [*args.fit, *args.holdout])
     (report, arrays), rule, withheld = with_truth_rule(select, fit, holdout, checks, args.base, args.candidates)
+    withhold_unexplained(report, rule)
     if rule.note():
         report["verdict"] += "; " + rule.note()
         report["truth_followed"] = rule.summary(withheld)

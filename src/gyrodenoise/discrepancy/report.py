@@ -221,11 +221,17 @@ def _lack_of_fit_md(report: dict) -> list[str]:
             f"| {row['p_corrected']:.2g} | {100 * row['share']:.2f}% ({100 * row['share_beyond_chance']:.2f}%) "
             f"| {'**yes**' if row['flagged'] else 'no'} |"
         )
-    lines += [
-        "",
-        f"**{lof['caution'][0].upper() + lof['caution'][1:]}.**" if lof["caution"] else "Nothing flagged.",
-        "",
-    ]
+    if lof.get("decided") is False:  # `truth_rule.withhold_unexplained`
+        said = (
+            "Not decided: every held-out ground truth used here follows the gyro in the compared band, so what the "
+            "bins hold is the fusion's error as much as the sensor's"
+            + (f" (flagged: {lof['caution']})." if lof["caution"] else ".")
+        )
+    elif lof["caution"]:
+        said = f"**{lof['caution'][0].upper() + lof['caution'][1:]}.**"
+    else:
+        said = "Nothing flagged."
+    lines += ["", said, ""]
     return lines
 
 

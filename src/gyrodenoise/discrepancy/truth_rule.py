@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from gyrodenoise.discrepancy.truth_check import TRUTH_FREE, followed_in_band
+from gyrodenoise.discrepancy.workflow import verdict_text
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import EFFECTS
 
@@ -34,6 +35,12 @@ class TruthRule:
         """Effects judged against the truth can be decided: no fit truth follows the gyro and at least one
         held-out truth does not (the rest are set aside)."""
         return not self.fit_followed and any(n not in self.holdout_followed for n in self.holdout_kept)
+
+    @property
+    def judges_holdout(self) -> bool:
+        """A held-out sequence the gaps use has a truth that does not follow the gyro (the residual there is the
+        sensor's)."""
+        return any(n not in self.holdout_followed for n in self.holdout_kept)
 
     def withheld(self, named: list[str]) -> list[str]:
         """The named effects that were judged against the truth (all but those named from the gyro alone)
@@ -118,3 +125,17 @@ def with_truth_rule(
 def truth_free_vocabulary(base: list[str], candidates: list[str] | None) -> list[str]:
     """The candidates left when the truth cannot judge: those of `candidates` (None: all) named from the gyro alone."""
     return [c for c in (candidates if candidates is not None else EFFECTS) if c in TRUTH_FREE and c not in base]
+
+
+def withhold_unexplained(report: dict, rule: TruthRule) -> None:
+    """The lack-of-fit check (`lack_of_fit`) reads the held-out residual against the truth: where every held-out
+    truth it used follows the gyro, what it finds is the fusion's error as much as the sensor's. Its caution then
+    leaves the verdict; the table stays, marked not decided."""
+    lof = report.get("lack_of_fit")
+    if not lof or rule.judges_holdout:
+        return
+    lof["decided"] = False
+    if lof["caution"]:
+        report["cautions"] = [c for c in report["cautions"] if c != lof["caution"]]
+        named = [e["name"] for e in report["named_effects"]]
+        report["verdict"] = verdict_text(named, report["equivalences"], report["cautions"])

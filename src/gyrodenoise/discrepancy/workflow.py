@@ -189,6 +189,14 @@ def decide(
     return sel_base, sel, null
 
 
+def verdict_text(named: list[str], equivalences: list[str], cautions: list[str]) -> str:
+    """The report's verdict: what was named, with what it cannot be told from and the cautions in brackets."""
+    verdict = NO_EFFECT if not named else "named: " + ", ".join(named)
+    if equivalences or cautions:
+        verdict += " (" + "; ".join(equivalences + cautions) + ")"
+    return verdict
+
+
 def run(
     fit: list[FitContext],
     holdout: list[FitContext],
@@ -248,9 +256,7 @@ def run(
             entry["held_out_agreement"] = sel.transfer[name]
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
-    verdict = NO_EFFECT if not sel.named else "named: " + ", ".join(sel.named)
-    if sel.equivalences or cautions:
-        verdict += " (" + "; ".join(sel.equivalences + cautions) + ")"
+    verdict = verdict_text(sel.named, sel.equivalences, cautions)
     fit_resid = residuals_after(sel_base.design, sel_base.result, sel_base.selected)
     report = {
         "verdict": verdict,
