@@ -45,6 +45,7 @@ def test_a_scale_asymmetry_the_vocabulary_lacks_is_flagged_as_left_over(asymmetr
     flagged = [(r["signal"], r["axis"]) for r in lof["rows"] if r["flagged"]]
     assert flagged == [("rate", "z")], lof["rows"]  # z: the largest asymmetry (2500 ppm)
     assert lof["caution"].startswith("the held-out residual still depends on the rate (z;")
+    assert "an effect outside the vocabulary, or a named one that does not hold here" in lof["caution"]
     assert "warmup_bias may stand in for it" in lof["caution"]
 
 

@@ -151,12 +151,19 @@ def lack_of_fit(
         "min_share": min_share,
         "sequences": [fc.name for fc in fcs],
         "rows": rows,
-        "caution": caution(flagged, sel.named),
+        "caution": caution(flagged, _predicting(sel)),
     }
 
 
+def _predicting(sel: Selection) -> list[str]:
+    """The named effects that enter the deterministic prediction (not noise, not read off the raw samples)."""
+    noise = {"vibration"} if sel.band_vibration else set()
+    return [n for n in sel.named if n in sel.effects and not sel.effects[n].stochastic and n not in noise]
+
+
 def caution(flagged: list[dict], named: list[str]) -> str:
-    """One sentence for the verdict when error is left that depends on a signal; '' when nothing is flagged."""
+    """One sentence for the verdict when error is left that depends on a signal; '' when nothing is flagged. `named`:
+    the effects named by regression (those read off the raw samples or drawn as noise cannot stand in for one)."""
     if not flagged:
         return ""
     parts = []
@@ -170,6 +177,8 @@ def caution(flagged: list[dict], named: list[str]) -> str:
             )
     stand_in = f"; {', '.join(named)} may stand in for it" if named else ""
     return (
-        "the held-out residual still depends on " + " and ".join(parts) + ": an effect the vocabulary lacks may be "
-        "present" + stand_in + " (section 'Error the named effects leave unexplained')"
+        "the held-out residual still depends on " + " and ".join(parts) + ": the model lacks something these "
+        "sequences hold (an effect outside the vocabulary, or a named one that does not hold here)"
+        + stand_in
+        + " (section 'Error the named effects leave unexplained')"
     )
