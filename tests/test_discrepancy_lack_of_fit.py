@@ -9,10 +9,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gyrodenoise.discrepancy.compare import load_fit_contexts
-from gyrodenoise.discrepancy.lack_of_fit import caution, lack_of_fit
+from gyrodenoise.discrepancy.lack_of_fit import caution, lack_of_fit, shape
 from gyrodenoise.discrepancy.truth_rule import TruthRule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import decide
 from gyrodenoise.sim.effects import EFFECTS
@@ -44,7 +45,7 @@ def test_a_scale_asymmetry_the_vocabulary_lacks_is_flagged_as_left_over(asymmetr
     assert sel.named == ["warmup_bias"]  # the stand-in of the blind trial before the vocabulary had the effect
     flagged = [(r["signal"], r["axis"]) for r in lof["rows"] if r["flagged"]]
     assert flagged == [("rate", "z")], lof["rows"]  # z: the largest asymmetry (2500 ppm)
-    assert lof["caution"].startswith("the held-out residual still depends on the rate (z;")
+    assert lof["caution"].startswith("the held-out residual still depends on the rate (z: even;")
     assert "an effect outside the vocabulary, or a named one that does not hold here" in lof["caution"]
     assert "warmup_bias may stand in for it" in lof["caution"]
 
@@ -62,13 +63,13 @@ def test_a_sensor_without_a_missing_effect_leaves_nothing(tmp_path):
 
 def test_the_caution_names_each_signal_its_axes_and_the_largest_share():
     rows = [
-        {"signal": "rate", "axis": "x", "share_beyond_chance": 0.02},
-        {"signal": "rate", "axis": "z", "share_beyond_chance": 0.05},
-        {"signal": "specific force", "axis": "y", "share_beyond_chance": 0.011},
+        {"signal": "rate", "axis": "x", "shape": "odd", "share_beyond_chance": 0.02},
+        {"signal": "rate", "axis": "z", "shape": "even", "share_beyond_chance": 0.05},
+        {"signal": "specific force", "axis": "y", "shape": "odd", "share_beyond_chance": 0.011},
     ]
     text = caution(rows, ["warmup_bias"])
-    assert "the rate (x, z; up to 5.0% of the in-band residual)" in text
-    assert "the specific force (y; up to 1.1%" in text
+    assert "the rate (x: odd, z: even; up to 5.0% of the in-band residual)" in text
+    assert "the specific force (y: odd; up to 1.1%" in text
     assert "warmup_bias may stand in for it" in text
     assert caution([], ["warmup_bias"]) == ""
 
@@ -95,3 +96,14 @@ def test_against_held_out_truths_that_follow_the_gyro_the_caution_leaves_the_ver
     r = report()
     withhold_unexplained(r, independent)
     assert r["verdict"] == f"named: quantization ({said})" and "decided" not in r["lack_of_fit"]
+
+
+def test_the_shape_of_the_bin_means_points_at_a_kind_of_effect():
+    x = np.linspace(-2.0, 2.0, 10)
+    n = np.full(10, 100.0)
+    assert shape(x, 3e-3 * x, n) == "odd"  # a scale factor
+    assert shape(x, 2e-3 * (np.abs(x) - np.abs(x).mean()), n) == "even"  # a scale asymmetry
+    assert shape(x, 2e-3 * x + 4e-3 * (np.abs(x) - np.abs(x).mean()), n) == "odd + even"
+    g = 9.81 + x  # a specific force about gravity: odd and even are read about its median
+    assert shape(g, 1e-3 * (g - np.median(g)), n, centred=True) == "odd"
+    assert shape(x, np.zeros(10), n) == "flat"

@@ -84,12 +84,30 @@ def _scores(r: np.ndarray, sig: dict[str, np.ndarray]) -> dict[tuple[str, int], 
             centres, means, n = _binned(r[:, a], x[:, a])
             power = float(np.sum(n * means**2))
             out[(name, a)] = {
+                "shape": shape(centres, means, n, centred=name == "specific force"),
                 "score": power / max(float(np.var(r[:, a])), 1e-300),
                 "share": power / max(float(np.sum(r[:, a] ** 2)), 1e-300),
                 "centres": centres,
                 "means": means,
             }
     return out
+
+
+def shape(centres: np.ndarray, means: np.ndarray, n: np.ndarray, centred: bool = False) -> str:
+    """What the bin means look like, to point at a kind of effect: fitted by a x + b (|x| - mean |x|) (weights n;
+    `centred`: x about its median, for a reading such as the specific force whose zero is not in its range), 'odd'
+    when the odd part holds >= 80 % of the fitted power (a scale factor, a misalignment; for the angular acceleration,
+    a time offset), 'even' when it holds <= 20 % (a scale asymmetry, a quadratic error), else 'odd + even'."""
+    w = n / max(float(n.sum()), 1.0)
+    x = centres - (float(np.median(centres)) if centred else 0.0)
+    even = np.abs(x) - float(np.sum(w * np.abs(x)))
+    sw = np.sqrt(w)
+    a, b = np.linalg.lstsq(np.stack([x * sw, even * sw], 1), means * sw, rcond=None)[0]
+    odd_power, even_power = float(np.sum(w * (a * x) ** 2)), float(np.sum(w * (b * even) ** 2))
+    if not odd_power + even_power > 0:
+        return "flat"
+    odd = odd_power / (odd_power + even_power)
+    return "odd" if odd >= 0.8 else ("even" if odd <= 0.2 else "odd + even")
 
 
 def _tail(observed: float, null: np.ndarray) -> float:
@@ -135,6 +153,7 @@ def lack_of_fit(
                 "null_mean": chance,
                 "null_sd": float(np.std(null_scores[(name, a)], ddof=1)),
                 "p_corrected": p,
+                "shape": o["shape"],
                 "share": o["share"],
                 "share_beyond_chance": beyond,
                 "flagged": bool(p < ALPHA and beyond >= min_share),
@@ -171,7 +190,7 @@ def caution(flagged: list[dict], named: list[str]) -> str:
         mine = [row for row in flagged if row["signal"] == name]
         if mine:
             worst = max(mine, key=lambda row: row["share_beyond_chance"])
-            axes = ", ".join(row["axis"] for row in mine)
+            axes = ", ".join(f"{row['axis']}: {row['shape']}" for row in mine)
             parts.append(
                 f"the {name} ({axes}; up to {100 * worst['share_beyond_chance']:.1f}% of the in-band residual)"
             )

@@ -207,19 +207,20 @@ def _lack_of_fit_md(report: dict) -> list[str]:
         "(scaled chi-square fitted to their mean and variance; p corrected for the "
         f"{len(lof['rows'])} tests). Flagged: p < {lof['alpha']:g} and a share of the in-band residual power beyond "
         f"what chance puts in the bins of at least {100 * lof['min_share']:g}% (the size an effect needs to be "
-        "named). A flag says the vocabulary "
-        "lacks what the data hold, or a named effect has the wrong shape; it names nothing. `unexplained.png`: the "
-        "bin means with the re-simulations' 95% band.",
+        "named). A flag says the vocabulary lacks what the data hold, or a named effect does not hold on these "
+        "sequences; it names nothing. `unexplained.png`: the bin means with the re-simulations' 95% band. Shape: "
+        "the bin means fitted by an odd and an even part in the reading (odd: a scale factor, a misalignment, or for "
+        "the angular acceleration a time offset; even: a scale asymmetry, a quadratic error).",
         "",
         "| reading | axis | score | re-simulated (mean +- sd) | p (corrected) | share of in-band power (beyond chance) "
-        "| flagged |",
-        "|---|---|---|---|---|---|---|",
+        "| shape | flagged |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for row in lof["rows"]:
         lines.append(
             f"| {row['signal']} | {row['axis']} | {row['score']:.1f} | {row['null_mean']:.1f} +- {row['null_sd']:.1f} "
             f"| {row['p_corrected']:.2g} | {100 * row['share']:.2f}% ({100 * row['share_beyond_chance']:.2f}%) "
-            f"| {'**yes**' if row['flagged'] else 'no'} |"
+            f"| {row.get('shape', '')} | {'**yes**' if row['flagged'] else 'no'} |"
         )
     if lof.get("decided") is False:  # `truth_rule.withhold_unexplained`
         said = (
