@@ -84,11 +84,11 @@ def _scores(r: np.ndarray, sig: dict[str, np.ndarray]) -> dict[tuple[str, int], 
             centres, means, n = _binned(r[:, a], x[:, a])
             power = float(np.sum(n * means**2))
             out[(name, a)] = {
-                "shape": shape(centres, means, n, centred=name == "specific force"),
                 "score": power / max(float(np.var(r[:, a])), 1e-300),
                 "share": power / max(float(np.sum(r[:, a] ** 2)), 1e-300),
                 "centres": centres,
                 "means": means,
+                "counts": n,
             }
     return out
 
@@ -153,7 +153,7 @@ def lack_of_fit(
                 "null_mean": chance,
                 "null_sd": float(np.std(null_scores[(name, a)], ddof=1)),
                 "p_corrected": p,
-                "shape": o["shape"],
+                "shape": shape(o["centres"], o["means"], o["counts"], centred=name == "specific force"),
                 "share": o["share"],
                 "share_beyond_chance": beyond,
                 "flagged": bool(p < ALPHA and beyond >= min_share),

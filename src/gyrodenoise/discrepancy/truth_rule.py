@@ -34,7 +34,7 @@ class TruthRule:
     def decided(self) -> bool:
         """Effects judged against the truth can be decided: no fit truth follows the gyro and at least one
         held-out truth does not (the rest are set aside)."""
-        return not self.fit_followed and any(n not in self.holdout_followed for n in self.holdout_kept)
+        return not self.fit_followed and self.judges_holdout
 
     @property
     def judges_holdout(self) -> bool:
