@@ -7,10 +7,10 @@
 #
 # DEADLINE: seconds after the queue starts after which no further training starts (finished runs are kept; a
 # second call resumes the queue, skipping collected runs: give it the first call's results via DONE=folder).
-# What it writes comes back as $OUT/results.tar (paths as in the repository: unpack at its root) and $OUT/call.log.
+# What it writes comes back under $OUT: res/ (the run summaries, paths as in the repository) and call.log.
 set -uo pipefail
 OUT=${OUT:-/tmp/gpu_call_out}
-mkdir -p "$OUT" /tmp/res/benchmarks/results/gpu_queue_logs
+mkdir -p "$OUT/res"
 start=$(date +%s)
 elapsed() { echo $(($(date +%s) - start)); }
 {
@@ -21,8 +21,7 @@ elapsed() { echo $(($(date +%s) - start)); }
   fi
   echo "== ablations, seeds 1 and 4 ($(elapsed) s)"
   python benchmarks/run_queue.py benchmarks/queues/ablation_folds_1_4.txt --jobs "${JOBS:-12}" --threads 1 \
-    --out /tmp/gpu_runs --collect /tmp/res ${DONE:+--done "$DONE"} --deadline "${DEADLINE:-300}" \
+    --out /tmp/gpu_runs --collect "$OUT/res" ${DONE:+--done "$DONE"} --deadline "${DEADLINE:-300}" \
     --note "gpu_call_ablation_folds.sh: ${JOBS:-12} trainings at once, 1 CPU thread each, one GPU machine"
   echo "== done ($(elapsed) s)"
 } 2>&1 | tee "$OUT/call.log"
-tar cf "$OUT/results.tar" -C /tmp/res .
