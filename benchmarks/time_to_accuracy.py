@@ -159,7 +159,8 @@ def stats(xs: list[float]) -> str:
 def queue_throughput() -> list[tuple[Path, str]]:
     """(log, closing line) of every committed GPU queue log: runs, seconds, runs per hour."""
     out = []
-    for path in sorted(Path("benchmarks/results/gpu_queue_logs").glob("*.log")):
+    logs = Path("benchmarks/results/gpu_queue_logs").glob("*.log")
+    for path in sorted(logs, key=lambda p: (len(p.name.split("_")[0]), p.name)):  # call9 before call10
         lines = [ln for ln in path.read_text().splitlines() if "runs finished in" in ln]
         out += [(path, lines[-1].strip())] if lines else []
     return out
@@ -312,11 +313,13 @@ def cmd_report(args: argparse.Namespace) -> int:
         "The queue logs of the GPU calls are in `benchmarks/results/gpu_queue_logs/` (calls 1-6: one H100, 16 CPU",
         "cores, eager steps, `python benchmarks/run_queue.py QUEUE --jobs J --threads 1`; J = 12 in call 1, 14 in",
         "call 3, 15 in calls 4-5, 8 with 2 threads in call 6; call 1's single run was the 1800-epoch run alone;",
-        "calls 7-8 ran one run at a time, above; call 9: one H200, the CUDA-graph step, J = 8 with 2 threads). The",
-        "runs of calls 1-6 mix 600-epoch EuRoC runs with 300-1800-epoch and TUM-VI ones, so runs/hour is that of",
-        "each call's mix; a mostly-600-epoch EuRoC queue (calls 3-4) ran at 571-652 runs/hour, call 9's sixteen",
-        "600-epoch EuRoC runs at 580 (start-up, validation, test and the calibrated baseline are most of a run",
-        "there: its fit is ~27 s of a ~50-s process). Their closing lines:",
+        "calls 7-8 and 11 ran one run at a time, above; call 9: one H200, the CUDA-graph step, J = 8 with 2 threads;",
+        "call 10: one H100, the CUDA-graph step, J = 12 with 1 thread, the 54 ablation runs of",
+        "`queues/ablation_folds_1_4.txt`). The runs of calls 1-6 mix 600-epoch EuRoC runs with 300-1800-epoch and",
+        "TUM-VI ones, so runs/hour is that of each call's mix; a mostly-600-epoch EuRoC queue (calls 3-4) ran at",
+        "571-652 runs/hour, call 9's sixteen 600-epoch EuRoC runs at 580, call 10's fifty-four 600-epoch EuRoC runs",
+        "(five training flights each) at 707 (start-up, validation, test and the calibrated baseline are most of a",
+        "run there: its fit is ~27 s of a ~50-s process). Their closing lines:",
         "",
         *[f"- `{line}` ({path.name})" for path, line in queue_throughput()],
         "",

@@ -317,6 +317,29 @@ def test_json_summaries_in_the_mean_std_collector(activation_runs, tmp_path):
     assert settings[0].stats("test")[0] == pytest.approx(np.mean(BASE))
 
 
+def test_p_value_is_the_paired_t_test_and_holm_adjusts_over_the_family(activation_runs):
+    a = ablation_report.analyse(load(activation_runs, "reference", "activation"), {"model.act": "gelu"})
+    arms = {arm.label: arm for arm in a.arms}
+    reference = [arms["model.act=gelu"].per_seed["test"][str(s)] for s in SEEDS]
+    for label in ("model.act=relu", "model.act=elu"):
+        arm = [arms[label].per_seed["test"][str(s)] for s in SEEDS]
+        assert arms[label].diffs["test"].p_value == pytest.approx(stats.ttest_rel(arm, reference).pvalue, rel=1e-12)
+    assert arms["model.act=relu"].diffs["test"].p_value < 0.05 < arms["model.act=elu"].diffs["test"].p_value
+    assert math.isnan(PairedDiff(("0",), (0.3,)).p_value)
+    assert PairedDiff(("0", "1"), (0.2, 0.2)).p_value == 0.0 and PairedDiff(("0", "1"), (0.0, 0.0)).p_value == 1.0
+    # Holm by hand: sorted 0.01, 0.03, 0.04 times 3, 2, 1, never decreasing; a nan is no test and stays out
+    assert ablation_stats.holm([0.01, 0.04, 0.03, math.nan])[:3] == pytest.approx([0.03, 0.06, 0.06])
+    assert math.isnan(ablation_stats.holm([0.01, 0.04, 0.03, math.nan])[3])
+    assert ablation_stats.holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])  # capped at 1
+    # the report's section: relu is resolved (p ~1e-4) and holds over a family of two; elu is not listed
+    md = "\n".join(ablation_report.many_arms_section({"activation": a}))
+    relu_p = arms["model.act=relu"].diffs["test"].p_value
+    assert "**test AOE**: 2 arms compared with the reference; 1 resolved by their own 95 % interval" in md
+    assert "1 of them holds after Holm's correction" in md
+    assert f"| activation | model.act=relu | +0.50 | {relu_p:.3g} | {min(1.0, 2 * relu_p):.3g} | yes |" in md
+    assert "model.act=elu" not in md
+
+
 def test_whole_report(activation_runs, tmp_path):
     appendix = tmp_path / "ablation_euroc_appendix.md"
     appendix.write_text("# EuRoC ablations, short schedule\n\nOld text | kept\n")
@@ -327,9 +350,9 @@ def test_whole_report(activation_runs, tmp_path):
     )
     assert code == 0
     md = out.read_text()
-    assert md.index("## 1. Activation function") < md.index("# Appendix: 120-epoch runs (earlier session)")
+    assert md.index("## 1. Activation function") < md.index("# Appendix: earlier verdicts and runs")
     assert md.endswith(
-        "# Appendix: 120-epoch runs (earlier session)\n\n# EuRoC ablations, short schedule\n\nOld text | kept\n"
+        "# Appendix: earlier verdicts and runs\n\n# EuRoC ablations, short schedule\n\nOld text | kept\n"
     )
     assert (
         "| [Activation function](#1-activation-function-section-v-b1) | V-B1 | not resolved at this sample size |" in md

@@ -109,6 +109,15 @@ class PairedDiff:
         return {1: "worse", -1: "better"}.get(self.direction, f"not resolved at n={self.n}")
 
     @property
+    def p_value(self) -> float:
+        """Two-sided p of the paired t-test of mean d = 0 (the test behind the t-interval); nan below 2 pairs."""
+        if self.n < 2 or not math.isfinite(self.sd):
+            return math.nan
+        if self.sd == 0.0:  # identical differences: certain unless they are all 0
+            return 1.0 if self.mean == 0.0 else 0.0
+        return float(stats.ttest_1samp(self.diffs, 0.0).pvalue)
+
+    @property
     def n_star(self) -> float:
         """Seeds estimated to resolve an unresolved difference (see seeds_to_resolve); nan if resolved."""
         return math.nan if self.direction else seeds_to_resolve(self.mean, self.sd, self.n)
@@ -123,6 +132,18 @@ class PairedDiff:
         if math.isinf(ns):
             return f"{self.verdict} (mean difference 0: no n* would resolve it)"
         return f"{self.verdict} (n* ≈ {ns:.0f} if the observed mean and sd held)"
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm-Bonferroni adjusted p-values: family-wise error control whatever the dependence between the tests
+    (arms that share one reference do depend). A nan (no test) stays nan and does not count in the family."""
+    ok = sorted((p, i) for i, p in enumerate(p_values) if math.isfinite(p))
+    adjusted = [math.nan] * len(p_values)
+    running = 0.0
+    for rank, (p, i) in enumerate(ok):
+        running = max(running, min(1.0, (len(ok) - rank) * p))  # adjusted values never decrease with p
+        adjusted[i] = running
+    return adjusted
 
 
 def paired_diff(arm: dict[str, float], reference: dict[str, float]) -> tuple[PairedDiff, list[str], list[str]]:
