@@ -431,11 +431,30 @@ def reproduce_command(a: Analysis) -> str:
         if key not in a.keys and key not in IGNORED_KEYS and key != SEED_KEY:
             tokens.append(f"{spelled.get(key, key)}={value}")
     seeds = sorted({_seed(r) for r in a.runs}, key=lambda s: (len(s), s))
-    tokens.append(f"seed={','.join(seeds)}")
-    cmd = "python -m gyrodenoise.train -m " + " ".join(shlex.quote(t) for t in tokens)
+    offsets = {_fold_offset(r) for r in a.runs}
+    if offsets in ({0}, {None}):  # the experiments' own dataset.cv_fold = seed (or no folds at all)
+        tokens.append(f"seed={','.join(seeds)}")
+        cmd = "python -m gyrodenoise.train -m " + " ".join(shlex.quote(t) for t in tokens)
+    elif len(offsets) == 1:  # a confirmation on fresh seeds: the fold is the seed minus a constant
+        k = offsets.pop()
+        args = " ".join(shlex.quote(t) for t in tokens) + f" seed=$s dataset.cv_fold=$((s - {k}))"
+        cmd = f"for s in {' '.join(seeds)}; do python -m gyrodenoise.train -m {args}; done"
+    else:
+        tokens.append(f"seed={','.join(seeds)}")
+        cmd = "python -m gyrodenoise.train -m " + " ".join(shlex.quote(t) for t in tokens)
+        cmd += "  # with each run's own dataset.cv_fold (its summary)"
     if n_settings != len(a.arms):  # Hydra sweeps the product of the lists
         cmd += f"  # the sweep's product has {n_settings} settings; the runs are {len(a.arms)} of them"
     return cmd
+
+
+def _fold_offset(run: Run) -> int | None:
+    """seed - dataset.cv_fold of a run (0 where the fold is the seed), None without a held-out fold."""
+    fold = run.summary.get("config", {}).get("dataset", {}).get("cv_fold")
+    try:
+        return None if fold is None else int(str(run.seed)) - int(fold)
+    except ValueError:  # a seed that is no number: no offset to speak of
+        return None
 
 
 def _fmt_verdict(a: Analysis, split: str) -> str:
@@ -449,7 +468,8 @@ def _facts(a: Analysis) -> list[str]:
     steps = Counter(str(r.summary.get("training_step", "eager (run before the graph step existed)")) for r in a.runs)
     walls = [float(r.summary.get("train_wall_time_s") or 0) for r in a.runs]
     val_note = (
-        "`val` is a training flight held out (dataset.cv_fold = seed), `val_tail` the end of the training flights"
+        "`val` is a training flight held out (dataset.cv_fold, tied to the seed), `val_tail` the end of the training "
+        "flights"
         if "val_tail" in a.splits
         else "`val` is the end of the training flights (no held-out flight in these runs)"
     )
@@ -496,9 +516,10 @@ def claim_section(a: Analysis, plot_link: str | None = None, level: int = 2) -> 
 
 
 METHOD = """\
-Each arm is compared with the reference arm (the paper's setting) **seed by seed**: with
-`dataset.cv_fold = seed` a seed fixes the initialisation, the crops, the augmentation and the held-out
-validation flight, so d = AOE(arm) − AOE(reference) of one seed cancels what the two runs share.
+Each arm is compared with the reference arm (the paper's setting) **seed by seed**: with the held-out
+flight tied to the seed (`dataset.cv_fold` = the seed, or the seed minus 6 in a confirmation on fresh
+seeds) a seed fixes the initialisation, the crops, the augmentation and the held-out validation flight,
+so d = AOE(arm) − AOE(reference) of one seed cancels what the two runs share.
 Positive d: the arm is worse. Per arm: the mean of d, its 95 % t-interval (n − 1 degrees of freedom)
 and a 95 % percentile-bootstrap interval (9999 resamples, fixed seed; from 3 pairs on; with a handful
 of seeds it is narrower than the t-interval, so the verdict uses the t-interval). Verdict: *worse* /
@@ -528,13 +549,16 @@ def write_report(
     out: Path = Path("reports/ablation_euroc.md"),
     tables: Path | None = None,
     appendix: Path | None = None,
+    title: str | None = None,
 ) -> dict[str, Analysis]:
     """The whole of `out` from every claim folder under `root` (plus root/reference, the shared paper
     setting), each claim's tables in `tables` (default: <out without .md>/paired/), and the text of
-    `appendix` (default: <out stem>_appendix.md) kept verbatim below its heading."""
+    `appendix` (default: <out stem>_appendix.md) kept verbatim below its heading; <out stem>_intro.md, if there is
+    one, is kept verbatim under the title."""
     root, out = Path(root), Path(out)
     tables = Path(tables) if tables else out.parent / out.stem / "paired"
     appendix = Path(appendix) if appendix else out.parent / f"{out.stem}_appendix.md"
+    intro = out.parent / f"{out.stem}_intro.md"  # hand-written text kept verbatim under the title, if there is one
     ref_runs = find_runs([root / REFERENCE_DIR])[0] if (root / REFERENCE_DIR).is_dir() else []
     results: dict[str, Analysis] = {}
     sections: list[str] = []
@@ -577,8 +601,9 @@ def write_report(
         else []
     )
     md = [
-        "# EuRoC ablations of Section V: paired seeds",
+        f"# {title or 'EuRoC ablations of Section V: paired seeds'}",
         "",
+        *([intro.read_text().rstrip("\n"), ""] if intro.is_file() else []),
         f"Generated by `python -m gyrodenoise.ablation --report` from the run summaries committed under `{root}/`"
         f" (the shared reference arm in `{root / REFERENCE_DIR}/`); do not edit by hand."
         + (
@@ -687,7 +712,7 @@ def report_cli(a: argparse.Namespace) -> int:
     out = a.out or Path("reports/ablation_euroc.md")
     if out.suffix != ".md":  # --out is a prefix elsewhere: PREFIX.md
         out = out.with_name(out.name + ".md")
-    results = write_report(root, out, a.tables, a.appendix)
+    results = write_report(root, out, a.tables, a.appendix, a.title)
     for name, an in results.items():
         print(f"{name}: test {an.verdicts.get('test', ('-',))[0]}, val {an.verdicts.get('val', ('-',))[0]}")
     print(f"wrote {out} ({len(results)} claims with runs)")
