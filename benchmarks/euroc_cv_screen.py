@@ -4,6 +4,7 @@
     python benchmarks/euroc_cv_screen.py acc_input       # benchmarks/queues/euroc_acc_input_cv.txt
     python benchmarks/euroc_cv_screen.py acc_diff_round  # benchmarks/queues/euroc_acc_diff_round.txt
     python benchmarks/euroc_cv_screen.py whole_diff_round  # benchmarks/queues/euroc_whole_diff_round.txt
+    python benchmarks/euroc_cv_screen.py reg             # benchmarks/queues/euroc_reg_cv.txt
 
 Per arm and fold k: d_k = the mean held-out-flight AOE of the arm's runs (seed 100+k in a screen; 100+k, 200+k and
 300+k in a round) minus the mean of ref's three CPU runs on that fold (rounds 2 and 3, seeds 100+k, 200+k, 300+k).
@@ -71,6 +72,12 @@ SCREENS = {
         seeds=(100, 200, 300),
         training="the other five flights whole",
         information={"whole": ("euroc_cv{2|3}", "whole"), "diff": ("euroc_acc_input_cv", "diff")},
+    ),
+    "reg": Screen(
+        "euroc_reg_cv",
+        "EuRoC: stronger regularisation at the 6-fold cross-validation protocol (a screen)",
+        {"wd05": "Adam weight decay 0.5 (default 0.1)", "do25": "dropout 0.25 (default 0.1)"},
+        "",
     ),
 }
 
