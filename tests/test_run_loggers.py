@@ -12,11 +12,15 @@ from _asl import TINY_TRAINING, run_train
 mlflow = pytest.importorskip("mlflow", reason="logger=mlflow needs the [mlflow] extra (in [dev])")
 
 
+@pytest.mark.parametrize("backend", ["file", "sqlite"])
 def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboard(
-    tiny_asl_root, tmp_path, monkeypatch
+    tiny_asl_root, tmp_path, monkeypatch, backend
 ):
-    store = tmp_path / "mlruns"
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"file:{store}")
+    if backend == "sqlite":  # MLflow's database store (what its server and newer versions default to)
+        pytest.importorskip("sqlalchemy", reason="MLflow's sqlite store needs sqlalchemy and alembic")
+        pytest.importorskip("alembic", reason="MLflow's sqlite store needs sqlalchemy and alembic")
+    store = f"file:{tmp_path / 'mlruns'}" if backend == "file" else f"sqlite:///{tmp_path / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", store)
     args = [
         "dataset=asl_folder",
         f"dataset.root={tiny_asl_root}",
@@ -35,7 +39,7 @@ def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboa
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert list((tmp_path / "run" / "tensorboard").glob("events.out.tfevents.*"))  # both loggers ran
 
-    client = mlflow.tracking.MlflowClient(tracking_uri=f"file:{store}")
+    client = mlflow.tracking.MlflowClient(tracking_uri=store)
     (experiment,) = [e for e in client.search_experiments() if e.name == "train-asl_folder"]
     (run,) = client.search_runs([experiment.experiment_id])
     assert run.info.run_name == "denoiser-seed3" and run.info.status == "FINISHED"
