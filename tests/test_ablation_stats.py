@@ -378,30 +378,13 @@ def test_a_confirmation_on_fresh_seeds_gets_its_title_intro_and_a_command_that_s
     """Seeds 6-9 holding out flights 0-3: the report's reproduce line loops over the seeds and sets each fold (the
     experiments' own cv_fold = seed would refuse seed 6); --title and <out>_intro.md head the report."""
     root = tmp_path / "confirm_runs"
-    seeds = [6, 7, 8, 9]
-    for s, b in zip(seeds, BASE, strict=True):
-        path = write_summary(
-            root / "reference" / f"gelu_s{s}.json",
-            ["experiment=ablation_activation", "model.act=gelu", f"seed={s}", f"dataset.cv_fold={s - 6}"],
-            s,
-            test=b,
-            val=b - 0.5,
-            val_tail=b - 1.0,
-        )
-        summary = json.loads(path.read_text())
-        summary["config"]["dataset"]["cv_fold"] = s - 6
-        path.write_text(json.dumps(summary))
-        path = write_summary(
-            root / "activation" / f"elu_s{s}.json",
-            ["experiment=ablation_activation", "model.act=elu", f"seed={s}", f"dataset.cv_fold={s - 6}"],
-            s,
-            test=b + 0.5,
-            val=b,
-            val_tail=b - 1.0,
-        )
-        summary = json.loads(path.read_text())
-        summary["config"]["dataset"]["cv_fold"] = s - 6
-        path.write_text(json.dumps(summary))
+    for folder, act, shift in (("reference", "gelu", 0.0), ("activation", "elu", 0.5)):
+        for s, b in zip([6, 7, 8, 9], BASE, strict=True):
+            overrides = ["experiment=ablation_activation", f"model.act={act}", f"seed={s}", f"dataset.cv_fold={s - 6}"]
+            path = write_summary(root / folder / f"{act}_s{s}.json", overrides, s, b + shift, b, val_tail=b - 1.0)
+            summary = json.loads(path.read_text())
+            summary["config"]["dataset"]["cv_fold"] = s - 6
+            path.write_text(json.dumps(summary))
     out = tmp_path / "confirm.md"
     (tmp_path / "confirm_intro.md").write_text("Rule: written before the runs.\n")
     assert ablation.main([str(root), "--report", "--out", str(out), "--title", "A confirmation"]) == 0
@@ -413,4 +396,4 @@ def test_a_confirmation_on_fresh_seeds_gets_its_title_intro_and_a_command_that_s
         "- Reproduce: `for s in 6 7 8 9; do python -m gyrodenoise.train -m experiment=ablation_activation "
         "model.act=gelu,elu seed=$s dataset.cv_fold=$((s - 6)); done`" in md
     )
-    assert "**test AOE**: 1 arms compared with the reference; 1 resolved by their own 95 % interval" in md
+    assert "**test AOE**: 1 arm compared with the reference; 1 resolved by their own 95 % interval" in md

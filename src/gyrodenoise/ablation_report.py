@@ -431,18 +431,16 @@ def reproduce_command(a: Analysis) -> str:
         if key not in a.keys and key not in IGNORED_KEYS and key != SEED_KEY:
             tokens.append(f"{spelled.get(key, key)}={value}")
     seeds = sorted({_seed(r) for r in a.runs}, key=lambda s: (len(s), s))
-    offsets = {_fold_offset(r) for r in a.runs}
-    if offsets in ({0}, {None}):  # the experiments' own dataset.cv_fold = seed (or no folds at all)
-        tokens.append(f"seed={','.join(seeds)}")
-        cmd = "python -m gyrodenoise.train -m " + " ".join(shlex.quote(t) for t in tokens)
-    elif len(offsets) == 1:  # a confirmation on fresh seeds: the fold is the seed minus a constant
-        k = offsets.pop()
+    offsets = {_fold_offset(r) for r in a.runs} - {None}
+    k = next(iter(offsets)) if len(offsets) == 1 else 0
+    if k:  # a confirmation on fresh seeds: the fold is the seed minus a constant, not the experiments' cv_fold = seed
         args = " ".join(shlex.quote(t) for t in tokens) + f" seed=$s dataset.cv_fold=$((s - {k}))"
         cmd = f"for s in {' '.join(seeds)}; do python -m gyrodenoise.train -m {args}; done"
     else:
         tokens.append(f"seed={','.join(seeds)}")
         cmd = "python -m gyrodenoise.train -m " + " ".join(shlex.quote(t) for t in tokens)
-        cmd += "  # with each run's own dataset.cv_fold (its summary)"
+        if len(offsets) > 1:
+            cmd += "  # with each run's own dataset.cv_fold (its summary)"
     if n_settings != len(a.arms):  # Hydra sweeps the product of the lists
         cmd += f"  # the sweep's product has {n_settings} settings; the runs are {len(a.arms)} of them"
     return cmd
@@ -647,14 +645,15 @@ def many_arms_section(results: dict[str, Analysis], splits: Sequence[str] = ("te
         rows = [
             [name, arm.label, _signed(d.mean), f"{d.p_value:.3g}", f"{q:.3g}", "yes" if q < 0.05 else "no"]
             for (name, arm, d), q in zip(family, adjusted, strict=True)
-            if d.direction or q < 0.05
+            if d.direction  # Holm's p is never below the arm's own, so what holds is resolved alone too
         ]
         held = sum(r[-1] == "yes" for r in rows)
         md += [
-            f"**{split} AOE**: {len(family)} arms compared with the reference; {len(rows)} resolved by their own 95 % "
-            f"interval (about {0.05 * len(family):.1f} expected by chance if no arm made a difference); {held} of "
-            f"them {'holds' if held == 1 else 'hold'} after Holm's correction over all of them (family-wise 5 %, "
-            "valid although the arms share one reference)." + (" Resolved arms:" if rows else ""),
+            f"**{split} AOE**: {len(family)} arm{'s' * (len(family) != 1)} compared with the reference; "
+            f"{len(rows)} resolved by their own 95 % interval (about {0.05 * len(family):.1f} expected by chance if "
+            f"no arm made a difference); {held} of them {'holds' if held == 1 else 'hold'} after Holm's correction "
+            "over all of them (family-wise 5 %, valid although the arms share one reference)."
+            + (" Resolved arms:" if rows else ""),
             "",
         ]
         if rows:
