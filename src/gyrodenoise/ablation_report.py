@@ -627,6 +627,9 @@ def write_report(
     return results
 
 
+FIGURE_NAMES = {"test": "test AOE", "val": "val AOE (the held-out training flight)"}
+
+
 def many_arms_section(results: dict[str, Analysis], splits: Sequence[str] = ("test", "val")) -> list[str]:
     """Each verdict is one arm's own 95 % interval; over a report's many arms some come out resolved by chance.
     Per figure: every arm's paired-t p and its Holm-adjusted p over all arms of all claims; the table lists the
@@ -649,7 +652,8 @@ def many_arms_section(results: dict[str, Analysis], splits: Sequence[str] = ("te
         ]
         held = sum(r[-1] == "yes" for r in rows)
         md += [
-            f"**{split} AOE**: {len(family)} arm{'s' * (len(family) != 1)} compared with the reference; "
+            f"**{FIGURE_NAMES.get(split, split)}**: {len(family)} arm{'s' * (len(family) != 1)} compared with the "
+            "reference; "
             f"{len(rows)} resolved by their own 95 % interval (about {0.05 * len(family):.1f} expected by chance if "
             f"no arm made a difference); {held} of them {'holds' if held == 1 else 'hold'} after Holm's correction "
             "over all of them (family-wise 5 %, valid although the arms share one reference)."
