@@ -9,8 +9,8 @@
 #
 # Settings (environment): QUEUE (default queues/gpu_alone_graph.txt; call 7 ran queues/gpu_alone.txt), DEADLINE
 # (seconds after which no further training starts), BREAKDOWN=1 (also gpu_step_breakdown.py), TESTS=1 (first the
-# tests that need a GPU: tests/test_cuda_graph_step.py; its resumed-run-with-dropout test was written after call 8
-# and has not run on a GPU yet), CALL (names the logs: callN_...).
+# tests that need a GPU: tests/test_cuda_graph_step.py, all of which passed in call 10), CALL (names the logs:
+# callN_...).
 #
 # Everything runs one thing at a time (the GPU machine to itself). Order: the GPU tests, the step taken apart
 # (gpu_step_breakdown.py, short), gyrodenoise's 1800-epoch run (the queue's first line), the authors'
