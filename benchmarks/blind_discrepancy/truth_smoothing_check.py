@@ -55,6 +55,21 @@ SLOPE_AT = (22.0, 28.0)
 DEG = np.pi / 180
 
 
+# the summary's lines: label (padded as printed) -> the row's value, averaged over a selection of rows
+SUMMARY = (
+    ("  level  g/Dq at 25 Hz - 1:       ", lambda r: r["g25"] / r["dq25"] - 1),
+    ("  slope  g/Dq (22->28 Hz) - 1:    ", lambda r: r["g_slope"] / r["dq_slope"] - 1),
+    ("  slope  closed form, true sigma_n, kappa 1, /Dq - 1:", lambda r: r["gt_slope"] / r["dq_slope"] - 1),
+    ("  corner: workflow objective - realised-drop objective:", lambda r: r["wf_objective_hz"] - r["realised_drop_hz"]),
+    ("  corner: workflow objective - exact truth (same rows):", lambda r: r["wf_objective_hz"] - r["exact_truth_hz"]),
+    ("  corner: realised-drop objective - exact truth:       ", lambda r: r["realised_drop_hz"] - r["exact_truth_hz"]),
+    ("  corner: workflow objective - 25 Hz:                  ", lambda r: r["wf_objective_hz"] - TRUE_HZ),
+    ("  corner: exact truth (same rows) - 25 Hz:             ", lambda r: r["exact_truth_hz"] - TRUE_HZ),
+    ("  corner: workflow's reported - its objective re-min:  ", lambda r: r["workflow_hz"] - r["wf_objective_hz"]),
+    ("  corner: uncorrected - workflow objective:            ", lambda r: r["no_correction_hz"] - r["wf_objective_hz"]),
+)
+
+
 def write_mocap(src: Path, dst: Path, rng: np.random.Generator) -> None:
     """dst: the exact mocap of src (noise-free poses) with a fresh draw of the generator's baseline noise."""
     d = np.loadtxt(src, delimiter=",", skiprows=1)
@@ -210,38 +225,8 @@ def main(argv=None) -> int:
         if len(sel) < 2:
             continue
         print(f"-- {label}")
-        print("  level  g/Dq at 25 Hz - 1:       ", ms([r["g25"] / r["dq25"] - 1 for r in sel]))
-        print("  slope  g/Dq (22->28 Hz) - 1:    ", ms([r["g_slope"] / r["dq_slope"] - 1 for r in sel]))
-        print(
-            "  slope  closed form, true sigma_n, kappa 1, /Dq - 1:",
-            ms([r["gt_slope"] / r["dq_slope"] - 1 for r in sel]),
-        )
-        print(
-            "  corner: workflow objective - realised-drop objective:",
-            ms([r["wf_objective_hz"] - r["realised_drop_hz"] for r in sel]),
-        )
-        print(
-            "  corner: workflow objective - exact truth (same rows):",
-            ms([r["wf_objective_hz"] - r["exact_truth_hz"] for r in sel]),
-        )
-        print(
-            "  corner: realised-drop objective - exact truth:       ",
-            ms([r["realised_drop_hz"] - r["exact_truth_hz"] for r in sel]),
-        )
-        print(
-            "  corner: workflow objective - 25 Hz:                  ", ms([r["wf_objective_hz"] - TRUE_HZ for r in sel])
-        )
-        print(
-            "  corner: exact truth (same rows) - 25 Hz:             ", ms([r["exact_truth_hz"] - TRUE_HZ for r in sel])
-        )
-        print(
-            "  corner: workflow's reported - its objective re-min:  ",
-            ms([r["workflow_hz"] - r["wf_objective_hz"] for r in sel]),
-        )
-        print(
-            "  corner: uncorrected - workflow objective:            ",
-            ms([r["no_correction_hz"] - r["wf_objective_hz"] for r in sel]),
-        )
+        for name, value in SUMMARY:
+            print(name, ms([value(r) for r in sel]))
     print(
         "Reading: g > Dq means the correction is LARGER than the realised drop (not short). 'workflow objective -"
         " realised-drop objective' is the corner bias the correction's error implies; 'uncorrected - workflow"
