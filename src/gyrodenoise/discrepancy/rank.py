@@ -57,6 +57,7 @@ from gyrodenoise.discrepancy.reconstruction import row_frequencies
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
     CORNER_STEP,
+    CORNER_XATOL,
     BandFit,
     FloorShapeFit,
     corner_se,
@@ -568,7 +569,7 @@ def _delay_or_lowpass(
     k = int(np.argmin([lowpass(float(u)) for u in grid]))
     res = optimize.minimize_scalar(
         lowpass, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
-        options={"xatol": 2e-3},
+        options={"xatol": CORNER_XATOL},
     )  # fmt: skip
     u = float(res.x) if lowpass(float(res.x)) < lowpass(float(grid[k])) else float(grid[k])
     best = fits[u]
