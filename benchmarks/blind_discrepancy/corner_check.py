@@ -1,9 +1,10 @@
 """Does the model's low-pass fit the blind generator's without bias? (a check of the corner's low lean)
 
-    python benchmarks/blind_discrepancy/corner_check.py [--draws 200]
+    python benchmarks/blind_discrepancy/corner_check.py [--draws 200] [--seeds 1 101 201 301]
 
-For the trials sensor_lowpass_40hz and sensor_lowpass_25hz, on the fitted sequences the blind runner draws for its
-default seed (seed = 1 + the trial's index, sequences seed * 1000 + i, 3 x 60 s), the corner is fitted by least squares
+For the trials sensor_lowpass_40hz and sensor_lowpass_25hz, on the fitted sequences the blind runner draws for each
+runner seed (`run.py --seed`, default 1; trial seed = runner seed + the trial's index, sequences seed * 1000 + i,
+3 x 60 s), the corner is fitted by least squares
 (each sequence's mean removed) of the gyro against the model's low-pass (`sim.effects.SensorBandwidth.filter_rate`)
 applied to the true rate at the stamps, three ways:
 
@@ -55,20 +56,20 @@ def fit_corner(pairs: list[tuple[np.ndarray, np.ndarray]], truth_hz: float) -> f
     return float(np.exp(res.x))
 
 
-def check(trial: str, draws: int, work: Path) -> dict:
+def check(trial: str, draws: int, work: Path, runner_seed: int = 1) -> dict:
     hidden = generate.TRIALS[trial]
     corner = float(hidden.params["corner_hz"])
-    seed = 1 + list(generate.TRIALS).index(trial)
+    seed = runner_seed + list(generate.TRIALS).index(trial)
     dt = 1.0 / generate.IMU_HZ
     t = np.arange(int(round(DURATION_S * generate.IMU_HZ))) * dt
     noise = generate.BASELINE["gyro_noise_density_rad_s_sqrtHz"]
     clean, realised = [], []
     for i in range(N_FIT):
         s = seed * 1000 + i
-        generate.make_sequence(work / trial / f"seq{i:02d}", s, DURATION_S, hidden)
+        generate.make_sequence(work / f"{trial}_{seed}" / f"seq{i:02d}", s, DURATION_S, hidden)
         motion = generate.make_motion(np.random.default_rng(s), DURATION_S)  # make_sequence's first draws
         rate = motion.body_rate(t)
-        csv = work / trial / f"seq{i:02d}" / "mav0" / "imu0" / "data.csv"
+        csv = work / f"{trial}_{seed}" / f"seq{i:02d}" / "mav0" / "imu0" / "data.csv"
         gyro = np.loadtxt(csv, delimiter=",", skiprows=1)[:, 1:4]
         quiet = generate.lowpassed_gyro(motion.body_rate, np.random.default_rng(0), t, dt, corner, 0.0)
         clean.append((quiet, rate))
@@ -86,6 +87,7 @@ def check(trial: str, draws: int, work: Path) -> dict:
     return {
         "trial": trial,
         "truth_hz": corner,
+        "runner_seed": runner_seed,
         "seed": seed,
         "noise_free_hz": fit_corner(clean, corner),
         "realised_hz": fit_corner(realised, corner),
@@ -101,27 +103,32 @@ def check(trial: str, draws: int, work: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=200, help="fresh white-noise draws per trial")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1], help="runner seeds (`run.py --seed`)")
     ap.add_argument("--results", type=Path, default=RESULTS)
     a = ap.parse_args(argv)
     start = time.time()
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [check(trial, a.draws, Path(tmp)) for trial in TRIALS]
+        rows = [check(trial, a.draws, Path(tmp), s) for s in a.seeds for trial in TRIALS]
     machine = f"{platform.node()} ({platform.machine()}, {platform.python_version()})"
     out = {"rows": rows, "wall_s": time.time() - start, "machine": machine}
     write_json(a.results / "blind_corner_check.json", out)
+    seeds = " ".join(map(str, a.seeds))
     lines = [
         "# The low-pass corner: model against the blind generator, gyro side only",
         "",
-        f"`python benchmarks/blind_discrepancy/corner_check.py --draws {a.draws}` ({out['wall_s']:.0f} s, {machine}). "
-        "Least-squares corner of each trial's 3 fitted sequences (default seed) against the model's low-pass of the "
-        "true rate; the fresh draws keep the motion and draw the white noise anew.",
+        f"`python benchmarks/blind_discrepancy/corner_check.py --draws {a.draws} --seeds {seeds}` "
+        f"({out['wall_s']:.0f} s, {machine}). "
+        "Least-squares corner of each trial's 3 fitted sequences (runner seed as listed) against the model's low-pass "
+        "of the true rate; the fresh draws keep the motion and draw the white noise anew.",
         "",
-        "| trial | truth (Hz) | noise-free | realised (runner's gyro) | fresh draws: mean ± se (sd) | below truth |",
-        "|---|---|---|---|---|---|",
+        "| trial | runner seed | truth (Hz) | noise-free | realised (runner's gyro) | fresh draws: mean ± se (sd) "
+        "| below truth |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['trial']} | {r['truth_hz']:g} | {r['noise_free_hz']:.4f} | {r['realised_hz']:.4f} | "
+            f"| {r['trial']} | {r['runner_seed']} | {r['truth_hz']:g} | {r['noise_free_hz']:.4f} | "
+            f"{r['realised_hz']:.4f} | "
             f"{r['fresh_mean_hz']:.4f} ± {r['fresh_se_hz']:.4f} ({r['fresh_sd_hz']:.4f}) | "
             f"{r['fresh_share_below']:.0%} of {r['fresh_draws']} |"
         )

@@ -45,6 +45,7 @@ import generate  # noqa: E402
 from gyrodenoise.discrepancy import rank  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_contexts  # noqa: E402
 from gyrodenoise.discrepancy.design import Design, sensor_view  # noqa: E402
+from gyrodenoise.discrepancy.spectral import CORNER_XATOL  # noqa: E402
 
 TRIAL = "sensor_lowpass_25hz"
 TRUE_HZ = 25.0
@@ -231,7 +232,8 @@ def main(argv=None) -> int:
         "Reading: g > Dq means the correction is LARGER than the realised drop (not short). 'workflow objective -"
         " realised-drop objective' is the corner bias the correction's error implies; 'uncorrected - workflow"
         " objective' is what the whole correction is worth. 'realised-drop - exact truth' is the mocap noise's"
-        " random cross term with the gyro residual. 'reported - re-min': the bounded search's xatol (2e-3)."
+        " random cross term with the gyro residual. 'reported - re-min': the bounded search's tolerance"
+        f" (spectral.CORNER_XATOL {CORNER_XATOL:g} in log corner)."
     )
     print(f"wall {time.time() - t0:.0f} s")
     return 0
