@@ -14,11 +14,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.fitted_model import Selection
 from gyrodenoise.discrepancy.hidden import make_measured
 from gyrodenoise.discrepancy.rank import _corner_se, select_effects, truth_error_smoothing
+from gyrodenoise.discrepancy.reconstruction import band_rows, row_frequencies
+from gyrodenoise.discrepancy.spectral import colour_factor
 from gyrodenoise.sim.effects import SensorBandwidth, WarmupBias
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "blind_discrepancy"))
@@ -68,6 +71,22 @@ def test_low_pass_behind_a_noisy_mocap_is_named_a_low_pass(tmp_path):
     # behind a noisy mocap the floor's shape is not read in the band: the SE is the motion fit's own
     assert np.isfinite(se) and 0 < se < 0.05 * corner and abs(corner - 40.0) < 4 * se
     assert "sensor_bandwidth" not in sel.not_identifiable  # named, so not listed as untested
+    d = sel.delay_or_lowpass  # the reported SE: the profile's white SE times the colour factor (below)
+    assert se == pytest.approx(d["lowpass_corner_se_white_hz"] * d["lowpass_corner_se_colour_factor"])
+    assert 1.0 < d["lowpass_corner_se_colour_factor"] < 1.5  # the weighted band rows: nearly white
+
+
+def test_behind_an_exact_mocap_the_corner_se_takes_the_low_passed_noise_colour(tmp_path, monkeypatch):
+    """With an exact truth the residual is the gyro's low-passed noise: coloured like the motion the corner is read
+    from, so the white SE understates the corner's spread (by ~1.3-1.8 on these trials; the calibration over fresh
+    draws: benchmarks/results/blind_corner_se_calibration_exact_mocap.md)."""
+    for k in ("mocap_pos_noise_m", "mocap_rot_noise_deg"):
+        monkeypatch.setitem(generate.BASELINE, k, 0.0)
+    _, sel = _selection(tmp_path, "sensor_lowpass_25hz")
+    d = sel.delay_or_lowpass
+    assert sel.named == ["sensor_bandwidth"] and d["kept"] == "sensor_bandwidth"
+    assert d["lowpass_corner_se_colour_factor"] > 1.25
+    assert abs(d["lowpass_corner_hz"] - 25.0) < 3 * d["lowpass_corner_se_hz"]
 
 
 def test_truth_error_smoothing_is_the_noise_power_the_low_pass_removes(tmp_path):
@@ -166,3 +185,37 @@ def test_caution_when_a_searched_parameter_ends_at_the_end_of_its_search(tau, ed
             f"warmup_bias was named with tau {tau:g} s, the {edge} searched: its best value may lie beyond the search, "
             "and it may stand in for an effect the vocabulary lacks"
         ]
+
+
+def _coloured(rng: np.random.Generator, n: int, pole: float) -> np.ndarray:
+    """(n, 3) white noise through a one-pole low-pass y_t = pole y_(t-1) + x_t (pole 0: white)."""
+    return signal.lfilter([1.0], [1.0, -pole], rng.standard_normal((n, 3)), axis=0)
+
+
+@pytest.mark.parametrize("pole", [0.0, 0.6])
+def test_colour_factor_brings_a_white_se_to_the_spread_of_the_estimate(pole):
+    """A least-squares slope on a slow regressor (like the motion a corner is read from), with noise white or
+    low-passed like a sensor's: over fresh draws the slope's spread is the white SE times `colour_factor`, which is
+    1 for white noise and well above 1 for the coloured one, whose power is highest where the regressor's is (the
+    profile SE of the workflow's corner takes its rows as white)."""
+    rng = np.random.default_rng(7)
+    n, rate = 4000, 200.0
+    x = _coloured(rng, n, 0.95)  # the regressor: most of its power at low frequencies
+    f = row_frequencies(n, rate, None)
+    slopes, white, factors = [], [], []
+    for _ in range(300):
+        e = _coloured(rng, n, pole)
+        y = 0.5 * x + e
+        b = float(np.sum(x * y) / np.sum(x * x))
+        r = y - b * x
+        slopes.append(b)
+        white.append(np.sqrt(np.mean(r**2) / np.sum(x * x)))
+        if len(factors) < 20:
+            rows = band_rows(r, rate, None, force=True)
+            factors.append(colour_factor([rows], [band_rows(x, rate, None, force=True)], [f]))
+    spread, se, k = np.std(slopes, ddof=1), float(np.mean(white)), float(np.mean(factors))
+    if pole == 0.0:
+        assert k == pytest.approx(1.0, abs=0.05)
+    else:
+        assert k > 1.3 and spread > 1.3 * se  # the white SE understates the spread
+    assert spread == pytest.approx(k * se, rel=0.12)  # 300 draws: the sd's own error is ~4 %

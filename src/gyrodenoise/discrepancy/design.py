@@ -98,6 +98,18 @@ def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, 
     return Xb.reshape(-1, k), rb.reshape(-1)
 
 
+def spectral_rows(fc: FitContext, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A weighted residual r (N, 3) of sequence `fc` as the Fourier rows (M, 3) a fit weighs (`fit_rows`), with
+    each row's frequency (M,). A fit on time samples gets the whole spectrum's rows (left-out samples zeroed):
+    the same inner products (Parseval), but rows that are nearly uncorrelated even where r is not white."""
+    n, f_max = len(fc.t), fc.extra.get("band_hz")
+    if fc.extra.get("row_weights") is None and (f_max is None or f_max >= fc.rate_hz / 2):
+        x = np.where(row_mask(fc), r, 0.0)
+        return band_rows(x, fc.rate_hz, None, force=True), row_frequencies(n, fc.rate_hz, None)
+    _, rb = fit_rows(fc, np.zeros((3 * n, 1)), r.reshape(-1))  # one empty column: the shapes need k >= 1
+    return rb.reshape(-1, 3), row_frequencies(n, fc.rate_hz, f_max)
+
+
 def without_edges(fc: FitContext, Xb: np.ndarray, rb: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted Fourier rows Xb (M, 3, k) and rb (M, 3) of sequence `fc` with the reconstruction
     error's edge impulses projected out, per axis (`reconstruction.edge_rows`: the angle error's

@@ -50,6 +50,7 @@ from gyrodenoise.discrepancy.design import (
     set_reconstruction_model,
     set_row_weights,
     set_saturation_mask,
+    spectral_rows,
 )
 from gyrodenoise.discrepancy.fitted_model import Selection, fill_params, predict
 from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiability
@@ -60,6 +61,7 @@ from gyrodenoise.discrepancy.spectral import (
     CORNER_XATOL,
     BandFit,
     FloorShapeFit,
+    colour_factor,
     corner_se,
     fit_band,
     fit_floor_shape,
@@ -573,12 +575,16 @@ def _delay_or_lowpass(
     )  # fmt: skip
     u = float(res.x) if lowpass(float(res.x)) < lowpass(float(grid[k])) else float(grid[k])
     best = fits[u]
-    se = _corner_se(lowpass, u, final.n)
+    se_white = _corner_se(lowpass, u, final.n)
+    # the profile takes the rows as white; the low-pass colours the gyro's noise where the fit reads the corner
+    colour = _corner_colour_factor(fits, u, others, sigma)
     dbic = final.n * np.log(final.rss / best[0])
     out |= {
         "delta_bic_lowpass_vs_offset": float(dbic),
         "lowpass_corner_hz": best[1],
-        "lowpass_corner_se_hz": se,
+        "lowpass_corner_se_hz": se_white * colour,
+        "lowpass_corner_se_white_hz": se_white,
+        "lowpass_corner_se_colour_factor": colour,
         # what the low-pass's smoothing of the truth's error alone would have been worth (0: exact truth)
         "truth_error_smoothing_bic": float(final.n * np.log(best[0] / (best[0] - best[3]))),
     }
@@ -589,6 +595,21 @@ def _delay_or_lowpass(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+def _corner_colour_factor(fits: Mapping[float, tuple], u: float, others: list[str], sigma: np.ndarray) -> float:
+    """`spectral.colour_factor` of the low-pass fit at corner exp(u): its residual's Fourier rows and their
+    derivative in log corner, by central differences of the refits `_corner_se` made (the other effects refitted
+    at each corner, so the derivative is the profile's)."""
+    rows = {}
+    for d in (-CORNER_STEP, 0.0, CORNER_STEP):
+        design, res, views = fits[u + d][2]
+        resid = residuals_after(design, res, others, views)
+        rows[d] = [spectral_rows(fc, e / sigma) for fc, e in zip(views, resid, strict=True)]
+    slopes = [
+        -(up[0] - down[0]) / (2 * CORNER_STEP) for up, down in zip(rows[CORNER_STEP], rows[-CORNER_STEP], strict=True)
+    ]
+    return colour_factor([e for e, _ in rows[0.0]], slopes, [f for _, f in rows[0.0]])
 
 
 def _corner_se(rss_at: Callable[[float], float], u: float, n: int) -> float:

@@ -555,6 +555,36 @@ def corner_se(ll_minus: float, ll: float, ll_plus: float, u: float, h: float = C
     return float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
 
 
+def colour_factor(
+    rows: list[np.ndarray], slopes: list[np.ndarray], freqs: list[np.ndarray], smooth_hz: float = 0.5
+) -> float:
+    """How much a least-squares standard error that takes its rows as white understates the real one: the ratio
+    sqrt(sum J^2 V / sum J^2 / mean e^2) of the sandwich variance sum J^2 V / (sum J^2)^2 to s2 / sum J^2, from
+    Fourier rows e (M, 3) of the residual, the rows J (M, 3) of the fitted values' derivative in the parameter, and
+    each row's frequency (M,), one triple per sequence. V is the residual's local variance, its squared rows averaged
+    over +- `smooth_hz` (Fourier rows of a stationary residual are nearly uncorrelated, with variance its spectrum).
+    1 where the residual is white; above 1 where it has most power where J has (a low-pass colours the gyro's noise
+    like the motion it is fitted to)."""
+    num = den = ee = 0.0
+    m = 0
+    for e, J, f in zip(rows, slopes, freqs, strict=True):
+        order = np.argsort(f, kind="stable")
+        fs = f[order]
+        lo = np.searchsorted(fs, fs - smooth_hz, side="left")
+        hi = np.searchsorted(fs, fs + smooth_hz, side="right")
+        for a in range(e.shape[1]):
+            c = np.concatenate([[0.0], np.cumsum(e[order, a] ** 2)])
+            v = (c[hi] - c[lo]) / (hi - lo)  # local mean square of the rows within +- smooth_hz
+            j2 = J[order, a] ** 2
+            num += float(np.sum(j2 * v))
+            den += float(np.sum(j2))
+        ee += float(np.sum(e**2))
+        m += e.size
+    if den <= 0 or ee <= 0:
+        return 1.0
+    return float(np.sqrt(num / den / (ee / m)))
+
+
 @dataclass
 class FloorShapeFit:
     """A sensor low-pass read from the shape of the noise floor (`SensorBandwidth`)."""
