@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrodenoise.discrepancy.report import _gap_words, _raw_sample_evidence_md
+from gyrodenoise.discrepancy.report import _corner_se_words, _gap_words, _raw_sample_evidence_md
 
 
 def test_quantization_is_reported_with_its_lattice():
@@ -30,3 +30,11 @@ def test_gap_words_say_when_the_drift_grows():
     assert "residual RMS -0.3%" in text and "drift +2.2% (it grows" in text and "Allan-deviation gap -13.7%" in text
     after["drift_10s_median_deg"] = 0.6
     assert "it grows" not in _gap_words(before, after)[0]
+
+
+def test_a_corner_read_from_the_motion_says_what_its_se_is_made_of():
+    d = {"kept": "sensor_bandwidth", "lowpass_corner_se_white_hz": 0.0254, "lowpass_corner_se_colour_factor": 1.27}
+    (line,) = _corner_se_words({"delay_or_lowpass": d})
+    assert "0.0254 Hz with the rows taken as white, times 1.27" in line
+    assert _corner_se_words({"delay_or_lowpass": d | {"kept": "time_offset"}}) == []
+    assert _corner_se_words({"delay_or_lowpass": None}) == []

@@ -37,6 +37,19 @@ def _label(c: dict) -> str:
     return f"{c['name' if 'name' in c else 'effect']}" + (f" ({c['variant']})" if c.get("variant") else "")
 
 
+def _corner_se_words(report: dict) -> list[str]:
+    """Where a named low-pass's corner was read from the motion, what its standard error is made of."""
+    d = report.get("delay_or_lowpass") or {}
+    if d.get("kept") != "sensor_bandwidth" or "lowpass_corner_se_colour_factor" not in d:
+        return []
+    return [
+        f"sensor_bandwidth corner_hz: read from the motion (it replaced a time offset); its standard error is the "
+        f"fit's profile, {_fmt(d['lowpass_corner_se_white_hz'])} Hz with the rows taken as white, times "
+        f"{d['lowpass_corner_se_colour_factor']:.2f} for the residual's colour (`spectral.colour_factor`: the "
+        "low-passed noise has its power where the motion the corner is read from has)."
+    ]
+
+
 def _raw_sample_evidence_md(report: dict) -> list[str]:
     """Effects named from the raw gyro samples, not by the regression (no delta BIC): what they rest on."""
     lines = []
@@ -610,6 +623,7 @@ def markdown(report: dict) -> str:
                 "time_offset delta > 0: the IMU stamps are late (the sample stamped t holds the motion of t - delta); "
                 "< 0: early."
             )
+        lines += _corner_se_words(report)
         lines.append("")
         lines += _raw_sample_evidence_md(report)
     else:
