@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 import discrepancy_se_calibration as se_cal  # noqa: E402  (beside this script)
 
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
-from gyrodenoise.discrepancy.design import fit_rows, residuals_after, row_mask  # noqa: E402
-from gyrodenoise.discrepancy.reconstruction import band_rows, row_frequencies  # noqa: E402
+from gyrodenoise.discrepancy.design import residuals_after, spectral_rows  # noqa: E402
+from gyrodenoise.discrepancy.spectral import local_mean_square  # noqa: E402
 from gyrodenoise.discrepancy.workflow import decide  # noqa: E402
 from gyrodenoise.discrepancy.worldcases import (  # noqa: E402
     FIT_FLIGHT,
@@ -39,17 +39,12 @@ SEEDS = (2010, 2011, 2012)  # the replay seeds of `discrepancy_se_calibration.py
 
 
 def fourier_rows(fc, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted columns X (3N, k) and residual r (3N,) as the fit's Fourier rows (M, 3, k), (M, 3), frequencies (M,);
-    a fit on time samples: the whole spectrum's rows (`design.spectral_rows` for the residual alone)."""
-    n, k, f_max = len(fc.t), X.shape[1], fc.extra.get("band_hz")
-    if fc.extra.get("row_weights") is None and (f_max is None or f_max >= fc.rate_hz / 2):
-        m = row_mask(fc)
-        Xt = np.where(m[:, :, None], X.reshape(n, 3, k), 0.0).reshape(n, 3 * k)
-        Xf = band_rows(Xt, fc.rate_hz, None, force=True).reshape(-1, 3, k)
-        rf = band_rows(np.where(m, r.reshape(n, 3), 0.0), fc.rate_hz, None, force=True)
-        return Xf, rf, row_frequencies(n, fc.rate_hz, None)
-    Xb, rb = fit_rows(fc, X, r)
-    return Xb.reshape(-1, 3, k), rb.reshape(-1, 3), row_frequencies(n, fc.rate_hz, f_max)
+    """Weighted columns X (3N, k) and residual r (3N,) as the fit's Fourier rows (M, 3, k), (M, 3) and frequencies
+    (M,): `design.spectral_rows`, a linear map, applied to the residual and to each column."""
+    n = len(fc.t)
+    rf, f = spectral_rows(fc, r.reshape(n, 3))
+    Xf = np.stack([spectral_rows(fc, X[:, j].reshape(n, 3))[0] for j in range(X.shape[1])], axis=-1)
+    return Xf, rf, f
 
 
 def se_ratio(sel) -> dict[int, float]:
@@ -64,15 +59,11 @@ def se_ratio(sel) -> dict[int, float]:
         X, idx = design.local_columns(s, sel.selected)
         loc = [pos[int(g)] for g in idx]
         Xf, ef, f = fourier_rows(fc, X, (resid[s] / design.sigma).reshape(-1))
-        order = np.argsort(f, kind="stable")
-        lo = np.searchsorted(f[order], f[order] - SMOOTH_HZ)
-        hi = np.searchsorted(f[order], f[order] + SMOOTH_HZ, side="right")
+        v = local_mean_square(ef, f, SMOOTH_HZ)
         for a in range(3):
-            x = Xf[order, a, :]
-            c = np.concatenate([[0.0], np.cumsum(ef[order, a] ** 2)])
-            v = (c[hi] - c[lo]) / (hi - lo)
+            x = Xf[:, a, :]
             G[np.ix_(loc, loc)] += x.T @ x
-            B[np.ix_(loc, loc)] += (x * v[:, None]).T @ x
+            B[np.ix_(loc, loc)] += (x * v[:, a, None]).T @ x
         ee += float(np.sum(ef**2))
         m += ef.size
     w, V = np.linalg.eigh(G)

@@ -555,6 +555,20 @@ def corner_se(ll_minus: float, ll: float, ll_plus: float, u: float, h: float = C
     return float(np.exp(u) / np.sqrt(d2)) if d2 > 0 else float("nan")
 
 
+def local_mean_square(e: np.ndarray, f: np.ndarray, smooth_hz: float) -> np.ndarray:
+    """Per column of rows e (M, ...) at frequencies f (M,): each row's local variance, the mean of e^2 over the rows
+    within +- `smooth_hz` of its frequency (same shape as e)."""
+    order = np.argsort(f, kind="stable")
+    fs = f[order]
+    lo = np.searchsorted(fs, fs - smooth_hz, side="left")
+    hi = np.searchsorted(fs, fs + smooth_hz, side="right")
+    c = np.concatenate([np.zeros((1, *e.shape[1:])), np.cumsum(e[order] ** 2, axis=0)])
+    n = (hi - lo).reshape(-1, *([1] * (e.ndim - 1)))
+    out = np.empty_like(e, dtype=float)
+    out[order] = (c[hi] - c[lo]) / n
+    return out
+
+
 def colour_factor(
     rows: list[np.ndarray], slopes: list[np.ndarray], freqs: list[np.ndarray], smooth_hz: float = 0.5
 ) -> float:
@@ -568,16 +582,9 @@ def colour_factor(
     num = den = ee = 0.0
     m = 0
     for e, J, f in zip(rows, slopes, freqs, strict=True):
-        order = np.argsort(f, kind="stable")
-        fs = f[order]
-        lo = np.searchsorted(fs, fs - smooth_hz, side="left")
-        hi = np.searchsorted(fs, fs + smooth_hz, side="right")
-        for a in range(e.shape[1]):
-            c = np.concatenate([[0.0], np.cumsum(e[order, a] ** 2)])
-            v = (c[hi] - c[lo]) / (hi - lo)  # local mean square of the rows within +- smooth_hz
-            j2 = J[order, a] ** 2
-            num += float(np.sum(j2 * v))
-            den += float(np.sum(j2))
+        v = local_mean_square(e, f, smooth_hz)
+        num += float(np.sum(J**2 * v))
+        den += float(np.sum(J**2))
         ee += float(np.sum(e**2))
         m += e.size
     if den <= 0 or ee <= 0:
