@@ -21,7 +21,8 @@ Motion capture, its own clock and phase: 120 Hz, white position (0.2 mm) and ori
 written in the w >= 0 hemisphere (sign flips in the stream, as some mocap systems write them); it starts 0.3 s after
 and ends 0.3 s before the IMU.
 
-Hidden effects (one per trial, ``HiddenEffect``): see ``apply_hidden`` and ``TRIALS``.
+Hidden effects (one per trial, ``HiddenEffect``, or several at once in the compound trials): see ``make_sequence``
+and ``TRIALS``.
 """
 
 from __future__ import annotations
@@ -142,6 +143,29 @@ class HiddenEffect:
     params: dict
 
 
+RATE_EFFECTS = ("sensor_lowpass", "scale_asymmetry", "nonlinearity_even")  # each replaces the sensed rate: one at most
+
+
+def hidden_effects(hidden: HiddenEffect | tuple | None) -> dict:
+    """kind -> params of a trial's hidden effect(s): one HiddenEffect, a tuple of them (a compound trial) or None.
+    Compound trials apply them in the sensor's order (`make_sequence`); a kind twice, or two effects that each
+    replace the sensed rate, are refused."""
+    items = () if hidden is None else (hidden,) if isinstance(hidden, HiddenEffect) else tuple(hidden)
+    kinds = [h.kind for h in items]
+    if len(set(kinds)) < len(kinds) or sum(k in RATE_EFFECTS for k in kinds) > 1:
+        raise ValueError(f"hidden effects {kinds}: a kind twice, or more than one of {RATE_EFFECTS}")
+    return {h.kind: h.params for h in items}
+
+
+def answer_key_hidden(hidden: HiddenEffect | tuple | None) -> dict | list | None:
+    """The answer key's `hidden`: {kind, params} for one effect (as before compound trials), a list for several."""
+    if hidden is None:
+        return None
+    if isinstance(hidden, HiddenEffect):
+        return {"kind": hidden.kind, "params": hidden.params}
+    return [{"kind": h.kind, "params": h.params} for h in hidden]
+
+
 def temperature(t, t_on, tau_s, delta_k, osc_k, osc_period_s, phase):
     """A warming-up board: exponential approach plus a slow oscillation (air flow), kelvin above start."""
     return delta_k * (1 - np.exp(-(t + t_on) / tau_s)) + osc_k * np.sin(2 * np.pi * t / osc_period_s + phase)
@@ -194,7 +218,7 @@ IMU_HEADER = (
 MOCAP_HEADER = "#timestamp [ns], p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []"
 
 
-def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEffect | None) -> dict:
+def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEffect | tuple | None) -> dict:
     """Write one sequence; return what was drawn (baseline values and motion statistics)."""
     rng = np.random.default_rng(seed)
     motion = make_motion(rng, duration_s)
@@ -205,12 +229,11 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
     t0_ns = int(1_600_000_000_000_000_000 + rng.integers(0, 10**15))
     b = BASELINE
 
-    kind = hidden.kind if hidden is not None else "none"
-    p = hidden.params if hidden is not None else {}
+    effects = hidden_effects(hidden)
     t_meas = t
-    if kind == "time_offset":
+    if "time_offset" in effects:
         # The sample stamped t_k was measured at t_k - delay: IMU stamps late by delay_ms against the mocap.
-        t_meas = t - p["imu_stamp_late_ms"] * 1e-3
+        t_meas = t - effects["time_offset"]["imu_stamp_late_ms"] * 1e-3
 
     w_true = window_mean(motion.body_rate, t_meas, dt)
     f_true = window_mean(motion.specific_force, t_meas, dt)
@@ -222,41 +245,55 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
     ab0 = b["acc_turn_on_bias_std_m_s2"] * rng.standard_normal(3)
     an = b["acc_noise_density_m_s2_sqrtHz"] * np.sqrt(IMU_HZ) * rng.standard_normal((n, 3))
 
+    gmat = None
+    if "g_sensitivity" in effects:
+        gmat = np.asarray(effects["g_sensitivity"]["matrix_deg_s_per_g"], float) * DEG / G  # rad/s per m/s^2
     w_sensed = w_true.copy()
-    if kind == "sensor_lowpass":  # the rate and the white noise through the sensor's low-pass
-        w_sensed = lowpassed_gyro(motion.body_rate, rng, t, dt, p["corner_hz"], b["gyro_noise_density_rad_s_sqrtHz"])
-        wn = np.zeros((n, 3))
     extra = np.zeros((n, 3))
     drawn: dict = {}
-    if kind == "g_sensitivity":
-        gmat = np.asarray(p["matrix_deg_s_per_g"], float) * DEG / G  # rad/s per m/s^2
-        extra = f_true @ gmat.T
-    elif kind == "misalignment":
-        m = np.asarray(p["matrix_mrad"], float) * 1e-3
-        w_sensed = w_true @ (np.eye(3) + m).T
-    elif kind == "scale_factor":
-        w_sensed = w_true * (1.0 + np.asarray(p["scale_ppm"], float) * 1e-6)
-    elif kind == "scale_asymmetry":  # scale factor +a on positive rates, -a on negative ones, before the sample mean
-        a = np.asarray(p["asymmetry_ppm"], float) * 1e-6
+    # the effects of the instantaneous rate (at most one of them: checked by hidden_effects)
+    if "sensor_lowpass" in effects:  # the rate, the g-sensitivity and the white noise through the sensor's low-pass
+        sensed = motion.body_rate
+        if gmat is not None:  # the sensing element's g-sensitivity passes the filter with the rate
+            g_in = gmat
+            sensed = lambda tt: motion.body_rate(tt) + motion.specific_force(tt) @ g_in.T  # noqa: E731
+            gmat = None
+        corner = effects["sensor_lowpass"]["corner_hz"]
+        w_sensed = lowpassed_gyro(sensed, rng, t_meas, dt, corner, b["gyro_noise_density_rad_s_sqrtHz"])
+        wn = np.zeros((n, 3))
+    elif "scale_asymmetry" in effects:  # scale factor +a on positive rates, -a on negative ones, before the sample mean
+        a = np.asarray(effects["scale_asymmetry"]["asymmetry_ppm"], float) * 1e-6
         w_sensed = window_mean(lambda tt: (w := motion.body_rate(tt)) + a * np.abs(w), t_meas, dt)
-    elif kind == "nonlinearity_even":  # an even quadratic error k w^2 of the instantaneous rate, before the sample mean
-        k = np.asarray(p["k_ppm_per_deg_s"], float) * 1e-6 / DEG  # per rad/s
+    elif "nonlinearity_even" in effects:  # an even quadratic error k w^2 of the instantaneous rate, before the mean
+        k = np.asarray(effects["nonlinearity_even"]["k_ppm_per_deg_s"], float) * 1e-6 / DEG  # per rad/s
         w_sensed = window_mean(lambda tt: (w := motion.body_rate(tt)) + k * w**2, t_meas, dt)
-    elif kind == "vibration":
-        extra = vibration(rng, t, p["f0_hz"], p["wander_hz"], p["amp_rad_s"])
-    elif kind == "temperature_drift":
+    # linear in the sensed rate (behind a low-pass they scale its noise too: 0.3 % at most, below the noise fit's SE)
+    if "misalignment" in effects:
+        m = np.asarray(effects["misalignment"]["matrix_mrad"], float) * 1e-3
+        w_sensed = w_sensed @ (np.eye(3) + m).T
+    if "scale_factor" in effects:
+        w_sensed = w_sensed * (1.0 + np.asarray(effects["scale_factor"]["scale_ppm"], float) * 1e-6)
+    # added to the sensed rate
+    if gmat is not None:
+        extra = extra + f_true @ gmat.T
+    if "vibration" in effects:
+        p = effects["vibration"]
+        extra = extra + vibration(rng, t, p["f0_hz"], p["wander_hz"], p["amp_rad_s"])
+    if "temperature_drift" in effects:
+        p = effects["temperature_drift"]
         t_on = rng.uniform(*p["t_on_range_s"])
         temp = temperature(t, t_on, p["tau_s"], p["delta_k"], p["osc_k"], p["osc_period_s"], rng.uniform(0, 6.28))
-        extra = np.outer(temp, np.asarray(p["coeff_deg_s_per_k"]) * DEG)
+        extra = extra + np.outer(temp, np.asarray(p["coeff_deg_s_per_k"]) * DEG)
         drawn["t_on_s"] = float(t_on)
         drawn["bias_change_rad_s"] = (extra[-1] - extra[0]).tolist()
 
     gyro = w_sensed + b0 + rw + wn + extra
     acc = f_true + ab0 + an
-    if kind == "saturation":  # the output register's full scale: every sample beyond it reads the full-scale value
-        lim = p["range_deg_s"] * DEG
+    if "saturation" in effects:  # the output register's full scale: every sample beyond it reads the full-scale value
+        lim = effects["saturation"]["range_deg_s"] * DEG
         gyro = np.clip(gyro, -lim, lim)
-    if kind == "quantization":
+    if "quantization" in effects:
+        p = effects["quantization"]
         gyro = np.round(gyro / p["gyro_lsb_rad_s"]) * p["gyro_lsb_rad_s"]
         acc = np.round(acc / p["acc_lsb_m_s2"]) * p["acc_lsb_m_s2"]
 
@@ -341,6 +378,29 @@ TRIALS = {
     "nonlinearity_even": HiddenEffect("nonlinearity_even", {"k_ppm_per_deg_s": [20.0, -15.0, 30.0]}),
 }
 
+# Added at session 49, at the end (the trials above keep their seeds): several effects at once, as a real sensor has
+# them, each with the values of its single trial above. Written, with the runner's verdict rule for them, before
+# their first run.
+_ONE = {k: v for k, v in TRIALS.items() if v is not None}
+TRIALS |= {
+    # the classic calibration errors together: a full 3x3 rate matrix and a g-sensitivity
+    "calibration_triple": (_ONE["scale_factor"], _ONE["misalignment"], _ONE["g_sensitivity"]),
+    # a delay beside an effect that is linear in the rate
+    "time_offset_scale_factor": (_ONE["time_offset"], _ONE["scale_factor"]),
+    # a low-pass shapes the noise in the g-sensitivity's rows (regression SEs under coloured noise)
+    "lowpass_40hz_g_sensitivity": (_ONE["sensor_lowpass_40hz"], _ONE["g_sensitivity"]),
+    # both ways a gyro lags the truth at once: the stamps and the sensor's filter
+    "lowpass_40hz_time_offset": (_ONE["sensor_lowpass_40hz"], _ONE["time_offset"]),
+    # a consumer MEMS gyro: filter, axes, scale, g-sensitivity and a 16-bit output at +-2000 deg/s
+    "consumer_imu": (
+        _ONE["sensor_lowpass_40hz"],
+        _ONE["misalignment"],
+        _ONE["scale_factor"],
+        _ONE["g_sensitivity"],
+        _ONE["quantization"],
+    ),
+}
+
 
 def make_trial(root: Path, trial: str, n_seqs: int, duration_s: float, seed: int) -> list[dict]:
     hidden = TRIALS[trial]
@@ -364,7 +424,7 @@ def main(argv=None):
         root = a.out / trial
         drawn = make_trial(root, trial, a.n_seqs, a.duration, a.seed + list(TRIALS).index(trial))
         h = TRIALS[trial]
-        key = {"trial": trial, "hidden": None if h is None else {"kind": h.kind, "params": h.params}}
+        key = {"trial": trial, "hidden": answer_key_hidden(h)}
         key["baseline"] = BASELINE
         key["sequences"] = drawn
         (root / "answer_key.json").write_text(json.dumps(key, indent=1))

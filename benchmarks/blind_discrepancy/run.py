@@ -11,6 +11,11 @@ gyro's datasheet white noise as --gyro-noise-density), and scores what it named 
 - verdict: PASS = named exactly the hidden effect and its magnitude agrees (chi-square p >= 0.01, or relative error
   under REL_TOL where no standard error is reported); MAGNITUDE OFF = named, disagrees; MISS = nothing named; WRONG =
   another effect named (also with the right one: + EXTRA); the null trial: PASS or FALSE POSITIVE; CRASH = no report.
+- compound trials (several effects hidden at once; rule written with them, before their first run): PASS = named
+  exactly the hidden set, and the z of every component of every hidden effect pooled into one chi-square with p >=
+  0.01 (and every value without an SE within REL_TOL); MAGNITUDE OFF = the set named, the pooled test fails; PARTIAL =
+  some but not all of the hidden effects named (their z still reported); + EXTRA = an effect not hidden named too;
+  WRONG = none of the hidden effects named, another one is; MISS = nothing named.
 
 Writes benchmarks/results/blind_discrepancy.{md,json} (--results, --name). One trial at a time, OMP_NUM_THREADS=1:
 
@@ -51,11 +56,25 @@ BASE = "bias,white_noise,bias_random_walk"  # the baseline sensor model of gener
 REL_TOL = {"step": 1e-4, "corner_hz": 0.25, "limit": 1e-4}  # limit: a saturation's plateau (session 44, before its run)
 
 
-def expected(trial: str, key: dict) -> tuple[str | None, dict]:
-    """The workflow's name for the hidden effect and the truth in its datasheet units (parameter -> array)."""
+def hidden_list(key: dict) -> list[dict]:
+    """The answer key's hidden effects as a list of {kind, params} (empty: the null trial)."""
     h = key["hidden"]
-    if h is None:
-        return None, {}
+    return [] if h is None else [h] if isinstance(h, dict) else list(h)
+
+
+def expected_all(trial: str, key: dict) -> list[tuple[str, dict]]:
+    """(the workflow's name, the truth in its datasheet units) of each hidden effect, in the key's order."""
+    return [expected_one(trial, h, key) for h in hidden_list(key)]
+
+
+def expected(trial: str, key: dict) -> tuple[str | None, dict]:
+    """The workflow's name for a single-effect trial's hidden effect and its truth (None, {}: the null trial)."""
+    found = expected_all(trial, key)
+    return found[0] if found else (None, {})
+
+
+def expected_one(trial: str, h: dict, key: dict) -> tuple[str, dict]:
+    """The workflow's name for one hidden effect and the truth in its datasheet units (parameter -> array)."""
     p, kind = h["params"], h["kind"]
     if kind == "g_sensitivity":
         return "g_sensitivity", {"matrix": np.asarray(p["matrix_deg_s_per_g"])}
@@ -87,9 +106,10 @@ def expected(trial: str, key: dict) -> tuple[str | None, dict]:
 
 
 def hidden_text(trial: str, key: dict) -> str:
-    h = key["hidden"]
-    if h is None:
-        return "none"
+    return " + ".join(_one_text(h) for h in hidden_list(key)) or "none"
+
+
+def _one_text(h: dict) -> str:
     p = h["params"]
     return {
         "g_sensitivity": lambda: f"G = {np.asarray(p['matrix_deg_s_per_g']).tolist()} deg/s/g",
@@ -135,34 +155,39 @@ def diagnostic(trial: str, root: Path, key: dict, report: dict | None) -> str:
 
 
 def score(trial: str, key: dict, report: dict | None) -> dict:
-    name, truth = expected(trial, key)
+    hidden = dict(expected_all(trial, key))  # name -> truth
     if report is None:
         return {"named": None, "verdict": "CRASH", "fit": ""}
     named = [e["name"] for e in report["named_effects"]]
     out = {"named": named, "fit": "", "z": None, "chi2_p": None}
-    if name is None:
+    if not hidden:
         out["verdict"] = "PASS" if not named else "FALSE POSITIVE"
         return out
     if not named:
         out["verdict"] = "MISS"
         return out
-    if name not in named:
+    right = [n for n in named if n in hidden]
+    extra = len(named) > len(right)
+    if not right:
         out["verdict"] = "WRONG"
         out["fit"] = "; ".join(_fmt_effect(e) for e in report["named_effects"])
         return out
-    e = next(e for e in report["named_effects"] if e["name"] == name)
     parts, zs, rel = [], [], []
-    for k, t in truth.items():
-        d = e["datasheet"].get(k)
-        if d is None:
+    for e in report["named_effects"]:
+        if e["name"] not in hidden:
             continue
-        v = np.asarray(d["value"], float)
-        se = np.asarray(d.get("standard_error") if d.get("standard_error") is not None else np.nan, float)
-        parts.append(f"{k} {_arr(v)} +- {_arr(se)} {d['unit']} (truth {_arr(t)})")
-        if np.all(se > 0):
-            zs.append(((v - t) / se).ravel())
-        else:
-            rel.append((float(np.max(np.abs(v - t) / np.abs(t))), REL_TOL.get(k, 1e-4)))
+        for k, t in hidden[e["name"]].items():
+            d = e["datasheet"].get(k)
+            if d is None:
+                continue
+            v = np.asarray(d["value"], float)
+            se = np.asarray(d.get("standard_error") if d.get("standard_error") is not None else np.nan, float)
+            label = f"{e['name']} {k}" if len(hidden) > 1 else k
+            parts.append(f"{label} {_arr(v)} +- {_arr(se)} {d['unit']} (truth {_arr(t)})")
+            if np.all(se > 0):
+                zs.append(((v - t) / se).ravel())
+            else:
+                rel.append((float(np.max(np.abs(v - t) / np.abs(t))), REL_TOL.get(k, 1e-4)))
     out["fit"] = "; ".join(parts)
     ok = True
     if zs:
@@ -175,7 +200,13 @@ def score(trial: str, key: dict, report: dict | None) -> dict:
         out["rel_error"] = max(r for r, _ in rel)
         out["fit"] += f"; rel. error {out['rel_error']:.2g} (no SE; tolerance {max(t for _, t in rel):g})"
         ok = ok and all(r < tol for r, tol in rel)
-    out["verdict"] = ("PASS" if ok else "MAGNITUDE OFF") + (" + EXTRA" if len(named) > 1 else "")
+    if len(right) < len(hidden):
+        out["missed"] = [n for n in hidden if n not in right]
+        out["fit"] += f"; not named: {', '.join(out['missed'])}"
+        base = "PARTIAL"
+    else:
+        base = "PASS" if ok else "MAGNITUDE OFF"
+    out["verdict"] = base + (" + EXTRA" if extra else "")
     return out
 
 
@@ -253,7 +284,7 @@ def main(argv=None) -> None:
         seed = a.seed + list(generate.TRIALS).index(trial)
         drawn = generate.make_trial(root, trial, a.n_seqs, a.duration, seed)
         h = generate.TRIALS[trial]
-        key = {"trial": trial, "seed": seed, "hidden": None if h is None else {"kind": h.kind, "params": h.params}}
+        key = {"trial": trial, "seed": seed, "hidden": generate.answer_key_hidden(h)}
         key |= {"baseline": generate.BASELINE, "sequences": drawn}
         (root / "answer_key.json").write_text(json.dumps(key, indent=1))  # before the workflow sees the data
         out = a.work / "reports" / trial
@@ -327,7 +358,9 @@ def main(argv=None) -> None:
         f" {', '.join(holdout)}. The answer key (`answer_key.json`) is written beside the data before the run.",
         "",
         "Verdicts (rule in the runner's docstring): PASS = exactly the hidden effect named and its estimate agrees"
-        " with the truth (chi-square of z = (estimate - truth) / reported SE, p >= 0.01); null: PASS = nothing named.",
+        " with the truth (chi-square of z = (estimate - truth) / reported SE, p >= 0.01); null: PASS = nothing named;"
+        " compound trials (several effects hidden): PASS = exactly the hidden set named and the pooled chi-square of"
+        " all their components p >= 0.01, PARTIAL = some of them named.",
         "",
         "The last column is what the report shows beside its verdict without naming an effect: narrow lines of the"
         " raw gyro above the band the truth can judge (`gyrodenoise.discrepancy.gyro_lines`; one in every fitted"
