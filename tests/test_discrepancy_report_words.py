@@ -38,3 +38,16 @@ def test_a_corner_read_from_the_motion_says_what_its_se_is_made_of():
     assert "0.0254 Hz with the rows taken as white, times 1.27" in line
     assert _corner_se_words({"delay_or_lowpass": d | {"kept": "time_offset"}}) == []
     assert _corner_se_words({"delay_or_lowpass": None}) == []
+
+
+def test_a_corner_read_beside_a_time_offset_says_both_parts_of_its_se():
+    d = {
+        "kept": "both",
+        "delay_s": 0.00797,
+        "both_corner_se_white_hz": 3.03,
+        "both_corner_se_colour_factor": 0.97,
+        "both_delay_se_from_corner_s": 0.000335,
+    }
+    (line,) = _corner_se_words({"delay_or_lowpass": d})
+    assert "beside a time offset" in line and "7.97 ms" in line
+    assert "3.03 Hz with the rows taken as white, times 0.97" in line and "corner's part, 0.335 ms" in line

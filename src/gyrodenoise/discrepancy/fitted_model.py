@@ -92,6 +92,17 @@ class Selection:
             return out
         dbic, thr = d["delta_bic_lowpass_vs_offset"], d["threshold"]
         margin, spread = abs(dbic - thr), 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
+        if d["kept"] == "both":  # the pair against the better one of them: the droop at the pair's corner
+            margin = abs(d["delta_bic_both_vs_one"] - thr)
+            spread = 2.0 * np.sqrt(max(d["both_expected_delta_bic"], 0.0))
+            if margin >= spread:
+                return out
+            return out + [
+                f"sensor_bandwidth ({d['both_corner_hz']:.1f} Hz) with time_offset ({1e3 * d['both_delay_s']:.2f} ms) "
+                f"was preferred to one of them alone by a margin of {margin:.0f} in delta BIC (threshold {thr:g}, "
+                f"after charging the low-pass {d['truth_error_smoothing_bic']:.0f} for smoothing the ground truth's "
+                f"own noise), within the statistic's spread on this motion (~{spread:.0f}): it may be one of them"
+            ]
         if margin >= spread:
             return out
         delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
@@ -160,6 +171,12 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         by_motion = sel.delay_or_lowpass or {}
         if by_motion.get("kept") == "sensor_bandwidth":
             se = by_motion["lowpass_corner_se_hz"]
+        elif by_motion.get("kept") == "both":
+            # beside a time offset: the pair's profile; the offset's SE takes the corner's part (they share the delay)
+            se = by_motion["both_corner_se_hz"]
+            off = sel.se.get("time_offset", {}).get("delta")
+            if off is not None:
+                sel.se["time_offset"]["delta"] = np.hypot(off, by_motion["both_delay_se_from_corner_s"])
         else:
             prof = FloorShapeProfile(
                 resid_all, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), None, nuisance_of(fcs), named=True

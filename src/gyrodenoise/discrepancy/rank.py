@@ -32,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import optimize
-from scipy.signal import freqz
 
 from gyrodenoise.discrepancy.compare import window_drift_deg
 from gyrodenoise.discrepancy.design import (
@@ -455,7 +454,7 @@ def select_effects(
         design, final, view, delay_lp = _delay_or_lowpass(
             design, final, effects, selected, sigma, fcs, thresholds.get("sensor_bandwidth", bic_threshold)
         )
-        if delay_lp is not None and delay_lp["kept"] == "sensor_bandwidth":
+        if delay_lp is not None and delay_lp["kept"] in ("sensor_bandwidth", "both"):
             design, final = _recheck_after_lowpass(design, final, selected, base, thresholds, bic_threshold, steps)
             if "vibration" in selected and effects["vibration"].stochastic:  # the low-pass shapes the floor now
                 lp = float(effects["sensor_bandwidth"].params["corner_hz"])
@@ -533,13 +532,16 @@ def _delay_or_lowpass(
     """A named time offset that delays (IMU stamps late) is also what a sensor low-pass does at low
     frequencies. The expected delta BIC between the two on this motion (`delay_or_lowpass`) says
     whether the data can tell them apart; if not, the selection keeps the time offset and reports
-    the equivalence (delay and equivalent corner). If so, both are fitted (the low-pass's corner
-    searched, no time offset) and the better one by BIC (by at least `threshold`) is kept.
+    the equivalence (delay and equivalent corner). If so, three explanations are fitted, each corner
+    searched: the low-pass alone (no time offset), and the low-pass with a time offset beside it
+    (a sensor's filter and late stamps at once: the droop reads the corner, the offset takes the rest
+    of the delay). The pair is kept if it beats the better single explanation by `threshold` in BIC
+    (one parameter more); else the low-pass replaces the offset if it beats it by `threshold`.
 
     A low-pass applied to a reconstructed true rate also smooths that rate's own error (ground-truth
     noise, `reconstruction`), which the sensor never saw: under either explanation that lowers the
     low-pass's residual by about the error power it removes (`truth_error_smoothing`), so that
-    amount is added back to the low-pass's residual before the two are compared.
+    amount is added back to the low-pass's residual before the explanations are compared.
     Returns the (possibly new) design, fit, sensor view of `fcs` and the numbers."""
     delta = float(final.coef[design.cols["time_offset"]][0])
     view = design.fcs
@@ -551,33 +553,11 @@ def _delay_or_lowpass(
     if not dol.separable:
         return design, final, view, out
     others = [n for n in selected if n != "time_offset"]
-    fits: dict[float, tuple] = {}
-
-    def lowpass(u: float) -> float:
-        """rss + truth-error smoothing of the low-pass of corner exp(u), no time offset (fits cached)."""
-        if u not in fits:
-            c = float(np.exp(u))
-            v = [sensor_view(fc, c) for fc in fcs]
-            # the design kept if the low-pass wins holds it too (stochastic: no columns), as every
-            # selected effect's design does: `fill_params` asks it for the columns of all of them
-            d = Design(v, {n: effects[n] for n in [*others, "sensor_bandwidth"]}, sigma)
-            r = d.fit(others)
-            g = float(truth_error_smoothing(fcs, sigma, np.array([c]))[0])
-            fits[u] = (r.rss + g, c, (d, r, v), g)
-        return fits[u][0]
-
-    # a coarse grid around the delay's equivalent corner, then a bounded search between its neighbours
-    grid = np.log(dol.corner_hz * np.geomspace(0.25, 4.0, 17))
-    k = int(np.argmin([lowpass(float(u)) for u in grid]))
-    res = optimize.minimize_scalar(
-        lowpass, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
-        options={"xatol": CORNER_XATOL},
-    )  # fmt: skip
-    u = float(res.x) if lowpass(float(res.x)) < lowpass(float(grid[k])) else float(grid[k])
-    best = fits[u]
-    se_white = _corner_se(lowpass, u, final.n)
-    # the profile takes the rows as white; the low-pass colours the gyro's noise where the fit reads the corner
-    colour = _corner_colour_factor(fits, u, others, sigma)
+    alone = _LowpassProfile(fcs, effects, others, sigma)
+    # a coarse grid around the delay's equivalent corner (the low-pass alone); with an offset beside it the
+    # corner is above that (the offset takes the rest of the delay) or a little below it (stamps early)
+    u, se_white, colour = alone.search(np.log(dol.corner_hz * np.geomspace(0.25, 4.0, 17)), final.n)
+    best = alone.fits[u]
     dbic = final.n * np.log(final.rss / best[0])
     out |= {
         "delta_bic_lowpass_vs_offset": float(dbic),
@@ -588,6 +568,43 @@ def _delay_or_lowpass(
         # what the low-pass's smoothing of the truth's error alone would have been worth (0: exact truth)
         "truth_error_smoothing_bic": float(final.n * np.log(best[0] / (best[0] - best[3]))),
     }
+    pair = _LowpassProfile(fcs, effects, selected, sigma, total_delay_s=delta)
+    secant_at = effects["time_offset"].delta_ref
+    uj, se_white_j, colour_j = pair.search(np.log(dol.corner_hz * np.geomspace(0.5, 16.0, 21)), final.n)
+    joint = pair.fits[uj]
+    dbic_pair = final.n * np.log(min(final.rss, best[0]) / joint[0]) - np.log(final.n)
+    out["delta_bic_both_vs_one"] = float(dbic_pair)
+    if dbic_pair >= threshold:
+        d, r, v = joint[2]
+        # the offset moves with the corner (the two share the delay): its SE takes the corner's part,
+        # var = var(offset | corner) + (d offset / d log corner)^2 var(log corner)
+        slope = (pair.coef("time_offset", uj + CORNER_STEP) - pair.coef("time_offset", uj - CORNER_STEP)) / (
+            2 * CORNER_STEP
+        )
+        se_u = se_white_j * colour_j / joint[1]
+        out |= {
+            "kept": "both",
+            "both_corner_hz": joint[1],
+            "both_corner_se_hz": se_white_j * colour_j,
+            "both_corner_se_white_hz": se_white_j,
+            "both_corner_se_colour_factor": colour_j,
+            "both_delay_s": pair.coef("time_offset", uj),
+            "both_delay_se_from_corner_s": float(abs(slope) * se_u),
+            # the droop's information at that corner, at the pair's residual variance: the spread of the statistic
+            # that chose the pair (`cautions`)
+            "both_expected_delta_bic": delay_or_lowpass(
+                design,
+                selected,
+                joint[2][1].rss / max(joint[2][1].n - joint[2][1].k, 1),
+                1 / (2 * np.pi * joint[1]),
+                threshold,
+            ).expected_delta_bic,
+        }
+        selected.append("sensor_bandwidth")
+        effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(joint[1])
+        pair(uj)  # the kept design's secant: later designs built from `effects` take the same regressor
+        return d, r, v, out
+    effects["time_offset"].delta_ref = secant_at  # the offset alone's regressor again (the pair's was per corner)
     if dbic < threshold:
         return design, final, view, out
     selected.remove("time_offset")
@@ -595,6 +612,63 @@ def _delay_or_lowpass(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+class _LowpassProfile:
+    """The fit of the regression effects `fitted` seen through a sensor low-pass of corner exp(u), as a function of
+    u: rss plus the truth-error smoothing charge (`truth_error_smoothing`), cached per u as (rss + charge, corner,
+    (design, fit, view), charge). The design holds the low-pass too (stochastic: no columns), as every selected
+    effect's design does: `fill_params` asks it for the columns of all of them.
+
+    `total_delay_s`: a time offset is fitted beside the low-pass, and its regressor (`TimeOffset`, a secant through
+    w(t - delta_ref)) is taken at the delay the low-pass leaves to it, total_delay_s - 1 / (2 pi corner). A secant
+    taken at the whole delay would droop by itself where the fitted offset is shorter (the mean of w(t) and
+    w(t - 2 delta) is a low-pass), and the corner would take what is left of the droop."""
+
+    def __init__(
+        self,
+        fcs: list[FitContext],
+        effects: dict[str, Effect],
+        fitted: list[str],
+        sigma: np.ndarray,
+        total_delay_s: float | None = None,
+    ):
+        self.fcs, self.effects, self.fitted, self.sigma = fcs, effects, list(fitted), sigma
+        self.total_delay_s = total_delay_s
+        self.fits: dict[float, tuple] = {}
+
+    def __call__(self, u: float) -> float:
+        c = float(np.exp(u))
+        if self.total_delay_s is not None:
+            offset = self.effects["time_offset"]
+            offset.delta_ref = float(
+                np.clip(self.total_delay_s - 1 / (2 * np.pi * c), *(-offset.PRIOR[1], offset.PRIOR[1]))
+            )
+        if u not in self.fits:
+            v = [sensor_view(fc, c) for fc in self.fcs]
+            d = Design(v, {n: self.effects[n] for n in [*self.fitted, "sensor_bandwidth"]}, self.sigma)
+            r = d.fit(self.fitted)
+            g = float(truth_error_smoothing(self.fcs, self.sigma, np.array([c]))[0])
+            self.fits[u] = (r.rss + g, c, (d, r, v), g)
+        return self.fits[u][0]
+
+    def search(self, grid: np.ndarray, n: int) -> tuple[float, float, float]:
+        """The best log corner: the grid's, then a bounded search between its neighbours; with its profile standard
+        error (rows taken as white) and the colour factor of its residual (`_corner_colour_factor`)."""
+        k = int(np.argmin([self(float(u)) for u in grid]))
+        res = optimize.minimize_scalar(
+            self, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
+            options={"xatol": CORNER_XATOL},
+        )  # fmt: skip
+        u = float(res.x) if self(float(res.x)) < self(float(grid[k])) else float(grid[k])
+        se_white = _corner_se(self, u, n)
+        return u, se_white, _corner_colour_factor(self.fits, u, self.fitted, self.sigma)
+
+    def coef(self, name: str, u: float) -> float:
+        """The first coefficient of effect `name` in the fit at log corner u."""
+        self(u)
+        d, r, _ = self.fits[u][2]
+        return float(r.coef[d.cols[name]][0])
 
 
 def _corner_colour_factor(fits: Mapping[float, tuple], u: float, others: list[str], sigma: np.ndarray) -> float:
@@ -705,7 +779,6 @@ def truth_error_smoothing(fcs: list[FitContext], sigma: np.ndarray, corners: np.
         f = row_frequencies(len(fc.t), fc.rate_hz, fc.extra.get("band_hz"))
         power = np.sum(kappa * b.noise_psd(f) * (fc.rate_hz / 2) / sigma**2 * w**2, axis=1)
         for i, c in enumerate(corners):
-            num, den = SensorBandwidth._discrete(float(c), fc.rate_hz)
-            h2 = np.abs(freqz(num, den, worN=f, fs=fc.rate_hz)[1]) ** 2
+            h2 = np.abs(SensorBandwidth.response(f, float(c))) ** 2
             out[i] += float(np.sum((1.0 - h2) * power))
     return out

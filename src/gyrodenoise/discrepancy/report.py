@@ -40,6 +40,14 @@ def _label(c: dict) -> str:
 def _corner_se_words(report: dict) -> list[str]:
     """Where a named low-pass's corner was read from the motion, what its standard error is made of."""
     d = report.get("delay_or_lowpass") or {}
+    if d.get("kept") == "both":
+        return [
+            f"sensor_bandwidth corner_hz: read from the motion's droop beside a time offset (the two share the delay "
+            f"the motion shows, {_fmt(1e3 * d['delay_s'])} ms); its standard error is the pair's profile, "
+            f"{_fmt(d['both_corner_se_white_hz'])} Hz with the rows taken as white, times "
+            f"{d['both_corner_se_colour_factor']:.2f} for the residual's colour; the time offset's standard error "
+            f"includes the corner's part, {_fmt(1e3 * d['both_delay_se_from_corner_s'])} ms."
+        ]
     if d.get("kept") != "sensor_bandwidth" or "lowpass_corner_se_colour_factor" not in d:
         return []
     return [
