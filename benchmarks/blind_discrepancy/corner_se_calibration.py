@@ -66,15 +66,22 @@ def calibration(z: np.ndarray) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--draws", type=int, default=40)
-    ap.add_argument("--first-seed", type=int, default=5000, help="generator seeds first-seed + k (fresh)")
+def draw_args(doc: str, draws: int, first_seed: int, argv: list[str] | None) -> argparse.Namespace:
+    """The fresh-draw scripts' options (draws, first seed, mocap noise, output stem); the generator's mocap noise is
+    scaled here, before any draw."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=draws)
+    ap.add_argument("--first-seed", type=int, default=first_seed, help="generator seeds first-seed + k (fresh)")
     ap.add_argument("--mocap-noise-scale", type=float, default=1.0, help="the mocap's noise x this (0: exact)")
     ap.add_argument("--out", type=Path, help="results stem (.md, .json); default: print only")
     a = ap.parse_args(argv)
     for k in ("mocap_pos_noise_m", "mocap_rot_noise_deg"):
         generate.BASELINE[k] *= a.mocap_noise_scale
+    return a
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = draw_args(__doc__, 40, 5000, argv)
     t0 = time.time()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

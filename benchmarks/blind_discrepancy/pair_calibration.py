@@ -12,7 +12,6 @@ two share the delay the motion shows, so their z move together: the table gives 
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import sys
@@ -25,7 +24,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import generate  # noqa: E402  (beside this script)
-from corner_se_calibration import BASE, CANDIDATES, DURATION_S, N_FIT, calibration  # noqa: E402
+from corner_se_calibration import BASE, CANDIDATES, DURATION_S, N_FIT, calibration, draw_args  # noqa: E402
 
 from gyrodenoise.atomic import write_json, write_text  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
@@ -51,14 +50,7 @@ def one_draw(seed: int, work: Path) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--draws", type=int, default=20)
-    ap.add_argument("--first-seed", type=int, default=6000, help="generator seeds first-seed + k (fresh)")
-    ap.add_argument("--mocap-noise-scale", type=float, default=1.0, help="the mocap's noise x this (0: exact)")
-    ap.add_argument("--out", type=Path, help="results stem (.md, .json); default: print only")
-    a = ap.parse_args(argv)
-    for k in ("mocap_pos_noise_m", "mocap_rot_noise_deg"):
-        generate.BASELINE[k] *= a.mocap_noise_scale
+    a = draw_args(__doc__, 20, 6000, argv)
     t0 = time.time()
     with tempfile.TemporaryDirectory() as tmp:
         rows = []
