@@ -80,6 +80,15 @@ def draw_args(doc: str, draws: int, first_seed: int, argv: list[str] | None) -> 
     return a
 
 
+def write_results(out: Path | None, lines: list[str], record: dict) -> None:
+    """Print the table; with an output stem, write it (.md) and the runs (.json), each atomically."""
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if out:
+        write_json(out.with_suffix(".json"), record)
+        write_text(out.with_suffix(".md"), text)
+
+
 def main(argv: list[str] | None = None) -> int:
     a = draw_args(__doc__, 40, 5000, argv)
     t0 = time.time()
@@ -114,11 +123,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{calibration(z)} | {np.median([r['colour_factor'] for r in got]):.2f} |"
         )
     lines += ["", "Calibrated: RMS z ~1, ~68 % within 1, ~95 % within 2, mean z ~0."]
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if a.out:
-        write_json(a.out.with_suffix(".json"), {"command": cmd, "machine": machine, "wall_s": wall, "rows": rows})
-        write_text(a.out.with_suffix(".md"), text)
+    write_results(a.out, lines, {"command": cmd, "machine": machine, "wall_s": wall, "rows": rows})
     return 0
 
 

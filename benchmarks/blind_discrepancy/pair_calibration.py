@@ -24,9 +24,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import generate  # noqa: E402  (beside this script)
-from corner_se_calibration import BASE, CANDIDATES, DURATION_S, N_FIT, calibration, draw_args  # noqa: E402
+from corner_se_calibration import BASE, CANDIDATES, DURATION_S, N_FIT, calibration, draw_args, write_results  # noqa: E402
 
-from gyrodenoise.atomic import write_json, write_text  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
 from gyrodenoise.discrepancy.rank import select_effects  # noqa: E402
 
@@ -84,11 +83,7 @@ def main(argv: list[str] | None = None) -> int:
             "",
             "Calibrated: RMS z ~1, ~68 % within 1, ~95 % within 2, mean z ~0.",
         ]
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if a.out:
-        write_json(a.out.with_suffix(".json"), {"command": cmd, "machine": machine, "wall_s": wall, "rows": rows})
-        write_text(a.out.with_suffix(".md"), text)
+    write_results(a.out, lines, {"command": cmd, "machine": machine, "wall_s": wall, "rows": rows})
     return 0
 
 
