@@ -255,9 +255,7 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
     if "sensor_lowpass" in effects:  # the rate, the g-sensitivity and the white noise through the sensor's low-pass
         sensed = motion.body_rate
         if gmat is not None:  # the sensing element's g-sensitivity passes the filter with the rate
-            g_in = gmat
-            sensed = lambda tt: motion.body_rate(tt) + motion.specific_force(tt) @ g_in.T  # noqa: E731
-            gmat = None
+            sensed = lambda tt: motion.body_rate(tt) + motion.specific_force(tt) @ gmat.T  # noqa: E731
         corner = effects["sensor_lowpass"]["corner_hz"]
         w_sensed = lowpassed_gyro(sensed, rng, t_meas, dt, corner, b["gyro_noise_density_rad_s_sqrtHz"])
         wn = np.zeros((n, 3))
@@ -273,8 +271,8 @@ def make_sequence(out_dir: Path, seed: int, duration_s: float, hidden: HiddenEff
         w_sensed = w_sensed @ (np.eye(3) + m).T
     if "scale_factor" in effects:
         w_sensed = w_sensed * (1.0 + np.asarray(effects["scale_factor"]["scale_ppm"], float) * 1e-6)
-    # added to the sensed rate
-    if gmat is not None:
+    # added to the sensed rate (behind a low-pass the g-sensitivity went through it above)
+    if gmat is not None and "sensor_lowpass" not in effects:
         extra = extra + f_true @ gmat.T
     if "vibration" in effects:
         p = effects["vibration"]

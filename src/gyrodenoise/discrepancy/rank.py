@@ -31,7 +31,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from gyrodenoise.discrepancy.compare import window_drift_deg
 from gyrodenoise.discrepancy.design import (
@@ -57,7 +56,6 @@ from gyrodenoise.discrepancy.reconstruction import row_frequencies
 from gyrodenoise.discrepancy.spectral import (
     BAND_PARAMS,
     CORNER_STEP,
-    CORNER_XATOL,
     BandFit,
     FloorShapeFit,
     colour_factor,
@@ -65,6 +63,7 @@ from gyrodenoise.discrepancy.spectral import (
     fit_band,
     fit_floor_shape,
     fit_nuisance,
+    search_log_corner,
 )
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import EFFECTS, Effect, Saturation, SensorBandwidth
@@ -652,14 +651,9 @@ class _LowpassProfile:
         return self.fits[u][0]
 
     def search(self, grid: np.ndarray, n: int) -> tuple[float, float, float]:
-        """The best log corner: the grid's, then a bounded search between its neighbours; with its profile standard
-        error (rows taken as white) and the colour factor of its residual (`_corner_colour_factor`)."""
-        k = int(np.argmin([self(float(u)) for u in grid]))
-        res = optimize.minimize_scalar(
-            self, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]), method="bounded",
-            options={"xatol": CORNER_XATOL},
-        )  # fmt: skip
-        u = float(res.x) if self(float(res.x)) < self(float(grid[k])) else float(grid[k])
+        """The best log corner on `grid` (`spectral.search_log_corner`), with its profile standard error (rows taken
+        as white) and the colour factor of its residual (`_corner_colour_factor`)."""
+        u = search_log_corner(self, grid)
         se_white = _corner_se(self, u, n)
         return u, se_white, _corner_colour_factor(self.fits, u, self.fitted, self.sigma)
 

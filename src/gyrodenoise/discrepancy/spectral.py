@@ -548,6 +548,20 @@ CORNER_STEP = 0.02  # step in log corner of the central differences of a profile
 CORNER_XATOL = 1e-4
 
 
+def search_log_corner(fun: Callable[[float], float], grid: np.ndarray) -> float:
+    """The log corner that minimises `fun`: the grid's best, then a bounded search between its neighbours (to
+    CORNER_XATOL); the grid's best where the search does not improve on it."""
+    vals = [fun(float(u)) for u in grid]
+    k = int(np.argmin(vals))
+    res = optimize.minimize_scalar(
+        fun,
+        bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]),
+        method="bounded",
+        options={"xatol": CORNER_XATOL},
+    )
+    return float(res.x) if res.fun < vals[k] else float(grid[k])
+
+
 def corner_se(ll_minus: float, ll: float, ll_plus: float, u: float, h: float = CORNER_STEP) -> float:
     """Standard error (Hz) of a corner exp(u) from a profile log-likelihood at u - h, u, u + h (u = log corner):
     exp(u) / sqrt(-d2 ll / du2), by central differences; nan where the profile is not curved down."""
@@ -685,16 +699,7 @@ def fit_floor_shape(
         c = float(np.exp(u))
         return -(prof.loglik(c) + (extra(c) if extra else 0.0))
 
-    grid = np.log(prof.corner_grid())
-    vals = [neg(u) for u in grid]
-    k = int(np.argmin(vals))
-    res = optimize.minimize_scalar(
-        neg,
-        bounds=(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]),
-        method="bounded",
-        options={"xatol": CORNER_XATOL},
-    )
-    u = float(res.x) if res.fun < vals[k] else float(grid[k])
+    u = search_log_corner(neg, np.log(prof.corner_grid()))
     fit = prof.fit(float(np.exp(u)))
     fit.extra_loglik = float(extra(fit.corner_hz)) if extra else 0.0
     return fit

@@ -528,11 +528,11 @@ class SensorBandwidth(Effect):
     @classmethod
     def filter_rate(cls, x: np.ndarray, corner_hz: float, rate_hz: float) -> np.ndarray:
         """x (N, ...) through the continuous low-pass: its response applied to the band-limited signal whose samples
-        are x (in the Fourier domain, both ends held at their first and last values for ten time constants, so the
-        filter starts in steady state). A recursion discretised by first-order hold matches the phase but droops by
-        sinc^2(f / rate) more, the linear interpolation's own response (12 % at 40 Hz of 200): beside a free delay,
-        which takes the phase, a fitted corner read that droop and came out 15 % high (a blind trial with a low-pass
-        and a time offset at once)."""
+        are x (in the Fourier domain; each end continued by odd reflection for ten time constants and more, and the
+        ramp between the padded ends taken out and put back delayed, so the wrap-around adds no jump). A recursion
+        discretised by first-order hold matches the phase but droops by sinc^2(f / rate) more, the linear
+        interpolation's own response (12 % at 40 Hz of 200): beside a free delay, which takes the phase, a fitted
+        corner read that droop and came out 15 % high (a blind trial with a low-pass and a time offset at once)."""
         if not np.isfinite(corner_hz):
             return x
         x = np.asarray(x, dtype=np.float64)
