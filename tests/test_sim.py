@@ -27,6 +27,26 @@ def test_rate_and_acceleration_match_finite_differences(traj):
     assert np.allclose(np.linalg.norm(k0.specific_force, axis=1).mean(), G0, rtol=0.2)
 
 
+def test_sample_mean_is_the_simulators_centred_mean(traj):
+    """The detector's truth (`sample_mean`) is what the simulator's ideal gyro outputs: the rate's mean over the
+    period centred on the stamp, not the instantaneous rate (which differs by the mean's droop)."""
+    t, period = np.linspace(2, 18, 400), 1 / 200
+    fine = ((np.arange(1000) + 0.5) / 1000 - 0.5) * period  # midpoint rule on a fine grid
+    kins = [traj.evaluate(t + s) for s in fine]
+    mean = traj.sample_mean(t, period)
+    for field in ("omega", "alpha", "specific_force"):
+        want = np.mean([getattr(k, field) for k in kins], axis=0)
+        scale = np.abs(want).max()
+        assert np.abs(getattr(mean, field) - want).max() < 1e-6 * scale, field
+    inst = traj.evaluate(t)
+    # the mean differs from the instantaneous rate by its droop, T^2/24 w'' to leading order
+    h = 1e-4
+    w2 = (traj.evaluate(t + h).alpha - traj.evaluate(t - h).alpha) / (2 * h)
+    droop = mean.omega - inst.omega
+    assert np.abs(droop - period**2 / 24 * w2).max() < 1e-3 * np.abs(period**2 / 24 * w2).max()
+    assert np.allclose(mean.rot, inst.rot) and np.allclose(mean.pos, inst.pos)
+
+
 def test_vocabulary_and_datasheet_units():
     expected = {
         "bias", "bias_random_walk", "white_noise", "scale_factor", "misalignment", "g_sensitivity",

@@ -27,6 +27,7 @@ BIC at a stated reference magnitude is reported (`identifiability`).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -579,6 +580,7 @@ def _delay_or_lowpass(
     # the droop's information at the pair's corner, at the pair's residual variance: a corner the motion cannot
     # read is not named, whatever the statistic says (and it is the spread of that statistic: `cautions`)
     s2_pair = joint[2][1].rss / max(joint[2][1].n - joint[2][1].k, 1)
+    effects["time_offset"].delta_ref = pair.secant_delay(joint[1])  # the offset's regressor of the pair's fit
     droop = delay_or_lowpass(design, selected, s2_pair, 1 / (2 * np.pi * joint[1]), threshold).expected_delta_bic
     out |= {"delta_bic_both_vs_one": float(dbic_pair), "both_expected_delta_bic": float(droop)}
     if dbic_pair >= threshold and droop >= threshold:
@@ -600,7 +602,7 @@ def _delay_or_lowpass(
         }
         selected.append("sensor_bandwidth")
         effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(joint[1])
-        pair(uj)  # the kept design's secant: later designs built from `effects` take the same regressor
+        # later designs built from `effects` take the kept pair's regressor (set above, for the droop)
         return d, r, v, out
     effects["time_offset"].delta_ref = secant_at  # the offset alone's regressor again (the pair's was per corner)
     if dbic < threshold:
@@ -635,16 +637,20 @@ class _LowpassProfile:
         self.total_delay_s = total_delay_s
         self.fits: dict[float, tuple] = {}
 
+    def secant_delay(self, corner_hz: float) -> float:
+        """The delay a low-pass of this corner leaves to the offset beside it: where the offset's secant is taken."""
+        limit = self.effects["time_offset"].PRIOR[1]
+        return float(np.clip(self.total_delay_s - 1 / (2 * np.pi * corner_hz), -limit, limit))
+
     def __call__(self, u: float) -> float:
         c = float(np.exp(u))
-        if self.total_delay_s is not None:
-            offset = self.effects["time_offset"]
-            offset.delta_ref = float(
-                np.clip(self.total_delay_s - 1 / (2 * np.pi * c), *(-offset.PRIOR[1], offset.PRIOR[1]))
-            )
         if u not in self.fits:
             v = [sensor_view(fc, c) for fc in self.fcs]
-            d = Design(v, {n: self.effects[n] for n in [*self.fitted, "sensor_bandwidth"]}, self.sigma)
+            chosen = {n: self.effects[n] for n in [*self.fitted, "sensor_bandwidth"]}
+            if self.total_delay_s is not None:  # each corner's design keeps its own secant (columns are built lazily)
+                chosen["time_offset"] = copy.copy(chosen["time_offset"])
+                chosen["time_offset"].delta_ref = self.secant_delay(c)
+            d = Design(v, chosen, self.sigma)
             r = d.fit(self.fitted)
             g = float(truth_error_smoothing(self.fcs, self.sigma, np.array([c]))[0])
             self.fits[u] = (r.rss + g, c, (d, r, v), g)

@@ -116,7 +116,7 @@ def spline_noise_transfer(
     gt_rate_hz: float, rate_hz: float, knot_spacing_s: float, degree: int = 5, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(f, K_rate, K_resid): PSDs per unit orientation-noise variance (rad^2) of (a) the rate the
-    spline reconstructs from white orientation noise sampled at gt_rate_hz (evaluated at rate_hz),
+    spline reconstructs from white orientation noise sampled at gt_rate_hz (its mean over each period at rate_hz),
     (b) the fit residual of that noise at the ground-truth samples. Monte Carlo on a uniform grid.
     Small-angle noise on a quaternion spline enters the rate linearly, so a spline of the noise
     itself is the same transfer."""
@@ -129,7 +129,8 @@ def spline_noise_transfer(
     sp = make_lsq_spline(t, n, knots, k=k)
     margin = 2.0  # the spline's ends are less constrained
     ti = np.arange(t[0] + margin, t[-1] - margin, 1.0 / rate_hz)
-    rate = sp.derivative()(ti)
+    half = 0.5 / rate_hz  # the rate's mean over each IMU period, as the compared truth (`compare._context`)
+    rate = (sp(ti + half) - sp(ti - half)) / (2 * half)
     keep = (t > margin) & (t < t[-1] - margin)
     resid = (n - sp(t))[keep]
     f, k_rate = signal.welch(rate, fs=rate_hz, nperseg=int(WELCH_SECONDS * rate_hz), axis=0)

@@ -138,6 +138,20 @@ class SmoothTrajectory:
         f = np.einsum("nji,nj->ni", rot, acc - GRAVITY)
         return Kinematics(t, rot, self.pos(t), omega, alpha, acc, f)
 
+    def sample_mean(self, t: np.ndarray, period_s: float, nodes: int = 4) -> Kinematics:
+        """What an ideal integrating IMU samples at t: rate, angular acceleration and specific force are
+        their means over [t - period/2, t + period/2] (Gauss-Legendre, `nodes` points; the simulator's and
+        the test world's centred anti-alias mean), orientation and position are taken at t itself."""
+        t = np.asarray(t, dtype=np.float64)
+        x, w = np.polynomial.legendre.leggauss(nodes)
+        parts = [self.evaluate(t + 0.5 * period_s * xi) for xi in x]
+
+        def mean(field: str) -> np.ndarray:
+            return sum(wi * getattr(k, field) for wi, k in zip(w, parts, strict=True)) / 2.0
+
+        mid = self.evaluate(t)
+        return Kinematics(t, mid.rot, mid.pos, mean("omega"), mean("alpha"), mean("acc_world"), mean("specific_force"))
+
 
 # ------------------------------------------------------------------ procedural trajectories
 
