@@ -181,6 +181,22 @@ def test_effects_that_stood_in_for_the_low_pass_droop_are_removed(tmp_path, monk
     assert select().named == ["scale_factor", "sensor_bandwidth"]
 
 
+def test_a_strong_low_pass_reads_the_noise_floor_from_its_own_residual(tmp_path, monkeypatch):
+    """10 Hz behind the mocap, 3 fitted minutes. The base residual holds the low-pass's own power: read from it, the
+    sensor's floor was 80 times too high and the mocap error's level nothing, so nothing charged a low-pass for
+    smoothing the truth's noise, and a 7.4 Hz low-pass with the stamps 5.5 ms early and a scale factor was named. The
+    reconstruction model is now refitted on the selected model's residual (the low-pass included)."""
+    monkeypatch.setitem(generate.TRIALS, "lowpass_10hz", generate.HiddenEffect("sensor_lowpass", {"corner_hz": 10.0}))
+    generate.make_trial(tmp_path, "lowpass_10hz", 3, 60.0, 11)
+    fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(3)]
+    sel = select_effects(fcs, base=BASE, candidates=CANDIDATES)
+    assert sel.named == ["sensor_bandwidth"]
+    assert sel.nuisance_refit is not None
+    corner, se = float(sel.params["sensor_bandwidth"]["corner_hz"]), float(sel.se["sensor_bandwidth"]["corner_hz"])
+    assert abs(corner - 10.0) < 4 * se and se < 0.1
+    assert np.all(sel.params["white_noise"]["density"] < 2 * generate.BASELINE["gyro_noise_density_rad_s_sqrtHz"])
+
+
 @pytest.mark.parametrize(
     ("kept", "dbic", "cautioned"),
     [("sensor_bandwidth", 20.0, True), ("sensor_bandwidth", 40.0, False), ("time_offset", -2.0, True),

@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from gyrodenoise.discrepancy.compare import window_drift_deg
 from gyrodenoise.discrepancy.design import (
+    RECONSTRUCTION_KEYS,
     Design,
     FitResult,
     band_edges,
@@ -50,6 +51,7 @@ from gyrodenoise.discrepancy.design import (
     set_row_weights,
     set_saturation_mask,
     spectral_rows,
+    without_reconstruction,
 )
 from gyrodenoise.discrepancy.fitted_model import Selection, fill_params, predict
 from gyrodenoise.discrepancy.identifiability import delay_or_lowpass, identifiability
@@ -63,7 +65,6 @@ from gyrodenoise.discrepancy.spectral import (
     corner_se,
     fit_band,
     fit_floor_shape,
-    fit_nuisance,
     search_log_corner,
 )
 from gyrodenoise.sim.context import FitContext
@@ -437,18 +438,6 @@ def select_effects(
     band_check = {"thresholds": thresholds, "bic_threshold": bic_threshold, "min_gain": min_gain, "steps": steps}
     if band_vibration and "vibration" in selected and effects["vibration"].stochastic:
         design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, corner, **band_check)
-    if trusted_band and nuisance_residuals is None and corner is None:
-        resid = residuals_after(design, final, selected)
-        first = fcs[0].extra.get("nuisance_level")
-        if _nuisance_moved(fcs, resid):
-            sel = select_effects(
-                fcs, base=base, candidates=candidates, bic_threshold=bic_threshold, min_gain=min_gain,
-                min_drift_deg=min_drift_deg, max_added=max_added, rw_knot_spacing_s=rw_knot_spacing_s,
-                band_vibration=band_vibration, trusted_band=trusted_band, thresholds=thresholds, holdout=holdout,
-                nuisance_residuals=resid,
-            )  # fmt: skip
-            sel.nuisance_refit = {"first_fit": np.asarray(first).tolist(), "model": list(selected)}
-            return sel
     delay_lp = None
     if "time_offset" in selected and "sensor_bandwidth" in scorable and "sensor_bandwidth" not in selected:
         design, final, view, delay_lp = _delay_or_lowpass(
@@ -459,6 +448,23 @@ def select_effects(
             if "vibration" in selected and effects["vibration"].stochastic:  # the low-pass shapes the floor now
                 lp = float(effects["sensor_bandwidth"].params["corner_hz"])
                 design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, lp, **band_check)
+    if trusted_band and nuisance_residuals is None and corner is None:
+        # the reconstruction error's level again, on the selected model's residual (a low-pass the motion named
+        # included): the base residual holds the effects' own power, and a strong one leaves the level at nothing
+        resid = residuals_after(design, final, selected, view)
+        first = fcs[0].extra.get("nuisance_level")
+        if _nuisance_moved(fcs, resid):
+            for fc in fcs:  # the band, the floor and the level all from the selected model's residual
+                for key in RECONSTRUCTION_KEYS:
+                    fc.extra.pop(key, None)
+            sel = select_effects(
+                fcs, base=base, candidates=candidates, bic_threshold=bic_threshold, min_gain=min_gain,
+                min_drift_deg=min_drift_deg, max_added=max_added, rw_knot_spacing_s=rw_knot_spacing_s,
+                band_vibration=band_vibration, trusted_band=trusted_band, thresholds=thresholds, holdout=holdout,
+                nuisance_residuals=resid,
+            )  # fmt: skip
+            sel.nuisance_refit = {"first_fit": np.asarray(first).tolist(), "model": list(selected)}
+            return sel
     sel = Selection(
         base=base,
         selected=selected,
@@ -483,16 +489,23 @@ def select_effects(
 
 
 def _nuisance_moved(fcs: list[FitContext], residuals: list[np.ndarray]) -> bool:
-    """Whether the reconstruction error's level refitted on `residuals` differs from the one that
-    weights the rows now by more than KAPPA_TOLERANCE on some axis."""
-    old, nu = fcs[0].extra.get("nuisance_level"), nuisance_of(fcs)
-    if old is None or nu is None:
+    """Whether the reconstruction model refitted on `residuals` (band, sensor floor and the error's level,
+    `set_reconstruction_model`) differs from the one that weights the rows now by more than KAPPA_TOLERANCE in the
+    floor or the level on some axis. The base residual holds the effects' own power: a strong low-pass left the
+    floor 80 times too high and the level at nothing (10 Hz, 3 x 60 s behind the blind trials' mocap)."""
+    old_level, old_floor = fcs[0].extra.get("nuisance_level"), fcs[0].extra.get("sensor_floor")
+    if old_level is None or old_floor is None:
         return False
-    fit = fit_nuisance(residuals, fcs[0].rate_hz, row_masks(fcs), band_edges(fcs), nu)
-    if fit is None:
+    trial = [replace(fc, extra=without_reconstruction(fc.extra)) for fc in fcs]
+    if set_reconstruction_model(trial, residuals) is None:
         return False
-    ratio = np.maximum(fit[1], 1e-12) / np.maximum(old, 1e-12)
-    return bool(np.any(np.abs(np.log(ratio)) > np.log1p(KAPPA_TOLERANCE)))
+    new_level, new_floor = trial[0].extra.get("nuisance_level"), trial[0].extra.get("sensor_floor")
+    if new_level is None or new_floor is None:
+        return False
+    ratios = [
+        np.maximum(new, 1e-12) / np.maximum(old, 1e-12) for new, old in ((new_level, old_level), (new_floor, old_floor))
+    ]
+    return bool(any(np.any(np.abs(np.log(r)) > np.log1p(KAPPA_TOLERANCE)) for r in ratios))
 
 
 def _final_identifiability(
