@@ -398,6 +398,10 @@ TRIALS |= {
         _ONE["quantization"],
     ),
 }
+# Added at session 50, at the end (the trials above keep their seeds): a low-pass well below the compared band's
+# reach (a consumer gyro's slowest setting). Seen on a dev seed (11) before it was added: it was named as a 7.4 Hz
+# low-pass with the stamps 5.5 ms early and a scale factor, as the sensor's floor was read from the base residual.
+TRIALS |= {"sensor_lowpass_10hz": HiddenEffect("sensor_lowpass", {"corner_hz": 10.0})}
 
 
 def make_trial(root: Path, trial: str, n_seqs: int, duration_s: float, seed: int) -> list[dict]:
