@@ -2,8 +2,9 @@
 reconstruction error inside it.
 
 The detector's "true" rate is the derivative of a smooth spline fitted to the ground-truth poses
-(`sim.trajectory.SmoothTrajectory`). When those poses are measured (motion capture, a batch
-estimate), the reconstructed rate carries two errors that a gyro error model must not explain:
+(`sim.trajectory.SmoothTrajectory`), averaged over each IMU period as the gyro samples it. When those
+poses are measured (motion capture, a batch estimate), the reconstructed rate carries two errors that a
+gyro error model must not explain:
 
 - ground-truth noise passed by the spline and differentiated: PSD sigma_n^2 K(f), where sigma_n is
   the per-sample orientation noise and K(f) ~ (2 pi f)^2 (2 / gt_rate) |H(f)|^2 the spline's
