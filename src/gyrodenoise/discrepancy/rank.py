@@ -449,8 +449,8 @@ def select_effects(
                 lp = float(effects["sensor_bandwidth"].params["corner_hz"])
                 design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, lp, **band_check)
     if trusted_band and nuisance_residuals is None and corner is None:
-        # the reconstruction error's level again, on the selected model's residual (a low-pass the motion named
-        # included): the base residual holds the effects' own power, and a strong one leaves the level at nothing
+        # the reconstruction model again (band, sensor floor, error level), on the selected model's residual (a
+        # low-pass the motion named included): the base residual holds the effects' own power
         resid = residuals_after(design, final, selected, view)
         first = fcs[0].extra.get("nuisance_level")
         if _nuisance_moved(fcs, resid):
