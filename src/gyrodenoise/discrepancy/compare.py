@@ -132,7 +132,7 @@ def _context(
             "acc": imu.acc[keep],
             "gt_file": str(gt_path),
             # truth at other times (sequence time), for the time-offset regressor
-            "kinematics_at": lambda tt, off=float(t_imu[0]): traj.sample_mean(tt + off, 1.0 / rate),
+            "kinematics_at": lambda tt, off=float(t_imu[0]): traj.sampled_at(tt + off, 1.0 / rate),
             # the ground truth around its own fit, for the trusted band (`reconstruction.estimate_band`)
             **gt_fit_residual(traj, t_gt, gt.quat_xyzw, margin_s),
             "knot_spacing": knot_spacing,

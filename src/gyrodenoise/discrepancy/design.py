@@ -12,9 +12,9 @@ sees of the motion (`sensor_view`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
-from types import SimpleNamespace
+from functools import cached_property, partial
 
 import numpy as np
 from scipy.linalg import orth
@@ -349,6 +349,26 @@ def band_power(fc: FitContext, r: np.ndarray, sigma: np.ndarray) -> float:
     return float(np.mean(rows**2))
 
 
+class _Filtered:
+    """Kinematics seen through a low-pass, each field filtered when first read (the time offset's regressor reads
+    the rate alone)."""
+
+    def __init__(self, kin: object, lp: Callable[[np.ndarray], np.ndarray]) -> None:
+        self._kin, self._lp = kin, lp
+
+    @cached_property
+    def omega(self) -> np.ndarray:
+        return self._lp(self._kin.omega)
+
+    @cached_property
+    def alpha(self) -> np.ndarray:
+        return self._lp(self._kin.alpha)
+
+    @cached_property
+    def specific_force(self) -> np.ndarray:
+        return self._lp(self._kin.specific_force)
+
+
 def sensor_view(fc: FitContext, corner_hz: float | None, rate_only: bool = False) -> FitContext:
     """The sequence as seen through a sensor low-pass of corner `corner_hz` (`SensorBandwidth`):
     the true rate, its derivative and the specific force filtered (every regressor responds to
@@ -366,9 +386,8 @@ def sensor_view(fc: FitContext, corner_hz: float | None, rate_only: bool = False
     kin_at = fc.extra.get("kinematics_at")
     if kin_at is not None:
 
-        def filtered(tt: np.ndarray) -> SimpleNamespace:
-            k = kin_at(tt)
-            return SimpleNamespace(omega=lp(k.omega), alpha=lp(k.alpha), specific_force=lp(k.specific_force))
+        def filtered(tt: np.ndarray) -> _Filtered:
+            return _Filtered(kin_at(tt), lp)
 
         extra["kinematics_at"] = filtered
     return replace(fc, omega=lp(fc.omega), alpha=lp(fc.alpha), f=lp(fc.f), extra=extra)

@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
+import scipy.fft
 from scipy import signal
 
 from gyrodenoise.allan import fit_allan_noise
@@ -547,7 +548,8 @@ class SensorBandwidth(Effect):
         slope = (xp[-1:] - xp[:1]) / (len(xp) - 1)
         ramp = xp[:1] + slope * n
         h = cls.response(np.fft.rfftfreq(len(xp), 1.0 / rate_hz), float(corner_hz))
-        y = np.fft.irfft(np.fft.rfft(xp - ramp, axis=0) * h.reshape(-1, *([1] * (x.ndim - 1))), n=len(xp), axis=0)
+        spectrum = scipy.fft.rfft(xp - ramp, axis=0, workers=-1) * h.reshape(-1, *([1] * (x.ndim - 1)))
+        y = scipy.fft.irfft(spectrum, n=len(xp), axis=0, workers=-1)  # numpy's numbers, on all cores
         y += ramp - slope * tau_samples
         return y[pad : pad + len(x)]
 

@@ -12,6 +12,7 @@ f = R^T (a - g); quaternions scalar-last (x, y, z, w).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -126,10 +127,7 @@ class SmoothTrajectory:
     def evaluate(self, t: np.ndarray) -> Kinematics:
         t = np.asarray(t, dtype=np.float64)
         q, dq, ddq = self.quat(t), self._dq(t), self._ddq(t)
-        n2 = (q * q).sum(-1, keepdims=True)
-        qc = _conj(q)
-        p1 = _qmul(qc, dq)  # q* dq
-        omega = 2.0 * p1[:, :3] / n2
+        n2, qc, omega = self._rate(q, dq)
         # d/dt [2 Im(q* dq) / |q|^2] = 2 Im(q* ddq)/|q|^2 - 2 Im(q* dq) d|q|^2/dt / |q|^4
         dn2 = 2.0 * (q * dq).sum(-1, keepdims=True)
         alpha = 2.0 * _qmul(qc, ddq)[:, :3] / n2 - omega * dn2 / n2
@@ -137,6 +135,25 @@ class SmoothTrajectory:
         acc = self._ddp(t)
         f = np.einsum("nji,nj->ni", rot, acc - GRAVITY)
         return Kinematics(t, rot, self.pos(t), omega, alpha, acc, f)
+
+    @staticmethod
+    def _rate(q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """|q|^2, q* and the body rate 2 Im(q* dq) / |q|^2."""
+        n2 = (q * q).sum(-1, keepdims=True)
+        qc = _conj(q)
+        return n2, qc, 2.0 * _qmul(qc, dq)[:, :3] / n2
+
+    def rate_mean(self, t: np.ndarray, period_s: float, nodes: int = 4) -> np.ndarray:
+        """`sample_mean(t, period_s, nodes).omega` alone (the same numbers), without the orientation, position,
+        acceleration and specific force: the time offset's regressor reads the rate at shifted times only."""
+        t = np.asarray(t, dtype=np.float64)
+        x, w = np.polynomial.legendre.leggauss(nodes)
+        rates = [self._rate(self.quat(ti), self._dq(ti))[2] for ti in (t + 0.5 * period_s * xi for xi in x)]
+        return sum(wi * r for wi, r in zip(w, rates, strict=True)) / 2.0
+
+    def sampled_at(self, t: np.ndarray, period_s: float) -> SampledKinematics:
+        """`sample_mean(t, period_s)`, each field computed when it is first read (`SampledKinematics`)."""
+        return SampledKinematics(self, np.asarray(t, dtype=np.float64), period_s)
 
     def sample_mean(self, t: np.ndarray, period_s: float, nodes: int = 4) -> Kinematics:
         """What an ideal integrating IMU samples at t: rate, angular acceleration and specific force are
@@ -151,6 +168,27 @@ class SmoothTrajectory:
 
         mid = self.evaluate(t)
         return Kinematics(t, mid.rot, mid.pos, mean("omega"), mean("alpha"), mean("acc_world"), mean("specific_force"))
+
+
+class SampledKinematics:
+    """The sampled truth at times t (`SmoothTrajectory.sample_mean`), computed lazily: `omega` alone costs a
+    fifth of the whole (`rate_mean`); any other field computes them all once."""
+
+    def __init__(self, traj: SmoothTrajectory, t: np.ndarray, period_s: float) -> None:
+        self.t, self._traj, self._period = t, traj, period_s
+
+    @cached_property
+    def omega(self) -> np.ndarray:
+        return self._traj.rate_mean(self.t, self._period)
+
+    @cached_property
+    def _all(self) -> Kinematics:
+        return self._traj.sample_mean(self.t, self._period)
+
+    def __getattr__(self, name: str):  # rot, pos, alpha, acc_world, specific_force
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self._all, name)
 
 
 # ------------------------------------------------------------------ procedural trajectories
