@@ -162,33 +162,28 @@ def test_truth_error_smoothing_is_the_noise_power_the_low_pass_removes(tmp_path)
 
 
 def test_effects_that_stood_in_for_the_low_pass_droop_are_removed(tmp_path, monkeypatch):
-    """15 Hz behind the mocap, 3 fitted + 2 held-out minutes: next to the time offset a scale factor takes the droop
-    the offset lacks; once the low-pass replaces the offset, it is refitted out. (The blind 25 Hz trial did this
-    until session 50, when the truth's own droop, the sample mean, was still read as the sensor's.)"""
-    from gyrodenoise.discrepancy import rank
-
+    """15 Hz behind the mocap, 2 x 40 s: next to the time offset a scale factor takes the droop the offset lacks;
+    once the low-pass replaces the offset, it is refitted out (`_recheck_after_lowpass`, the one step that removes a
+    regression effect). (The blind 25 Hz trial did this until session 50, when the truth's own droop, the sample
+    mean, was still read as the sensor's.)"""
     monkeypatch.setitem(generate.TRIALS, "lowpass_15hz", generate.HiddenEffect("sensor_lowpass", {"corner_hz": 15.0}))
-    generate.make_trial(tmp_path, "lowpass_15hz", 5, 60.0, 11)
-    fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(5)]
-
-    def select():
-        return select_effects(fcs[:3], base=BASE, candidates=CANDIDATES, holdout=fcs[3:])
-
-    sel = select()
+    generate.make_trial(tmp_path, "lowpass_15hz", 2, 40.0, 11)
+    fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(2)]
+    sel = select_effects(fcs, base=BASE, candidates=CANDIDATES)
     assert sel.named == ["sensor_bandwidth"]
+    assert [s["added"] for s in sel.steps if "added" in s] == ["time_offset", "scale_factor"]
     assert [s["removed"] for s in sel.steps if "removed" in s] == ["scale_factor"]
-    monkeypatch.setattr(rank, "_recheck_after_lowpass", lambda design, final, *a: (design, final))
-    assert select().named == ["scale_factor", "sensor_bandwidth"]
 
 
 def test_a_strong_low_pass_reads_the_noise_floor_from_its_own_residual(tmp_path, monkeypatch):
-    """10 Hz behind the mocap, 3 fitted minutes. The base residual holds the low-pass's own power: read from it, the
+    """10 Hz behind the mocap, 2 x 40 s. The base residual holds the low-pass's own power: read from it, the
     sensor's floor was 80 times too high and the mocap error's level nothing, so nothing charged a low-pass for
-    smoothing the truth's noise, and a 7.4 Hz low-pass with the stamps 5.5 ms early and a scale factor was named. The
-    reconstruction model is now refitted on the selected model's residual (the low-pass included)."""
+    smoothing the truth's noise, and the stamps' offset and a scale factor were named instead (3 x 60 s: a 7.4 Hz
+    low-pass with the stamps 5.5 ms early and a scale factor). The reconstruction model is now refitted on the
+    selected model's residual (the low-pass included)."""
     monkeypatch.setitem(generate.TRIALS, "lowpass_10hz", generate.HiddenEffect("sensor_lowpass", {"corner_hz": 10.0}))
-    generate.make_trial(tmp_path, "lowpass_10hz", 3, 60.0, 11)
-    fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(3)]
+    generate.make_trial(tmp_path, "lowpass_10hz", 2, 40.0, 11)
+    fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(2)]
     sel = select_effects(fcs, base=BASE, candidates=CANDIDATES)
     assert sel.named == ["sensor_bandwidth"]
     assert sel.nuisance_refit is not None
