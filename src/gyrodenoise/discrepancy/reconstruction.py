@@ -32,10 +32,10 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-import scipy.fft
 from scipy import signal
 from scipy.interpolate import make_lsq_spline
 
+from gyrodenoise import fft_threads
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import SensorBandwidth
 
@@ -270,7 +270,7 @@ def band_rows(x: np.ndarray, rate_hz: float, f_max_hz: float | None, force: bool
         return x
     n = len(x)
     m = len(band_bins(n, rate_hz, f_max_hz))
-    X = scipy.fft.rfft(x, axis=0, workers=-1)[:m] * np.sqrt(2.0 / n)  # the same numbers as numpy's, on all cores
+    X = fft_threads.rfft(x)[:m] * np.sqrt(2.0 / n)
     X[0] /= np.sqrt(2.0)  # the mean: one real observation
     nyq = n % 2 == 0 and m == n // 2 + 1
     if nyq:

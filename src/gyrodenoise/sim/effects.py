@@ -19,9 +19,9 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-import scipy.fft
 from scipy import signal
 
+from gyrodenoise import fft_threads
 from gyrodenoise.allan import fit_allan_noise
 from gyrodenoise.sim.context import FitContext, SignalContext
 
@@ -548,8 +548,7 @@ class SensorBandwidth(Effect):
         slope = (xp[-1:] - xp[:1]) / (len(xp) - 1)
         ramp = xp[:1] + slope * n
         h = cls.response(np.fft.rfftfreq(len(xp), 1.0 / rate_hz), float(corner_hz))
-        spectrum = scipy.fft.rfft(xp - ramp, axis=0, workers=-1) * h.reshape(-1, *([1] * (x.ndim - 1)))
-        y = scipy.fft.irfft(spectrum, n=len(xp), axis=0, workers=-1)  # numpy's numbers, on all cores
+        y = fft_threads.irfft(fft_threads.rfft(xp - ramp) * h.reshape(-1, *([1] * (x.ndim - 1))), len(xp))
         y += ramp - slope * tau_samples
         return y[pad : pad + len(x)]
 
