@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,7 +31,7 @@ import generate  # noqa: E402  (the standalone generator)
 from gyrodenoise.atomic import write_json, write_text  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
 from gyrodenoise.discrepancy.rank import select_effects  # noqa: E402
-from gyrodenoise.provenance import machine_description  # noqa: E402
+from gyrodenoise.provenance import git_revision, machine_description  # noqa: E402
 
 BASE = ["bias", "white_noise", "bias_random_walk"]
 CANDIDATES = ["time_offset", "sensor_bandwidth", "scale_factor"]
@@ -66,11 +65,9 @@ def run_case(name: str) -> dict:
 
 
 def _commit(folder: Path) -> str:
-    """The git commit of the checkout the package was imported from (+ "-dirty" when its src/ has changes)."""
-    git = ["git", "-C", str(folder)]
-    head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run([*git, "status", "--porcelain", "."], capture_output=True, text=True).stdout.strip()
-    return head + ("-dirty" if dirty else "")
+    """The commit of the checkout the package was imported from (+ "-dirty" when its src/ differs from it)."""
+    rev = git_revision(folder, scope=".")
+    return "unknown" if rev is None else rev[0] + ("-dirty" if rev[1] else "")
 
 
 def _text(x: object) -> str:
