@@ -80,19 +80,33 @@ def test_a_fold_is_named_and_a_resumed_folder_goes_on_in_its_unfinished_mlflow_r
     assert MLflowRunLogger(tags={"output_dir": "/runs/a"}, **kw).run_id != first.run_id  # a finished run is not reused
 
 
+_start_together = None  # a barrier the forked jobs wait at, so that all of them look the experiment up at once
+
+
+def _wait_here(barrier) -> None:
+    global _start_together
+    _start_together = barrier
+
+
 def _start_run(store: str, name: str) -> str:
     from gyrodenoise.run_loggers import MLflowRunLogger
 
+    _start_together.wait()
     return MLflowRunLogger(experiment_name=name, run_name="job", tracking_uri=store).run_id
 
 
 def test_sweep_jobs_started_together_share_one_experiment(tmp_path):
-    """The joblib launcher starts jobs at once in a fresh store: each must find the one experiment, not make its own."""
+    """The joblib launcher starts jobs at once in a fresh store: each must find the one experiment, not make its own.
+    (Forked, not spawned: the race is in the store, and six fresh interpreters importing the package cost ~60 s.)"""
     import multiprocessing
 
+    import gyrodenoise.run_loggers  # noqa: F401  (imported once here, not in each forked job)
+
     store = f"file:{tmp_path / 'mlruns'}"
-    with multiprocessing.get_context("spawn").Pool(6) as pool:
-        runs = pool.starmap(_start_run, [(store, "train-mine")] * 6)
+    fork = multiprocessing.get_context("fork")
     client = mlflow.tracking.MlflowClient(tracking_uri=store)
-    (experiment,) = [e for e in client.search_experiments() if e.name == "train-mine"]
-    assert sorted(r.info.run_id for r in client.search_runs([experiment.experiment_id])) == sorted(runs)
+    for name in ("train-a", "train-b", "train-c"):  # without the lock, each round splits its runs about half the time
+        with fork.Pool(6, initializer=_wait_here, initargs=(fork.Barrier(6),)) as pool:
+            runs = pool.starmap(_start_run, [(store, name)] * 6)
+        (experiment,) = [e for e in client.search_experiments() if e.name == name]
+        assert sorted(r.info.run_id for r in client.search_runs([experiment.experiment_id])) == sorted(runs)

@@ -24,8 +24,7 @@ import numpy as np
 import torch
 
 from gyrodenoise.cli_errors import ConfigError
-from gyrodenoise.data.datamodule import gt_increments
-from gyrodenoise.data.sequence import Sequence
+from gyrodenoise.data.sequence import Sequence, gt_increments
 from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.metrics import aoe
 from gyrodenoise.models.denoiser import CalibratedImu, predict_gyro

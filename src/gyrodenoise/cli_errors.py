@@ -18,9 +18,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
-import torch
 from hydra.errors import InstantiationException
-from lightning.fabric.utilities.exceptions import MisconfigurationException
 from omegaconf.errors import MissingMandatoryValue
 
 from gyrodenoise.config import misspelt_key_message
@@ -58,12 +56,19 @@ def user_errors() -> Iterator[None]:
         )
     except MissingMandatoryValue as e:  # e.g. dataset=asl_folder without dataset.root
         _one_line(f"{e.full_key} has no value (it is '???' in the config): give it, e.g. {e.full_key}=...")
-    except (MisconfigurationException, InstantiationException) as e:  # Hydra wraps the Trainer's own error
+    except (InstantiationException, *_lightning_errors()) as e:  # Hydra wraps the Trainer's own error
         if isinstance(e.__cause__, USER_ERRORS):  # ours, raised inside a config's target (e.g. the data module)
             _one_line(str(e.__cause__))
         if "no supported gpu backend" not in str(e).lower():
             raise
         _one_line("no supported GPU backend on this machine: leave out trainer=gpu, or set trainer.accelerator=cpu.")
+
+
+def _lightning_errors() -> tuple[type[Exception], ...]:
+    """Lightning's configuration error, where Lightning is loaded (this module does not load it: a command that ends
+    before any training would spend seconds importing it)."""
+    module = sys.modules.get("lightning.fabric.utilities.exceptions")
+    return (module.MisconfigurationException,) if module is not None else ()
 
 
 def set_torch_threads(threads: Any) -> None:
@@ -73,6 +78,8 @@ def set_torch_threads(threads: Any) -> None:
         return
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ConfigError(f"threads={threads!r}: a whole number >= 1, or threads=null (torch's default)")
+    import torch
+
     torch.set_num_threads(threads)
 
 
@@ -80,6 +87,8 @@ def set_torch_threads(threads: Any) -> None:
 def torch_threads(threads: Any) -> Iterator[None]:
     """`set_torch_threads` for the length of a call: train() or evaluate() called from a notebook leaves the
     caller's thread count as it was."""
+    import torch
+
     before = torch.get_num_threads()
     set_torch_threads(threads)
     try:

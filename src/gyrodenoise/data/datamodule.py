@@ -30,17 +30,7 @@ from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.data.fetch import DATASETS as FETCHABLE
-from gyrodenoise.data.sequence import Sequence, misspelt, root_level_hint, sequences_in
-
-
-def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
-    """dR_k = R_{k*step}^T R_{(k+1)*step} and its availability (ground truth at every sample of it)."""
-    n = (len(seq) - 1) // step
-    R = seq.rot[: n * step + 1 : step]
-    dR = np.swapaxes(R[:-1], -1, -2) @ R[1:]
-    m = seq.gt_mask[: n * step + 1]
-    ok = np.array([m[k * step : (k + 1) * step + 1].all() for k in range(n)], dtype=bool)
-    return dR, ok
+from gyrodenoise.data.sequence import Sequence, gt_increments, misspelt, root_level_hint, sequences_in
 
 
 def sequence_item(seq: Sequence, step: int, block: int) -> dict:

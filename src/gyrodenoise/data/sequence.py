@@ -74,6 +74,16 @@ class Sequence:
         return int(np.searchsorted(self.t - self.t[0], seconds))
 
 
+def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """dR_k = R_{k*step}^T R_{(k+1)*step} and its availability (ground truth at every sample of it)."""
+    n = (len(seq) - 1) // step
+    R = seq.rot[: n * step + 1 : step]
+    dR = np.swapaxes(R[:-1], -1, -2) @ R[1:]
+    m = seq.gt_mask[: n * step + 1]
+    ok = np.array([m[k * step : (k + 1) * step + 1].all() for k in range(n)], dtype=bool)
+    return dR, ok
+
+
 def _clock_hint(t_imu0_ns: int, t_gt0_ns: int) -> str:
     """What the first stamps of an IMU (ns, its rate checked by the reader) and of a ground truth that does not
     overlap it say: the truth's stamps in another unit (about 1e3, 1e6 or 1e9 times smaller), or counted from its
