@@ -89,7 +89,12 @@ def fit_rows(fc: FitContext, X: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, 
     if w is None and (f_max is None or f_max >= fc.rate_hz / 2):
         return X[m], r[m]
     n, k = len(fc.t), X.shape[1]
-    Xb = band_rows(np.where(m[:, None], X, 0.0).reshape(n, 3 * k), fc.rate_hz, f_max, force=True)
+    Z = np.where(m[:, None], X, 0.0).reshape(n, 3 * k)
+    # most columns act on one axis (`effects._axis_columns`, the random walk's hats): two of every three per-axis
+    # columns are zero, and so are their rows; only the others are transformed (the FFT is most of a fit's time)
+    live = np.flatnonzero(Z.any(axis=0))
+    Xb = np.zeros((len(row_frequencies(n, fc.rate_hz, f_max)), 3 * k))
+    Xb[:, live] = band_rows(Z[:, live], fc.rate_hz, f_max, force=True)
     rb = band_rows(np.where(m, r, 0.0).reshape(n, 3), fc.rate_hz, f_max, force=True)
     if w is not None:
         Xb = (Xb.reshape(-1, 3, k) * w[:, :, None]).reshape(-1, 3 * k)
@@ -209,12 +214,15 @@ class Design:
         self.fcs, self.effects, self.sigma = fcs, effects, sigma
         self.cols: dict[str, np.ndarray] = {}  # effect -> global column indices ((S, k) if per sequence)
         p = 0
-        self.k = {name: e.columns(fcs[0]).shape[2] if not e.stochastic else 0 for name, e in effects.items()}
+        # each effect's columns of each sequence, built once here (building them is much of a design's time) and
+        # dropped after: a search keeps many designs
+        built = [{name: e.columns(fc) for name, e in effects.items() if not e.stochastic} for fc in fcs]
+        self.k = {name: built[0][name].shape[2] if not e.stochastic else 0 for name, e in effects.items()}
         for name, e in effects.items():
             k = self.k[name]
             if e.per_sequence and not e.stochastic:
                 # column counts may differ per sequence (random-walk knots): take the largest
-                k = max(e.columns(fc).shape[2] for fc in fcs)
+                k = max(b[name].shape[2] for b in built)
                 self.k[name] = k
                 self.cols[name] = p + np.arange(len(fcs) * k).reshape(len(fcs), k)
                 p += len(fcs) * k
@@ -227,22 +235,26 @@ class Design:
         self.rr = 0.0
         self.n = 0
         for s, fc in enumerate(fcs):
-            X, idx = self.local_columns(s, list(effects))
+            X, idx = self.local_columns(s, list(effects), built=built[s])
+            built[s] = {}
             X, r = fit_rows(fc, X, (fc.residual / sigma).reshape(-1))
             self.G[np.ix_(idx, idx)] += X.T @ X
             self.b[idx] += X.T @ r
             self.rr += float(r @ r)
             self.n += len(r)
 
-    def local_columns(self, s: int, names: list[str], fc: FitContext | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted columns (3N, k) of sequence s for `names`, with their global indices."""
+    def local_columns(
+        self, s: int, names: list[str], fc: FitContext | None = None, built: dict[str, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted columns (3N, k) of sequence s for `names`, with their global indices (`built`: the effects'
+        columns of this sequence where already built)."""
         fc = fc or self.fcs[s]
         blocks, idx = [], []
         for name in names:
             e = self.effects[name]
             if e.stochastic:
                 continue
-            c = e.columns(fc) / self.sigma[None, :, None]
+            c = (built[name] if built is not None else e.columns(fc)) / self.sigma[None, :, None]
             gi = self.cols[name][s] if e.per_sequence else self.cols[name]
             if c.shape[2] < len(gi):  # fewer knots in this sequence: pad with empty columns
                 c = np.concatenate([c, np.zeros((*c.shape[:2], len(gi) - c.shape[2]))], 2)
