@@ -10,7 +10,8 @@ Cases (benchmarks/blind_discrepancy/generate.py, noisy mocap, the generator's ba
     python benchmarks/discrepancy_selection_speed.py --out ... --compare benchmarks/results/..._before.json
 
 Run it on an older commit with that commit's package first on the path (PYTHONPATH=<worktree>/src). `--compare`
-reports whether every number (named effects, parameters, SEs, the delay-or-low-pass figures) is bit-identical.
+reports whether every number (named effects, parameters, SEs, the delay-or-low-pass figures) is bit-identical, and
+where not, whether anything but the numbers differs and the largest relative difference of a number.
 OMP_NUM_THREADS caps the threads (numpy, the FFTs)."""
 
 from __future__ import annotations
@@ -75,6 +76,24 @@ def _text(x: object) -> str:
     return json.dumps(json.loads(json.dumps(x, default=float)), sort_keys=True)
 
 
+def _differences(a: object, b: object, path: str = "") -> tuple[list[str], float, str]:
+    """How two results' numbers differ: the paths where anything but a number differs (named effects, decisions,
+    structure), and the largest relative difference of a number, with its path."""
+    if isinstance(a, dict) and isinstance(b, dict) and set(a) == set(b):
+        parts = [_differences(a[k], b[k], f"{path}/{k}") for k in sorted(a)]
+    elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        parts = [_differences(x, y, f"{path}[{i}]") for i, (x, y) in enumerate(zip(a, b, strict=True))]
+    elif all(isinstance(x, int | float) and not isinstance(x, bool) for x in (a, b)):
+        if a == b or (np.isnan(a) and np.isnan(b)):
+            return [], 0.0, ""
+        return [], abs(a - b) / max(abs(a), abs(b)), path
+    else:
+        return ([] if _text(a) == _text(b) else [path]), 0.0, ""
+    other = [p for part in parts for p in part[0]]
+    worst = max(parts, key=lambda part: part[1], default=([], 0.0, ""))
+    return other, worst[1], worst[2]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, required=True, help="result JSON (a .md beside it)")
@@ -99,11 +118,21 @@ def main() -> None:
         ref = json.loads(args.compare.read_text())
         cases = [n for n in res["cases"] if n in ref["cases"]]
         same = {n: _text(ref["cases"][n]["numbers"]) == _text(res["cases"][n]["numbers"]) for n in cases}
-        res["compared_with"] = {"file": str(args.compare), "identical_numbers": same}
+        diff = {n: _differences(res["cases"][n]["numbers"], ref["cases"][n]["numbers"]) for n in cases}
+        res["compared_with"] = {
+            "file": str(args.compare),
+            "identical_numbers": same,
+            "other_than_numbers_differ": {n: d[0] for n, d in diff.items()},
+            "largest_relative_difference": {n: {"value": d[1], "where": d[2]} for n, d in diff.items()},
+        }
         lines.append(f"\nAgainst `{args.compare}`: numbers bit-identical per case: {same}; selection time")
         for n in same:
             before, after = ref["cases"][n]["select_s"], res["cases"][n]["select_s"]
-            lines.append(f"- {n}: {before:.1f} s -> {after:.1f} s (x{before / after:.2f})")
+            other, worst, where = diff[n]
+            what = "named effects and every decision the same" if not other else f"DIFFERENT: {', '.join(other)}"
+            if not same[n]:
+                what += f"; largest relative difference of a number {worst:.1e} ({where})"
+            lines.append(f"- {n}: {before:.1f} s -> {after:.1f} s (x{before / after:.2f}); {what}")
     write_json(args.out, res)
     write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -29,6 +29,7 @@ from gyrodenoise.discrepancy.reconstruction import (
     sensor_floor,
 )
 from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, masked_samples, spectra
+from gyrodenoise.discrepancy.time_only_rows import cached_rows, rows_key
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect, SensorBandwidth
 
@@ -234,14 +235,41 @@ class Design:
         self.b = np.zeros(p)
         self.rr = 0.0
         self.n = 0
-        for s, fc in enumerate(fcs):
-            X, idx = self.local_columns(s, list(effects), built=built[s])
+        for s in range(len(fcs)):
+            X, idx, r = self._fit_rows(s, built[s])
             built[s] = {}
-            X, r = fit_rows(fc, X, (fc.residual / sigma).reshape(-1))
             self.G[np.ix_(idx, idx)] += X.T @ X
             self.b[idx] += X.T @ r
             self.rr += float(r @ r)
             self.n += len(r)
+
+    def _fit_rows(self, s: int, built: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`fit_rows` of every column of sequence s, with their global indices and the residual's rows. The rows of
+        columns that depend on the sample times alone come from `time_only_rows` (the same in every design of a
+        search); the others are built here. The columns keep their order (the Gram matrix is the same to the bit)."""
+        fc = self.fcs[s]
+        names = [n for n, e in self.effects.items() if not e.stochastic]
+        resid = (fc.residual / self.sigma).reshape(-1)
+        width = {n: self.cols[n].shape[-1] for n in names}
+        keys = {n: rows_key(self.effects[n], fc, self.sigma, width[n]) for n in names}
+        moving = [n for n in names if keys[n] is None]
+        X, _ = self.local_columns(s, moving, built=built)
+        Xr, r = fit_rows(fc, X if X.shape[1] else np.zeros((len(resid), 1)), resid)  # k >= 1 for the shapes
+        blocks, start = {}, 0
+        for n in moving:
+            blocks[n], start = Xr[:, start : start + width[n]], start + width[n]
+        for n in names:
+            if keys[n] is not None:
+
+                def rows_of(n: str = n) -> np.ndarray:
+                    return fit_rows(fc, self.local_columns(s, [n], built=built)[0], resid)[0]
+
+                blocks[n] = cached_rows(*keys[n], rows_of)
+        if not names:
+            return np.zeros((len(r), 0)), np.zeros(0, dtype=int), r
+        X = np.concatenate([blocks[n] for n in names], 1)
+        idx = np.concatenate([self.cols[n][s] if self.effects[n].per_sequence else self.cols[n] for n in names])
+        return X, idx, r
 
     def local_columns(
         self, s: int, names: list[str], fc: FitContext | None = None, built: dict[str, np.ndarray] | None = None

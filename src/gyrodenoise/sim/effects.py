@@ -92,6 +92,12 @@ class Effect:
         """(N, 3, k) contribution to the residual per unit coefficient."""
         raise NotImplementedError
 
+    def time_only_key(self) -> tuple | None:
+        """Where the columns depend on the sample times alone (not on the motion): what else they depend on, as a
+        key (designs over the same samples then share their fit rows: `discrepancy.time_only_rows`). None: they
+        follow the motion."""
+        return None
+
     def params_from_fit(self, coef: np.ndarray, se: np.ndarray) -> tuple[dict, dict]:
         """Coefficients (k,) or (n_seq, k) with standard errors -> (params SI, standard errors SI)."""
         raise NotImplementedError
@@ -139,6 +145,9 @@ class Bias(Effect):
 
     def columns(self, fc):
         return _axis_columns(np.ones((len(fc.t), 3)))
+
+    def time_only_key(self):
+        return ()
 
     def params_from_fit(self, coef, se):
         coef = np.atleast_2d(coef)
@@ -632,6 +641,9 @@ class BiasRandomWalk(Effect):
             if bic < best:
                 best, best_h = bic, h
         self.knot_spacing_s = best_h
+
+    def time_only_key(self):
+        return (self.knot_spacing_s,)
 
     def columns(self, fc):
         # hat functions on knots every knot_spacing_s (the first knot left to the bias)
