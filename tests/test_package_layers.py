@@ -91,3 +91,14 @@ def test_importing_the_package_leaves_the_matplotlib_backend_alone():
     env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert out.stdout.strip() == "svg", out
+
+
+def test_the_command_modules_leave_lightning_unimported():
+    """Lightning's import takes ~8 s on 2 cores: a command refused for its config, `--help`, evaluate and correct do
+    not pay it (train imports it in the functions that train)."""
+    code = (
+        "import sys, gyrodenoise.train, gyrodenoise.evaluate, gyrodenoise.correct, gyrodenoise.cli_errors, "
+        "gyrodenoise.discrepancy.__main__; print(sorted({m.split('.')[0] for m in sys.modules} & {'lightning'}))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", out
