@@ -246,7 +246,8 @@ class Design:
     def _fit_rows(self, s: int, built: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """`fit_rows` of every column of sequence s, with their global indices and the residual's rows. The rows of
         columns that depend on the sample times alone come from `time_only_rows` (the same in every design of a
-        search); the others are built here. The columns keep their order (the Gram matrix is the same to the bit)."""
+        search); the others are built here, in one transform. Each shared block is transformed on its own, so a
+        design served shared rows is a fresh design to the bit, and one transform of all columns to rounding."""
         fc = self.fcs[s]
         names = [n for n, e in self.effects.items() if not e.stochastic]
         resid = (fc.residual / self.sigma).reshape(-1)
