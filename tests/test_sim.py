@@ -47,6 +47,25 @@ def test_sample_mean_is_the_simulators_centred_mean(traj):
     assert np.allclose(mean.rot, inst.rot) and np.allclose(mean.pos, inst.pos)
 
 
+def test_sampled_view_gives_sample_means_numbers_and_computes_the_rate_once(traj, monkeypatch):
+    """`sampled_at` is `sample_mean` field by field, in either reading order, and a rate read after another field is
+    taken from the fields already computed (`rate_mean` is not called again)."""
+    t, period = np.linspace(2, 18, 400), 1 / 200
+    want = traj.sample_mean(t, period)
+    calls = []
+    rate_mean = type(traj).rate_mean
+    monkeypatch.setattr(type(traj), "rate_mean", lambda self, *a, **k: calls.append(1) or rate_mean(self, *a, **k))
+
+    rate_first = traj.sampled_at(t, period)
+    assert np.array_equal(rate_first.omega, want.omega) and calls == [1]
+    assert np.array_equal(rate_first.specific_force, want.specific_force)
+
+    calls.clear()
+    rate_last = traj.sampled_at(t, period)
+    assert np.array_equal(rate_last.alpha, want.alpha) and np.array_equal(rate_last.rot, want.rot)
+    assert np.array_equal(rate_last.omega, want.omega) and calls == []
+
+
 def test_vocabulary_and_datasheet_units():
     expected = {
         "bias", "bias_random_walk", "white_noise", "scale_factor", "misalignment", "g_sensitivity",

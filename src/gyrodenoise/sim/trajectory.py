@@ -172,13 +172,16 @@ class SmoothTrajectory:
 
 class SampledKinematics:
     """The sampled truth at times t (`SmoothTrajectory.sample_mean`), computed lazily: `omega` alone costs a
-    fifth of the whole (`rate_mean`); any other field computes them all once."""
+    fifth of the whole (`rate_mean`); any other field computes them all once, and `omega` read after it is
+    taken from them (the same numbers) rather than computed again."""
 
     def __init__(self, traj: SmoothTrajectory, t: np.ndarray, period_s: float) -> None:
         self.t, self._traj, self._period = t, traj, period_s
 
     @cached_property
     def omega(self) -> np.ndarray:
+        if "_all" in self.__dict__:
+            return self._all.omega
         return self._traj.rate_mean(self.t, self._period)
 
     @cached_property
