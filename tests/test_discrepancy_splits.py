@@ -36,6 +36,8 @@ def test_splits_run_each_sequence_held_out_once(tmp_path):
     assert (out / "a" / "report.md").is_file() and (out / "b" / "report.md").is_file()
     assert "scale_factor" not in summary["named_in_every_split"]  # a null sensor has no scale factor
     assert "Named in every split" in (out / "summary.md").read_text()
+    code = summary["splits"][0]["code"]  # the code that ran, in the summary's first line as in each report
+    assert code.startswith("gyrodenoise ") and f"{code}; per split's wall time" in (out / "summary.md").read_text()
 
 
 @pytest.mark.parametrize("argv", [["--sequences", "a"], ["--sequences", "a", "b", "--fit", "a"]])

@@ -101,6 +101,11 @@ def test_cli_writes_report(tmp_path):
     # the named offset leaves nothing the binned readings see (`lack_of_fit`): a table, no caution
     assert len(rep["lack_of_fit"]["rows"]) == 9 and rep["lack_of_fit"]["caution"] == ""
     assert "## Error the named effects leave unexplained" in (out / "report.md").read_text()
+    # where the result came from: the code (this checkout's commit) beside the machine and wall time
+    from gyrodenoise.provenance import code_version_text
+
+    assert rep["code"] == code_version_text() and rep["code"].startswith("gyrodenoise ")
+    assert f"; {rep['code']})." in (out / "report.md").read_text()
 
 
 def test_cli_rejects_overlapping_split(tmp_path):

@@ -80,18 +80,6 @@ def _receptive_field(members: list[StreamingCorrector]) -> int:
     return max(sc.receptive_field for sc in members)
 
 
-def code_version() -> str:
-    """'gyrodenoise <version>, commit <hash>[ with local changes in src/]' (the commit of a checkout, or of the wheel an
-    installed copy was built from; the version only when neither is known)."""
-    v = provenance.code_version()
-    out = f"gyrodenoise {v['package']}"
-    if "commit" not in v:
-        return out
-    if v.get("built"):
-        return out + f", commit {v['commit']} (wheel)"
-    return out + f", commit {v['commit']}" + (" with local changes in src/" if v.get("dirty") else "")
-
-
 # ---------------------------------------------------------------------------------------------- C text pieces
 def _float(v: float) -> str:
     """A float32 as a C literal that reads back to the same float32 (9 significant digits)."""
@@ -203,7 +191,7 @@ def _describe(model: CorrectionModel, members: list[StreamingCorrector], meta: d
             else ""
         ),
         _memory_line(rf, float(rate or 0)),
-        f"Exported by {code_version()} (python -m gyrodenoise.export ... --c)",
+        f"Exported by {provenance.code_version_text()} (python -m gyrodenoise.export ... --c)",
     ]
     if meta.get("path"):
         lines.append(f"From the model file: {Path(meta['path']).name}")

@@ -49,3 +49,15 @@ def code_version() -> dict:
         if built.get("commit"):
             out |= {"commit": built["commit"], "dirty": built.get("dirty"), "built": True}
     return out
+
+
+def code_version_text(version: dict | None = None) -> str:
+    """'gyrodenoise <version>, commit <hash>[ with local changes in src/]' (the commit of a checkout, or of the wheel
+    an installed copy was built from; the version only when neither is known), of `version` or `code_version()`."""
+    v = code_version() if version is None else version
+    out = f"gyrodenoise {v['package']}"
+    if "commit" not in v:
+        return out
+    if v.get("built"):
+        return out + f", commit {v['commit']} (wheel)"
+    return out + f", commit {v['commit']}" + (" with local changes in src/" if v.get("dirty") else "")

@@ -32,6 +32,7 @@ from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.paths import portable_command, portable_path
+from gyrodenoise.provenance import code_version_text
 from gyrodenoise.sim.effects import EFFECTS
 
 
@@ -218,6 +219,7 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
+    code = code_version_text()  # now: a run takes minutes, in which the checkout may move
 
     left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
 
@@ -267,6 +269,7 @@ def main(argv: list[str] | None = None) -> int:
         report["network"] = network_effects(args.network, fit + holdout, args.bic_threshold)
     report["wall_time_s"] = time.time() - t0
     report["machine"] = f"{platform.node()}, {os.cpu_count()} CPU threads"
+    report["code"] = code
     report["simulator_model"] = "error_model.yaml"  # the fitted model, for the simulator (`sim_model`)
     out = write_report(args.out, report, arrays)
     write_json(out / "report.json", report)

@@ -707,7 +707,8 @@ def markdown(report: dict) -> str:
     if report.get("command"):
         lines += ["## Command", "", "    " + report["command"], ""]
         if report.get("wall_time_s") is not None:
-            lines += [f"Wall time {report['wall_time_s']:.0f} s ({report.get('machine', 'this machine')}).", ""]
+            code = f"; {report['code']}" if report.get("code") else ""
+            lines += [f"Wall time {report['wall_time_s']:.0f} s ({report.get('machine', 'this machine')}{code}).", ""]
     return "\n".join(lines)
 
 

@@ -62,6 +62,7 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
                 "gap_after": {k: report["gap_after"][k] for k in GAPS},
                 "wall_time_s": report["wall_time_s"],
                 "machine": report["machine"],
+                "code": report.get("code"),
             }
         )
     return rows
@@ -79,10 +80,11 @@ def agreement(rows: list[dict]) -> dict:
 
 
 def summary_md(rows: list[dict], agree: dict, command: str) -> str:
+    code = f"; {rows[0]['code']}" if rows[0].get("code") else ""
     lines = [
         "# The discrepancy workflow over leave-one-out splits",
         "",
-        f"`{command}` ({rows[0]['machine']}; per split's wall time in the table).",
+        f"`{command}` ({rows[0]['machine']}{code}; per split's wall time in the table).",
         "",
         "| held out | fitted | verdict | residual RMS (rad/s) | 10-s drift (deg) | Allan gap | spectral gap "
         "| wall (s) |",
