@@ -51,10 +51,10 @@ def code_version() -> dict:
     return out
 
 
-def code_version_text(version: dict | None = None) -> str:
-    """'gyrodenoise <version>, commit <hash>[ with local changes in src/]' (the commit of a checkout, or of the wheel
-    an installed copy was built from; the version only when neither is known), of `version` or `code_version()`."""
-    v = code_version() if version is None else version
+def code_version_text() -> str:
+    """`code_version()` in words: 'gyrodenoise <version>, commit <hash>[ with local changes in src/]' (the commit of a
+    checkout, or of the wheel an installed copy was built from; the version only when neither is known)."""
+    v = code_version()
     out = f"gyrodenoise {v['package']}"
     if "commit" not in v:
         return out
