@@ -22,7 +22,7 @@ from gyrodenoise.discrepancy.hidden import make_measured
 from gyrodenoise.discrepancy.rank import _corner_se, select_effects, truth_error_smoothing
 from gyrodenoise.discrepancy.reconstruction import band_rows, row_frequencies
 from gyrodenoise.discrepancy.spectral import colour_factor
-from gyrodenoise.sim.effects import SensorBandwidth, WarmupBias
+from gyrodenoise.sim.effects import SensorBandwidth, TimeOffset, WarmupBias
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "blind_discrepancy"))
 import generate  # noqa: E402  (the standalone generator)
@@ -60,6 +60,26 @@ def test_time_offset_behind_a_noisy_mocap_is_named_a_time_offset(tmp_path):
     assert d["truth_error_smoothing_bic"] > 0  # the mocap's noise: what a low-pass would have gained from it
     # the reconstruction error's level, refitted once the offset is named (the null trial's is ~1)
     assert np.all(fcs[0].extra["nuisance_level"] < 1.5)
+
+
+def test_the_low_pass_is_compared_with_the_offset_at_its_fitted_delay(tmp_path, monkeypatch):
+    """The offset's first estimate regresses on the truth's noisy angular acceleration and falls short; the low-pass
+    must beat the offset refitted with its secant at the fitted delay, so the statistic does not depend on where that
+    estimate put the secant (a secant 10 % shorter moved it by 4 when the first estimate's fit was compared)."""
+    generate.make_trial(tmp_path, "time_offset", 2, 40.0, 3)
+    prepare, stats = TimeOffset.prepare, []
+    for shorter in (1.0, 0.9):
+
+        def prepare_short(self, fcs, residuals, shorter=shorter):
+            prepare(self, fcs, residuals)
+            self.delta_ref *= shorter
+
+        monkeypatch.setattr(TimeOffset, "prepare", prepare_short)
+        fcs = [load_fit_context(tmp_path, f"seq{i:02d}") for i in range(2)]
+        d = select_effects(fcs, base=BASE, candidates=CANDIDATES).delay_or_lowpass
+        assert d["kept"] == "time_offset" and d["offset_secant_refit_bic"] > 0
+        stats.append(d["delta_bic_lowpass_vs_offset"])
+    assert stats[1] == pytest.approx(stats[0], abs=1.0)
 
 
 def test_low_pass_behind_a_noisy_mocap_is_named_a_low_pass(tmp_path):
