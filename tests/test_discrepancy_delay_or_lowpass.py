@@ -56,7 +56,8 @@ def test_time_offset_behind_a_noisy_mocap_is_named_a_time_offset(tmp_path):
     assert sel.named == ["time_offset"], sel.steps
     assert float(sel.params["time_offset"]["delta"]) == pytest.approx(4e-3, abs=2e-4)
     d = sel.delay_or_lowpass
-    assert d["separable"] and d["kept"] == "time_offset" and d["delta_bic_lowpass_vs_offset"] < d["threshold"]
+    assert d["separable"] and d["kept"] == "time_offset" and d["delta_bic_lowpass_vs_offset"] < d["switch_threshold"]
+    assert d["switch_threshold"] == 0.0  # one parameter each: the better fit is kept
     assert d["truth_error_smoothing_bic"] > 0  # the mocap's noise: what a low-pass would have gained from it
     # the reconstruction error's level, refitted once the offset is named (the null trial's is ~1)
     assert np.all(fcs[0].extra["nuisance_level"] < 1.5)
@@ -213,22 +214,27 @@ def test_a_strong_low_pass_reads_the_noise_floor_from_its_own_residual(tmp_path,
 
 
 @pytest.mark.parametrize(
-    ("kept", "dbic", "cautioned"),
-    [("sensor_bandwidth", 20.0, True), ("sensor_bandwidth", 40.0, False), ("time_offset", -2.0, True),
-     ("time_offset", -30.0, False)],
+    ("kept", "dbic", "switch", "cautioned"),
+    [("sensor_bandwidth", 20.0, None, True), ("sensor_bandwidth", 40.0, None, False), ("time_offset", -2.0, None, True),
+     ("time_offset", -30.0, None, False), ("sensor_bandwidth", 10.0, 0.0, True), ("sensor_bandwidth", 20.0, 0.0, False),
+     ("time_offset", -12.0, 0.0, True), ("time_offset", -16.0, 0.0, False)],
 )  # fmt: skip
-def test_caution_when_the_margin_is_within_the_statistics_spread(kept, dbic, cautioned):
-    """Expected delta BIC 49: the statistic's spread is ~2 sqrt(49) = 14; margins over the threshold of 10, 30, 12
-    and 40."""
+def test_caution_when_the_margin_is_within_the_statistics_spread(kept, dbic, switch, cautioned):
+    """Expected delta BIC 49: the statistic's spread is ~2 sqrt(49) = 14. The margin is taken from the switch's
+    threshold (0 now: 10, 20, 12 and 16), or, in a report written before it had one of its own, from the detection
+    threshold it was then (10: 10, 30, 12 and 40)."""
     d = {
         "kept": kept, "delta_bic_lowpass_vs_offset": dbic, "threshold": 10.0, "truth_error_smoothing_bic": 100.0,
         "expected_delta_bic": 49.0, "delay_s": 0.004, "lowpass_corner_hz": 39.8, "separable": True,
     }  # fmt: skip
+    if switch is not None:
+        d["switch_threshold"] = switch
     cautions = Selection.cautions.fget(SimpleNamespace(delay_or_lowpass=d, named=[], effects={}))
     assert bool(cautions) == cautioned
     if cautioned:
         other = "a time offset of 4.00 ms" if kept == "sensor_bandwidth" else "a sensor low-pass of corner 39.8 Hz"
-        assert f"margin of {abs(dbic - 10):.0f}" in cautions[0] and "(~14)" in cautions[0]
+        margin = abs(dbic - (10.0 if switch is None else switch))
+        assert f"margin of {margin:.0f}" in cautions[0] and "(~14)" in cautions[0]
         assert cautions[0].endswith(f"it may be {other}")
     # an exact ground truth (nothing smoothed): no caution whatever the margin
     exact = SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0}, named=[], effects={})

@@ -1,13 +1,13 @@
 """How often the delay-or-low-pass choice goes wrong on its close calls (blind generator, many seeds).
 
 A 4 ms time offset and a 40 Hz first-order low-pass delay the motion alike; behind the generator's 0.05 deg mocap
-their expected delta BIC against each other is ~25-50, a few times the threshold (10). This draws both trials on
-fresh seeds at two sizes (2 fitted sequences of 40 s, as the tests; 3 of 60 s, as the blind runner) and runs the
-selection in process (`rank.select_effects`, base bias + white noise + bias random walk, candidates time_offset,
-sensor_bandwidth, scale_factor; fixed threshold 10, no null re-simulations), recording which explanation is kept,
-its margin over the threshold, the charge for smoothing the truth's noise, whether the report cautions (a margin
-within the statistic's spread, 2 sqrt(expected delta BIC): `Selection.cautions`) and, where the right effect is named,
-its value's z against its standard error.
+their expected delta BIC against each other is ~13-31 at these sizes. This draws both trials on fresh seeds at two
+sizes (2 fitted sequences of 40 s, as the tests; 3 of 60 s, as the blind runner) and runs the selection in process
+(`rank.select_effects`, base bias + white noise + bias random walk, candidates time_offset, sensor_bandwidth,
+scale_factor; fixed detection threshold 10, no null re-simulations), recording which explanation is kept, its margin
+over the switch's threshold (`rank.SWITCH_THRESHOLD`, 0; the detection threshold, 10, before session 54), the charge
+for smoothing the truth's noise, whether the report cautions (a margin within the statistic's spread, 2 sqrt(expected
+delta BIC): `Selection.cautions`) and, where the right effect is named, its value's z against its standard error.
 
     python benchmarks/blind_discrepancy/close_calls.py [--seeds 300 320] [--work /tmp/close_calls] [--name NAME]
 
@@ -31,7 +31,7 @@ from run import _git  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
-from gyrodenoise.discrepancy.rank import select_effects  # noqa: E402
+from gyrodenoise.discrepancy.rank import SWITCH_THRESHOLD, select_effects  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 BASE = ["bias", "white_noise", "bias_random_walk"]
@@ -71,7 +71,10 @@ def one(work: Path, trial: str, n: int, duration: float, seed: int) -> dict:
         "named": sel.named,
         "kept": d.get("kept"),
         "right": sel.named == [TRIALS[trial]],
-        "margin": None if "delta_bic_lowpass_vs_offset" not in d else d["delta_bic_lowpass_vs_offset"] - d["threshold"],
+        # over the switch's threshold (0 since session 54; runs before it had only the detection threshold, 10)
+        "margin": None
+        if "delta_bic_lowpass_vs_offset" not in d
+        else d["delta_bic_lowpass_vs_offset"] - d.get("switch_threshold", d["threshold"]),
         "charge": d.get("truth_error_smoothing_bic"),
         "expected": d.get("expected_delta_bic"),
         "cautioned": bool(sel.cautions),
@@ -130,8 +133,9 @@ def main(argv=None) -> None:
         f"{'' if a.name == 'blind_close_calls' else ' --name ' + a.name}`  ",
         f"Machine: {platform.node()} ({platform.machine()}), one process; wall time {wall:.0f} s. Code: {_git()}.",
         "",
-        "Selection in process, fixed threshold 10 (no null re-simulations), candidates time_offset, sensor_bandwidth,"
-        " scale_factor. Margin: delta BIC of the low-pass against the offset minus the threshold (> 0: low-pass kept),"
+        "Selection in process, fixed detection threshold 10 (no null re-simulations), candidates time_offset,"
+        " sensor_bandwidth, scale_factor. Margin: delta BIC of the low-pass against the offset minus the switch's"
+        f" threshold, {SWITCH_THRESHOLD:g} (> 0: low-pass kept),"
         " after the charge for smoothing the truth's noise. Cautioned: the report says the margin is within the"
         " statistic's spread, 2 sqrt(expected delta BIC), so it may be the other explanation.",
         "",

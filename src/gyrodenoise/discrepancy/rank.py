@@ -533,6 +533,14 @@ def _final_identifiability(
     return out
 
 
+# The low-pass replaces a named time offset when its delta BIC against it is at least this. Both explanations have one
+# parameter, so BIC's penalty cancels and the better fit is kept; the threshold that guards a detection was cleared
+# when the delay was named. (It was the detection threshold, 10, until session 54: with the offset's first-estimate
+# secant, which handed the low-pass 2-7, the two nearly cancelled; without it, 10 kept the offset for a 40 Hz low-pass
+# on 17 of 40 close calls of 2 x 40 s, `benchmarks/results/blind_close_calls_session54.md`.)
+SWITCH_THRESHOLD = 0.0
+
+
 def _delay_or_lowpass(
     design: Design,
     final: FitResult,
@@ -549,7 +557,7 @@ def _delay_or_lowpass(
     searched: the low-pass alone (no time offset), and the low-pass with a time offset beside it
     (a sensor's filter and late stamps at once: the droop reads the corner, the offset takes the rest
     of the delay). The pair is kept if it beats the better single explanation by `threshold` in BIC
-    (one parameter more); else the low-pass replaces the offset if it beats it by `threshold`.
+    (one parameter more); else the low-pass replaces the offset if it fits better (`SWITCH_THRESHOLD`).
 
     A low-pass applied to a reconstructed true rate also smooths that rate's own error (ground-truth
     noise, `reconstruction`), which the sensor never saw: under either explanation that lowers the
@@ -581,6 +589,7 @@ def _delay_or_lowpass(
     dbic = final.n * np.log(rss_offset / best[0])
     out |= {
         "delta_bic_lowpass_vs_offset": float(dbic),
+        "switch_threshold": SWITCH_THRESHOLD,
         "offset_secant_refit_bic": float(final.n * np.log(final.rss / rss_offset)),
         "lowpass_corner_hz": best[1],
         "lowpass_corner_se_hz": se_white * colour,
@@ -621,7 +630,7 @@ def _delay_or_lowpass(
         # later designs built from `effects` take the kept pair's regressor (set above, for the droop)
         return d, r, v, out
     effects["time_offset"].delta_ref = secant_at  # the offset alone's regressor again (the pair's was per corner)
-    if dbic < threshold:
+    if dbic < SWITCH_THRESHOLD:
         return design, final, view, out
     selected.remove("time_offset")
     selected.append("sensor_bandwidth")
