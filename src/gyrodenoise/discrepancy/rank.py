@@ -536,8 +536,8 @@ def _final_identifiability(
 # The low-pass replaces a named time offset when its delta BIC against it is at least this. Both explanations have one
 # parameter, so BIC's penalty cancels and the better fit is kept; the threshold that guards a detection was cleared
 # when the delay was named. (It was the detection threshold, 10, until session 54: with the offset's first-estimate
-# secant, which handed the low-pass 2-7, the two nearly cancelled; without it, 10 kept the offset for a 40 Hz low-pass
-# on 17 of 40 close calls of 2 x 40 s, `benchmarks/results/blind_close_calls_session54.md`.)
+# secant, which handed the low-pass 2-11, the two nearly cancelled; without it, 10 kept the offset for a 40 Hz low-pass
+# on 17 of 40 close calls of 2 x 40 s, `benchmarks/results/blind_close_calls{,_seed320}_session54.md`.)
 SWITCH_THRESHOLD = 0.0
 
 
@@ -583,7 +583,7 @@ def _delay_or_lowpass(
     # the offset alone again, its secant at its fitted delay (as the pair's is): what the low-pass and the pair must
     # beat is the offset, not the first estimate's secant. That estimate regresses on the truth's noisy angular
     # acceleration and falls short (3.8 ms for 4 ms behind a 0.05 deg mocap), and the secant's misfit then handed the
-    # low-pass 2-4 in delta BIC (an 8 ms offset alone gave the pair 19 and a 318 Hz corner)
+    # low-pass 2-5 in delta BIC on 2 x 40 s, 4-11 on 3 x 60 s (an 8 ms offset alone gave the pair 19, a 318 Hz corner)
     effects["time_offset"].delta_ref = delta
     rss_offset = min(final.rss, Design(view, {n: effects[n] for n in selected}, sigma).fit(selected).rss)
     dbic = final.n * np.log(rss_offset / best[0])
