@@ -71,10 +71,7 @@ def one(work: Path, trial: str, n: int, duration: float, seed: int) -> dict:
         "named": sel.named,
         "kept": d.get("kept"),
         "right": sel.named == [TRIALS[trial]],
-        # over the switch's threshold (0 since session 54; runs before it had only the detection threshold, 10)
-        "margin": None
-        if "delta_bic_lowpass_vs_offset" not in d
-        else d["delta_bic_lowpass_vs_offset"] - d.get("switch_threshold", d["threshold"]),
+        "margin": d["delta_bic_lowpass_vs_offset"] - SWITCH_THRESHOLD if "delta_bic_lowpass_vs_offset" in d else None,
         "charge": d.get("truth_error_smoothing_bic"),
         "expected": d.get("expected_delta_bic"),
         "cautioned": bool(sel.cautions),

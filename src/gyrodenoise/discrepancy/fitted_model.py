@@ -90,10 +90,6 @@ class Selection:
         d = self.delay_or_lowpass
         if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0 or "delta_bic_lowpass_vs_offset" not in d:
             return out
-        # the switch between the two single explanations has a threshold of its own (`rank.SWITCH_THRESHOLD`; runs
-        # before session 54 recorded only the detection threshold, which it was then)
-        dbic, thr = d["delta_bic_lowpass_vs_offset"], d.get("switch_threshold", d["threshold"])
-        margin, spread = abs(dbic - thr), 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
         if d["kept"] == "both":  # the pair against the better one of them: the droop at the pair's corner
             thr = d["threshold"]  # one parameter more: the detection threshold
             margin = abs(d["delta_bic_both_vs_one"] - thr)
@@ -106,6 +102,11 @@ class Selection:
                 f"after charging the low-pass {d['truth_error_smoothing_bic']:.0f} for smoothing the ground truth's "
                 f"own noise), within the statistic's spread on this motion (~{spread:.0f}): it may be one of them"
             ]
+        # the switch between the two single explanations has a threshold of its own (`rank.SWITCH_THRESHOLD`; runs
+        # before session 54 recorded only the detection threshold, which it was then)
+        thr = d.get("switch_threshold", d["threshold"])
+        margin = abs(d["delta_bic_lowpass_vs_offset"] - thr)
+        spread = 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
         if margin >= spread:
             return out
         delay, corner = f"{1e3 * d['delay_s']:.2f} ms", f"{d['lowpass_corner_hz']:.1f} Hz"
