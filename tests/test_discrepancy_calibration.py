@@ -172,7 +172,7 @@ def test_delay_or_lowpass_separability_grows_with_the_delay(tmp_path):
 
 def test_low_pass_that_replaces_a_named_delay_is_reported(tmp_path, monkeypatch):
     """When the noise floor is not visible in the trusted band (behind a noisy motion capture) the
-    selection names the delay, and `_delay_or_lowpass` may then keep a low-pass instead. That design
+    selection names the delay, and `lowpass_choice.choose` may then keep a low-pass instead. That design
     lacked the low-pass, and `fill_params` stopped with KeyError 'sensor_bandwidth' (a blind trial with a
     0.05 deg mocap, benchmarks/blind_discrepancy). A 5 Hz low-pass (32 ms of delay, a large droop)."""
     from gyrodenoise.discrepancy import rank

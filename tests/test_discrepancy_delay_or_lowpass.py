@@ -19,7 +19,8 @@ from scipy import signal
 from gyrodenoise.discrepancy.compare import load_fit_context
 from gyrodenoise.discrepancy.fitted_model import Selection
 from gyrodenoise.discrepancy.hidden import make_measured
-from gyrodenoise.discrepancy.rank import _corner_se, select_effects, truth_error_smoothing
+from gyrodenoise.discrepancy.lowpass_choice import profile_corner_se, truth_error_smoothing
+from gyrodenoise.discrepancy.rank import select_effects
 from gyrodenoise.discrepancy.reconstruction import band_rows, row_frequencies
 from gyrodenoise.discrepancy.spectral import colour_factor
 from gyrodenoise.sim.effects import SensorBandwidth, TimeOffset, WarmupBias
@@ -248,8 +249,8 @@ def test_corner_se_is_the_curvature_of_the_profile_log_likelihood():
     def rss_at(u: float) -> float:
         return 3.0 * np.exp((u - u0) ** 2 / (n * s**2))
 
-    assert _corner_se(rss_at, u0, n) == pytest.approx(40.0 * s, rel=1e-6)
-    assert np.isnan(_corner_se(lambda u: 3.0 * np.exp(-((u - u0) ** 2)), u0, n))  # a maximum: no SE
+    assert profile_corner_se(rss_at, u0, n) == pytest.approx(40.0 * s, rel=1e-6)
+    assert np.isnan(profile_corner_se(lambda u: 3.0 * np.exp(-((u - u0) ** 2)), u0, n))  # a maximum: no SE
 
 
 @pytest.mark.parametrize(("tau", "edge"), [(2.0, "shortest"), (300.0, "longest"), (30.0, None)])

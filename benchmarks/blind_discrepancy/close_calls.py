@@ -5,9 +5,10 @@ their expected delta BIC against each other is ~13-31 at these sizes. This draws
 sizes (2 fitted sequences of 40 s, as the tests; 3 of 60 s, as the blind runner) and runs the selection in process
 (`rank.select_effects`, base bias + white noise + bias random walk, candidates time_offset, sensor_bandwidth,
 scale_factor; fixed detection threshold 10, no null re-simulations), recording which explanation is kept, its margin
-over the switch's threshold (`rank.SWITCH_THRESHOLD`, 0; the detection threshold, 10, before session 54), the charge
-for smoothing the truth's noise, whether the report cautions (a margin within the statistic's spread, 2 sqrt(expected
-delta BIC): `Selection.cautions`) and, where the right effect is named, its value's z against its standard error.
+over the switch's threshold (`lowpass_choice.SWITCH_THRESHOLD`, 0; the detection threshold, 10, before session 54),
+the charge for smoothing the truth's noise, whether the report cautions (a margin within the statistic's spread,
+2 sqrt(expected delta BIC): `Selection.cautions`) and, where the right effect is named, its value's z against its
+standard error.
 
     python benchmarks/blind_discrepancy/close_calls.py [--seeds 300 320] [--work /tmp/close_calls] [--name NAME]
 
@@ -31,7 +32,8 @@ from run import _git  # noqa: E402
 
 from gyrodenoise.atomic import write_text  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_context  # noqa: E402
-from gyrodenoise.discrepancy.rank import SWITCH_THRESHOLD, select_effects  # noqa: E402
+from gyrodenoise.discrepancy.lowpass_choice import SWITCH_THRESHOLD  # noqa: E402
+from gyrodenoise.discrepancy.rank import select_effects  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 BASE = ["bias", "white_noise", "bias_random_walk"]
@@ -144,8 +146,8 @@ def main(argv=None) -> None:
     lines += [
         "",
         "Standard errors, where the right effect is named alone: z = (estimate - truth) / SE (a time offset: the"
-        " regression's SE; a corner: the motion fit's profile, `rank._corner_se`). Calibrated: RMS z ~1, ~68 % within"
-        " 1 and ~95 % within 2.",
+        " regression's SE; a corner: the motion fit's profile, `lowpass_choice.profile_corner_se`). Calibrated:"
+        " RMS z ~1, ~68 % within 1 and ~95 % within 2.",
         "",
         "| trial | size | named | RMS z | mean z | within 1 | within 2 | median SE |",
         "|---|---|---|---|---|---|---|---|",

@@ -6,7 +6,7 @@
 For each trial (sensor_lowpass_40hz, sensor_lowpass_25hz) and each of DRAWS generator seeds (fresh motion and
 noise, 3 sequences x 60 s as the blind runner fits), the workflow's selection runs in-process (base
 bias,white_noise,bias_random_walk; candidates time_offset, sensor_bandwidth, scale_factor) and, where it names the
-low-pass from the motion (`rank._delay_or_lowpass`), z = (corner - truth) / SE is taken twice: with the profile's
+low-pass from the motion (`lowpass_choice.choose`), z = (corner - truth) / SE is taken twice: with the profile's
 white SE and with that SE times the colour factor (`spectral.colour_factor`, what the workflow reports). Calibrated:
 RMS z ~1, ~68 % within 1, ~95 % within 2. `--mocap-noise-scale 0`: an exact mocap (the residual is then the
 low-passed gyro noise itself, coloured like the motion the corner is read from).

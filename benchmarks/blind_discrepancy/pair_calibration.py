@@ -6,7 +6,7 @@
 Fresh draws of the blind generator's `lowpass_40hz_time_offset` trial (40 Hz first-order low-pass, IMU stamps 4 ms
 late; 3 sequences x 60 s, as the blind runner fits), the workflow's selection in-process (base
 bias,white_noise,bias_random_walk; candidates time_offset, sensor_bandwidth, scale_factor). Where the pair is kept
-(`rank._delay_or_lowpass`, kept "both"), z = (estimate - truth) / reported SE for the corner and the offset. The
+(`lowpass_choice.choose`, kept "both"), z = (estimate - truth) / reported SE for the corner and the offset. The
 two share the delay the motion shows, so their z move together: the table gives each, not a pooled chi-square.
 """
 

@@ -1,4 +1,4 @@
-"""Is rank.truth_error_smoothing short of the realised drop, and does that pull the 25 Hz corner low?
+"""Is lowpass_choice.truth_error_smoothing short of the realised drop, and does that pull the 25 Hz corner low?
 
     python benchmarks/blind_discrepancy/truth_smoothing_check.py [--draws 12] [--seeds 11 111 211 311]
     (from the repository root; benchmarks/results/blind_truth_smoothing_check.txt is its output)
@@ -9,11 +9,11 @@ The mocap is written three ways: the generator's own noisy poses (draw 0), noise
 reference), and, for the first seed, extra draws of the mocap's noise (baseline 0.05 deg / 0.2 mm) on the same
 gyro and poses. For each noisy mocap the selection is run in-process as the workflow runs it (base
 bias,white_noise,bias_random_walk; candidates time_offset, sensor_bandwidth; fixed threshold 10), which names the
-offset, refits the reconstruction-error level and then searches the low-pass corner in rank._delay_or_lowpass.
+offset, refits the reconstruction-error level and then searches the low-pass corner in lowpass_choice.choose.
 With the fits' rows, weights and sigma that selection left in the contexts, on a grid of corners:
 
   rss_noisy(c)  the low-pass fit's weighted rss behind the noisy mocap (what the workflow minimises, + g)
-  g(c)          rank.truth_error_smoothing: the correction the workflow adds back
+  g(c)          lowpass_choice.truth_error_smoothing: the correction the workflow adds back
   Dq(c)         the realised drop from the truth's actual error e = omega_noisy - omega_exact (both the
                 workflow's spline of the mocap), through the same rows (edges projected, bias/walk projected):
                 ||P rows(e)||^2 - ||P rows(H_c e)||^2
@@ -42,7 +42,7 @@ REPO = Path.cwd()
 sys.path.insert(0, str(REPO / "benchmarks" / "blind_discrepancy"))
 import generate  # noqa: E402
 
-from gyrodenoise.discrepancy import rank  # noqa: E402
+from gyrodenoise.discrepancy import lowpass_choice, rank  # noqa: E402
 from gyrodenoise.discrepancy.compare import load_fit_contexts  # noqa: E402
 from gyrodenoise.discrepancy.design import Design, sensor_view  # noqa: E402
 from gyrodenoise.discrepancy.spectral import CORNER_XATOL  # noqa: E402
@@ -143,14 +143,14 @@ def analyse(root: Path, name: str, exact) -> dict:
     r_noisy = np.array([rss(fcs, c) for c in grid[:-1]])
     r_exact = np.array([rss(fx, c) for c in grid[:-1]])
     r_e = np.array([rss(fe, c) for c in grid])
-    g = rank.truth_error_smoothing(fcs, sigma, grid[:-1])
+    g = lowpass_choice.truth_error_smoothing(fcs, sigma, grid[:-1])
     dq = r_e[-1] - r_e[:-1]
     # the closed form with the generator's true orientation noise (0.05 deg) and kappa = 1
     kappa, bands = fcs[0].extra["nuisance_level"], [fc.extra["band"] for fc in fcs]
     for fc in fcs:
         fc.extra["nuisance_level"] = np.ones(3)
         fc.extra["band"] = replace(fc.extra["band"], orientation_noise_rad=np.full(3, 0.05 * DEG))
-    g_true = rank.truth_error_smoothing(fcs, sigma, grid[:-1])
+    g_true = lowpass_choice.truth_error_smoothing(fcs, sigma, grid[:-1])
     for fc, b in zip(fcs, bands, strict=True):
         fc.extra["nuisance_level"], fc.extra["band"] = kappa, b
     sig_n = np.mean([b.orientation_noise_rad for b in bands], 0) / DEG

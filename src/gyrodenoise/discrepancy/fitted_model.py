@@ -75,9 +75,10 @@ class Selection:
     def cautions(self) -> list[str]:
         """Named effects that another explanation may hide behind on this data (sentences for the report). Behind a
         noisy ground truth, the choice between a time offset and a low-pass rests on charging the low-pass what it
-        gains by smoothing the truth's own noise (`rank.truth_error_smoothing`), and its statistic has a sampling
-        spread of its own: the cross term of the two explanations' difference with the noise, of standard deviation
-        ~2 sqrt(lambda) for an expected delta BIC lambda. A margin over the threshold within that spread is said.
+        gains by smoothing the truth's own noise (`lowpass_choice.truth_error_smoothing`), and its statistic has a
+        sampling spread of its own: the cross term of the two explanations' difference with the noise, of standard
+        deviation ~2 sqrt(lambda) for an expected delta BIC lambda. A margin over the threshold within that spread is
+        said.
         A named effect whose searched parameter ended at an end of its search (`Effect.at_search_edge`) is said too:
         a blind trial's scale asymmetry, before the vocabulary had it, was named a warm-up bias of tau 2 s."""
         edges = [(n, self.effects[n].at_search_edge()) for n in self.named if n in self.effects]
@@ -102,8 +103,8 @@ class Selection:
                 f"after charging the low-pass {d['truth_error_smoothing_bic']:.0f} for smoothing the ground truth's "
                 f"own noise), within the statistic's spread on this motion (~{spread:.0f}): it may be one of them"
             ]
-        # the switch between the two single explanations has a threshold of its own (`rank.SWITCH_THRESHOLD`; runs
-        # before session 54 recorded only the detection threshold, which it was then)
+        # the switch between the two single explanations has a threshold of its own (`lowpass_choice.SWITCH_THRESHOLD`;
+        # runs before session 54 recorded only the detection threshold, which it was then)
         thr = d.get("switch_threshold", d["threshold"])
         margin = abs(d["delta_bic_lowpass_vs_offset"] - thr)
         spread = 2.0 * np.sqrt(max(d["expected_delta_bic"], 0.0))
@@ -170,7 +171,7 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
         sel.params["white_noise"], sel.se["white_noise"] = {"density": dens}, {"density": c_se / (4 * dens)}
     if corner is not None:
         # the corner stays the selection's. Its standard error: where the motion alone chose it (it replaced a time
-        # offset, `rank._delay_or_lowpass`), from that fit's profile; else (spectrum and motion together) from the
+        # offset, `lowpass_choice.choose`), from that fit's profile; else (spectrum and motion together) from the
         # curvature of the floor's profile on the final residual
         by_motion = sel.delay_or_lowpass or {}
         if by_motion.get("kept") == "sensor_bandwidth":

@@ -635,7 +635,7 @@ class FloorShapeProfile:
     reconstruction's nuisance term: its shape is not judged there (the error rises with frequency
     as the floor's droop falls, and a fixed level cannot tell them apart). `named`: the corner is
     already named, and the profile is read only for its standard error (not asked where the motion
-    alone chose the corner, `rank._delay_or_lowpass`, whose fit gives its own): the fixed floor is
+    alone chose the corner, `lowpass_choice.choose`, whose fit gives its own): the fixed floor is
     then read again through each corner's shape (`Nuisance.floor_at`), where it was read inside the
     trusted band."""
 
