@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -32,7 +30,7 @@ from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.provenance import code_version_text
+from gyrodenoise.provenance import code_version_text, machine_description
 from gyrodenoise.sim.effects import EFFECTS
 
 
@@ -268,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
 
         report["network"] = network_effects(args.network, fit + holdout, args.bic_threshold)
     report["wall_time_s"] = time.time() - t0
-    report["machine"] = f"{platform.node()}, {os.cpu_count()} CPU threads"
+    report["machine"] = machine_description()
     report["code"] = code
     report["simulator_model"] = "error_model.yaml"  # the fitted model, for the simulator (`sim_model`)
     out = write_report(args.out, report, arrays)
