@@ -256,11 +256,12 @@ def _fit_levels_nuisance(
         th[1] = 0.0
     elif fixed_power is not None:
         th[1] = np.asarray(fixed_power, dtype=np.float64)
+    Bt = np.ascontiguousarray(B.transpose(1, 0, 2))  # (3 axes, M, 3 levels): per-axis products run as BLAS matmuls
     for _ in range(iters):
-        S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
+        S = _model_psd(Bt, th)
         W = 1 / S**2
-        score = np.einsum("mak,ma->ka", B, (I - S) * W)
-        info = np.einsum("mak,mal,ma->akl", B, B, W)
+        score = np.matmul(((I - S) * W).T[:, None, :], Bt)[:, 0, :].T  # (levels, axes)
+        info = _fisher(Bt, W)
         step = np.zeros_like(th)
         for a in range(3):
             act = free & ~((th[:, a] <= 0) & (score[:, a] < 0))  # on a bound with a pull outwards: fixed
@@ -275,11 +276,21 @@ def _fit_levels_nuisance(
         th = new
         if done:
             break
-    S = np.maximum(np.einsum("mak,ka->ma", B, th), 1e-300)
+    S = _model_psd(Bt, th)
     ll = float(-(np.log(S) + I / S).sum()) - sp.log_shape
-    W = 1 / S**2
-    info = np.einsum("mak,mal,ma->akl", B, B, W)[:, :2, :2]
+    info = _fisher(Bt, 1 / S**2)[:, :2, :2]
     return th, ll, info
+
+
+def _model_psd(Bt: np.ndarray, th: np.ndarray) -> np.ndarray:
+    """(M, 3) PSD sum_k B[m, a, k] th[k, a] of the levels `th` (3 levels, 3 axes), Bt the basis as (axes, M, levels)."""
+    return np.maximum(np.matmul(Bt, th.T[:, :, None])[..., 0].T, 1e-300)
+
+
+def _fisher(Bt: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """(3 axes, 3, 3) Fisher information sum_m B[m, a, k] B[m, a, l] W[m, a] of the levels (the einsum
+    "mak,mal,ma->akl", as batched matmuls: three to four times faster on the whole spectrum's bins)."""
+    return np.matmul(Bt.transpose(0, 2, 1), Bt * W.T[:, :, None])
 
 
 def _band_edge(bands: list[float | None] | None, s: int, rate_hz: float) -> float:
