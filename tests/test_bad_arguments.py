@@ -3,6 +3,7 @@ line naming the option and what to do, before the work, and nothing is written."
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -101,3 +102,54 @@ def test_discrepancy_refuses_bad_options_before_the_work(tmp_path, a_file, capsy
     assert e.value.code == 2
     assert said.format(file=a_file) in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "override, said",
+    [
+        ("dataset.train_seqs=a", r"dataset.train_seqs='a' is one name, not a list: give 'dataset.train_seqs=\[a\]'"),
+        ("dataset.test_seqs=c", r"dataset.test_seqs='c' is one name, not a list"),
+        ("dataset.sensor.rate_hz=abc", r"dataset.sensor.rate_hz='abc': a number >= 0 in SI units"),
+        ("dataset.sensor.gyro_noise_density=-1", r"dataset.sensor.gyro_noise_density=-1: a number >= 0"),
+    ],
+)
+def test_a_dataset_setting_of_the_wrong_kind_is_named(tiny_asl_root, override, said):
+    """A sequence name without brackets was read letter by letter ('sequence folder(s) not found: a'); a rate that is
+    no number stopped in the noise formula with a TypeError naming only 'dataset'."""
+    import hydra
+    from test_train import tiny_dataset
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+
+    cfg = compose_config("train", [*tiny_dataset(tiny_asl_root), "dataset=asl_folder", override])
+    with pytest.raises(Exception) as e:
+        hydra.utils.instantiate(cfg.dataset)
+    error = e.value.__cause__ if isinstance(e.value.__cause__, ConfigError) else e.value  # Hydra wraps it
+    assert isinstance(error, ConfigError)
+    assert re.search(said, str(error))
+
+
+@pytest.mark.parametrize("window", ["-32", "0", "null_not"])
+def test_a_crop_window_that_is_not_a_positive_number_of_samples_is_named(tiny_asl_root, window):
+    from test_train import tiny_dataset
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.train import check_choices
+
+    cfg = compose_config("train", [*tiny_dataset(tiny_asl_root), f"dataset.window={window}"])
+    with pytest.raises(
+        ConfigError, match=r"dataset.window=.*: the samples per training crop, a whole multiple of the "
+    ):
+        check_choices(cfg)
+
+
+@pytest.mark.parametrize("value", [[7, "x"], 7, [0], [float("nan")]])
+def test_roe_distances_that_are_not_distances_are_named(value):
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.evaluate import roe_distances
+
+    with pytest.raises(ConfigError, match=r"roe_distances=.*: a list of travelled distances in metres, each > 0"):
+        roe_distances(value)
+    assert roe_distances([7, 21.5]) == [7.0, 21.5]
