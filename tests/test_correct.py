@@ -13,6 +13,7 @@ from _models import random_model
 from gyrodenoise.correct import main
 from gyrodenoise.data.checks import SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import G0, read_imu_csv
+from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.pretrained import save_model
 
 TINY = {"name": "denoiser", "channels": (8, 16), "kernel_size": 5, "dilations": (1, 4)}
@@ -473,3 +474,31 @@ def test_a_header_column_of_no_axis_does_not_break_the_columns_read_off_it():
 
     assert columns_from_names(["t", "gyro_norm", "gx", "gy", "gz", "ax", "ay", "az"]) == "1,3,4,5,6,7,8"
     assert columns_from_names(["time", "ax", "ay", "az", "gx", "gy", "gz"]) == "1,5,6,7,2,3,4"
+
+
+def test_stamps_in_exponent_form_that_lost_their_digits_are_refused(tmp_path):
+    """'1.600000000000e+18' (ns written as floats by a spreadsheet or pandas): the samples' times were rounded to a
+    millisecond and read without a word; 16 digits (1 µs) still read."""
+    t, g, a = synth(600)
+    lines = write_asl(tmp_path / "plain.csv", t, g, a).read_text().splitlines()
+
+    def stamps_as(fmt: str, name: str) -> Path:
+        rows = [fmt.format(float(line.split(",", 1)[0])) + "," + line.split(",", 1)[1] for line in lines[1:]]
+        (tmp_path / name).write_text("\n".join([lines[0], *rows]) + "\n")
+        return tmp_path / name
+
+    with pytest.raises(DataFormatError, match=r"coarse.csv:2: the time column is '1.600000000000e\+18', in exponent "
+                       r"form with too few digits: its last digit is worth 0.001 s"):  # fmt: skip
+        read_imu_csv(stamps_as("{:.12e}", "coarse.csv"))
+    np.testing.assert_allclose(read_imu_csv(stamps_as("{:.15e}", "fine.csv")).t_ns, t, atol=1000)
+
+
+def test_a_csv_with_every_field_in_quotes_is_read(tmp_path):
+    t, g, a = synth(300)
+    plain = write_asl(tmp_path / "plain.csv", t, g, a)
+    quoted = tmp_path / "quoted.csv"
+    lines = plain.read_text().splitlines()
+    quoted.write_text("".join(",".join(f'"{f}"' for f in line.split(",")) + "\n" for line in lines))
+    rec = read_imu_csv(quoted, columns="timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z")
+    np.testing.assert_array_equal(rec.t_ns, t)
+    np.testing.assert_array_equal(rec.gyro, read_imu_csv(plain).gyro)

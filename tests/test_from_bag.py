@@ -293,3 +293,21 @@ def test_a_gyro_in_deg_per_s_is_read_with_gyro_unit(tmp_path, sim):
     s = from_bag.import_bag(bag, tmp_path / "deg", gyro_unit="deg/s")
     assert s["data_warnings"] == [] and s["gyro_unit_in_bag"] == "deg/s"
     np.testing.assert_allclose(read_imu(tmp_path / "deg" / "mav0" / "imu0" / "data.csv").gyro, sim.gyro, atol=1e-12)
+
+
+def test_a_pose_that_is_not_a_unit_quaternion_names_the_bag(tmp_path, sim):
+    """The error named the topic only: with several bags imported in a loop, which one was it?"""
+    from rosbags.rosbag1 import Writer
+
+    bag = tmp_path / "scaled.bag"
+    with Writer(bag) as w:
+        c = w.add_connection("/mocap", "geometry_msgs/msg/PoseStamped", typestore=TS)
+        i = w.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=TS)
+        for k, t in enumerate(sim.t_ns[:2000].tolist()):
+            w.write(i, t, TS.serialize_ros1(imu_msg(t, sim.gyro[k], sim.acc[k]), "sensor_msgs/msg/Imu"))
+            q = 2.0 * sim.gt_quat_xyzw[k]  # a quaternion of norm 2: no orientation
+            m = pose_msg("geometry_msgs/msg/PoseStamped", t, sim.gt_pos[k], q)
+            w.write(c, t, TS.serialize_ros1(m, "geometry_msgs/msg/PoseStamped"))
+    with pytest.raises(from_bag.BagError, match=rf"^{bag}: /mocap: 2000 orientations are not unit quaternions"):
+        from_bag.import_bag(bag, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -296,3 +296,15 @@ def test_a_sequence_without_ground_truth_says_how_to_name_another_file(tmp_path)
     with pytest.raises(FileNotFoundError, match=r"\+dataset\.gt_files\.walk_1=FOLDER/data\.csv") as e:
         find_groundtruth_file(mav0)
     assert "gyrodenoise-correct for IMU-only recordings" in str(e.value)
+
+
+def test_a_header_naming_fewer_columns_than_the_data_is_still_checked(tmp_path):
+    """A header of t, p, q (w last) over data with velocity and biases after them was not compared: read as w first."""
+    header = "#timestamp,p_x,p_y,p_z,q_x,q_y,q_z,q_w,v_x,v_y,v_z\n"  # 11 names, 17 columns below
+    f = write(tmp_path / "gt.csv", header, gt_rows(extra=",0,0,0,0,0,0,0,0,0"))
+    with pytest.raises(
+        DataFormatError, match=r"gt.csv:1: column 5 is 'q_x' where quat w is expected.*w column before x"
+    ):
+        read_groundtruth(f)
+    note = "# recorded by a logger, v1.2\n"  # a comment of few fields above the data is no header: read as before
+    read_groundtruth(write(tmp_path / "ok.csv", GT_HEADER + note, gt_rows(extra=",0,0,0,0,0,0,0,0,0")))

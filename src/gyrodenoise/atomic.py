@@ -5,6 +5,7 @@ An interrupted run therefore never leaves a half-written file that looks whole.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -20,11 +21,33 @@ def _umask() -> int:
     return mask
 
 
+def output_path_problem(path: str | Path, folder: bool = False) -> str | None:
+    """Why `path` cannot be written (a file, or with `folder` a folder of outputs): it is a folder where a file is
+    meant, a file where a folder is meant, or a folder above it is a file. None when it can be. The commands ask
+    this before their work, so that a wrong output path is not found only when the results are written."""
+    path = Path(path)
+    if not folder and path.is_dir():
+        return f"{path} is a folder: give a file path"
+    if folder and path.exists() and not path.is_dir():
+        return f"{path} is a file: give a folder"
+    for above in path.parents:
+        if above.exists():
+            return None if above.is_dir() else f"{above} is a file, not a folder: {path} cannot be written under it"
+    return None
+
+
+def _make_parent(path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as e:  # a folder on the way is a file: say which, not mkdir's errno
+        raise NotADirectoryError(errno.ENOTDIR, output_path_problem(path) or str(e), str(path)) from None
+
+
 @contextmanager
 def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path to write; it replaces `path` only if the block succeeds."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _make_parent(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix or ".tmp")
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the result the usual permissions

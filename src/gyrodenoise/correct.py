@@ -32,7 +32,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.arrays import as_rows
-from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.atomic import output_path_problem, write_json, write_text
 from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import (
     ACC_UNITS,
@@ -279,6 +279,16 @@ def main(argv: list[str] | None = None) -> int:
             if target is not None and target.is_dir():  # found after the work, it would leave half the outputs
                 raise ValueError(f"{flag} {target} is a folder: give a file path (or -o DIR for a folder)")
         path = find_imu_file(args.input)
+        out_dir = args.out_dir or default_out_dir(path)
+        out_csv = args.out_csv or out_dir / "imu_corrected.csv"
+        out_tum = args.out_tum or out_dir / "orientation.txt"
+        for flag, target, folder in (
+            ("-o", args.out_dir, True),
+            ("--out-csv", out_csv, False),
+            ("--out-tum", out_tum, False),
+        ):
+            if target is not None and (problem := output_path_problem(target, folder)):  # not after the work
+                raise ValueError(f"{flag} {target}: {problem}")
         try:
             model, meta = load_model(args.model, warn=False)  # its warning is listed with the others
         except RuntimeError as e:  # a state dict that does not fit the model's config
@@ -308,9 +318,6 @@ def main(argv: list[str] | None = None) -> int:
     if rec.units_from_header:  # read in the units its header declares: say so, the flags would override them
         said = ", ".join(f"{k} in {rec.units[k]}" for k in rec.units_from_header)
         print(f"note: read {said}, as the header declares (--{rec.units_from_header[0]}-unit ... overrides)")
-    out_dir = args.out_dir or default_out_dir(path)
-    out_csv = args.out_csv or out_dir / "imu_corrected.csv"
-    out_tum = args.out_tum or out_dir / "orientation.txt"
     summary_file = out_csv.parent / "correct_summary.json"
     if summary_file.is_file():  # say so: the earlier outputs (maybe of another model) are about to be replaced
         try:

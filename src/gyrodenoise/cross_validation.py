@@ -47,7 +47,7 @@ from gyrodenoise.ablation_runs import (
     with_ext,
 )
 from gyrodenoise.ablation_stats import PairedDiff
-from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.atomic import output_path_problem, write_json, write_text
 from gyrodenoise.tables import markdown_table
 
 FOLD_KEY = "dataset.cv_fold"
@@ -448,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--out", type=Path, help=f"output prefix (default: the first folder's {CV_SUMMARY})")
     args = ap.parse_args(argv)
+    if args.out is not None and (problem := output_path_problem(f"{args.out}.md")):  # a folder on the way is a file
+        ap.error(f"--out {args.out}: {problem}")
     try:
         found, _ = load_recipes(args.dirs, parse_where(args.where))
         ref = None

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from gyrodenoise import plots, uncertainty
 from gyrodenoise.atomic import write_json, write_text
@@ -165,6 +165,20 @@ def evaluate(cfg: DictConfig) -> dict:
         return _evaluate(cfg, out)
 
 
+def roe_distances(value: object) -> list[float]:
+    """`roe_distances` as metres: a list of positive numbers, else a ConfigError naming it (not float()'s own)."""
+    items = list(value) if isinstance(value, list | tuple | ListConfig) else None
+    ok = items is not None and all(
+        isinstance(d, int | float) and not isinstance(d, bool) and math.isfinite(d) and d > 0 for d in items
+    )
+    if not ok:
+        raise ConfigError(
+            f"roe_distances={value!r}: a list of travelled distances in metres, each > 0, "
+            "e.g. 'roe_distances=[7,21,35]'"
+        )
+    return [float(d) for d in items]
+
+
 def _evaluate(cfg: DictConfig, out: Path) -> dict:
     start = time.time()
     # results.json, written last, is the mark of a finished evaluation: an earlier one's must not outlive a rerun
@@ -173,6 +187,7 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
+    distances = roe_distances(cfg.roe_distances)  # before the data are read, not after the scoring
     if split == "test" and OmegaConf.is_missing(cfg.dataset, "train_seqs"):  # asl_folder's '???': not read to test
         cfg = cfg.copy()
         with open_dict(cfg):
@@ -248,7 +263,6 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     warned += estimate_warnings
     for w in model_warnings:
         warnings.warn(w, ModelQualityWarning, stacklevel=2)
-    distances = [float(d) for d in cfg.roe_distances]
     results: dict[str, dict] = {}
     calib: dict[str, uncertainty.CalibrationResult] = {}
     external: dict[str, dict[str, dict]] = {name: {} for name in estimates}  # name -> sequence -> file, coverage

@@ -32,7 +32,7 @@ import torch
 from torch import nn
 
 from gyrodenoise import c_export
-from gyrodenoise.atomic import atomic_path
+from gyrodenoise.atomic import atomic_path, output_path_problem
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings, quiet_library_notices
 from gyrodenoise.pretrained import load_model, sensor_model
@@ -197,6 +197,12 @@ def export_onnx(
             external_data=False,
             verbose=False,
         )
+    written = program.model.opset_imports.get("", opset)
+    if written != opset:  # the exporter falls back to its own lowest opset when it cannot convert down: say so
+        raise ValueError(
+            f"--opset {opset}: the exporter could not convert the graph to ONNX opset {opset} (it can write opset "
+            f"{written}), so nothing was written; give --opset {written} or higher (default {OPSET})"
+        )
     program.model.metadata_props.update(onnx_metadata(model, meta, stateful))
     with atomic_path(path, ".onnx") as tmp:
         program.save(str(tmp), external_data=False)
@@ -250,6 +256,9 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"{flag} {target} is a folder: give a file path, e.g. {target / ('model' + target.suffix)}")
     if args.c is not None and args.c.exists() and not args.c.is_dir():
         ap.error(f"--c {args.c} is a file: give a folder for the C files")
+    for flag, target, folder in (("--onnx", args.onnx, False), ("--pt2", args.pt2, False), ("--c", args.c, True)):
+        if target is not None and (problem := output_path_problem(target, folder)):  # a folder above is a file
+            ap.error(f"{flag} {target}: {problem}")
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
             model, meta = load_model(args.model)

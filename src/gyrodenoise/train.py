@@ -191,6 +191,11 @@ def check_choices(cfg: DictConfig) -> None:
             "(the dataset follows it)"
         )
     window, block = cfg.dataset.get("window"), max(loss_inc or data_inc or [1])
+    if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < block):
+        raise ConfigError(  # a negative window passed the test below and stopped at the crops as 'too short' data
+            f"dataset.window={window!r}: the samples per training crop, a whole multiple of the longest loss increment "
+            f"({block} samples) and at least that, e.g. dataset.window=9600 (48 s at 200 Hz)"
+        )
     if window is not None and window % block:
         raise ConfigError(
             f"dataset.window={window} is not a multiple of the longest loss increment ({block} samples): give e.g. "

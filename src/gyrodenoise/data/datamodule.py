@@ -126,6 +126,12 @@ class ImuDataModule(L.LightningDataModule):
     ) -> None:
         super().__init__()
         self.name, self.root = name, str(root)
+        for key, names in (("train_seqs", train_seqs), ("test_seqs", test_seqs), ("val_seqs", val_seqs)):
+            if isinstance(names, str):  # list('walk_1') would look for the sequences w, a, l, k, _, 1
+                raise ConfigError(
+                    f"dataset.{key}={names!r} is one name, not a list: give 'dataset.{key}=[{names}]' (quoted for "
+                    f"the shell), or several: 'dataset.{key}=[a,b]'"
+                )
         self.train_names = list(train_seqs)
         self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
         self.val_explicit = val_seqs is not None  # named validation sequences must have data to validate on
@@ -161,6 +167,17 @@ class ImuDataModule(L.LightningDataModule):
                 "At another rate than 200 Hz: docs/own-data.md, 'Rates other than 200 Hz'"
             )
         self.sensor = dict(sensor or {})
+        for key in ("rate_hz", "gyro_noise_density", "acc_noise_density"):
+            value = self.sensor.get(key)
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0
+            ):  # else a TypeError deep in the noise's formula, naming only 'dataset'
+                raise ConfigError(
+                    f"dataset.sensor.{key}={value!r}: a number >= 0 in SI units "
+                    "(rate_hz in Hz, noise densities in rad/s/sqrt(Hz) and m/s^2/sqrt(Hz))"
+                )
+        if self.sensor.get("rate_hz") == 0:
+            raise ConfigError("dataset.sensor.rate_hz=0: give the IMU's nominal rate in Hz, e.g. 200")
         self._augment_spec = dict(augment or {})
         # checked now (a wrong key fails before any data is read); rebuilt at the data's measured rate for training
         self.augment = self._augment_config(self.sensor.get("rate_hz", 200.0))

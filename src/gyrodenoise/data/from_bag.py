@@ -364,14 +364,15 @@ def _covered(streams: dict[tuple[str, str], Stream], ref: Step, at: np.ndarray) 
 
 
 def _link_at(
-    step: Step, links: TfLinks, streams: dict[tuple[str, str], Stream], ref: Step, at: np.ndarray
+    step: Step, links: TfLinks, streams: dict[tuple[str, str], Stream], ref: Step, at: np.ndarray, bag: Path
 ) -> tuple[Rotation, np.ndarray]:
     """One link of the path as (R, t): a constant, the reference link's own samples, or another link at `at`."""
     if step.pair in links.static:
         v = links.static[step.pair]
-        return _unit_rotations(v[None, 3:], np.zeros(1, np.int64), f"{links.source[step.pair][0]} {step}")[0], v[:3]
+        where = f"{bag}: {links.source[step.pair][0]} {step}"
+        return _unit_rotations(v[None, 3:], np.zeros(1, np.int64), where)[0], v[:3]
     s = streams[step.pair]
-    rot = _unit_rotations(s.values[:, 3:], s.t_ns, s.topic)
+    rot = _unit_rotations(s.values[:, 3:], s.t_ns, f"{bag}: {s.topic}")
     if step.pair == ref.pair:
         keep = np.isin(s.t_ns, at)
         return rot[keep], s.values[keep, :3]
@@ -413,7 +414,7 @@ def read_tf_chain(
             f"{bag}: the moving links of {start} -> {goal} never cover the same instants ({spans}): no pose can be "
             "composed; check that they were recorded together, and --stamp"
         )
-    rot, trans = compose([_link_at(s, links, streams, ref, at) for s in path], [s.inverted for s in path])
+    rot, trans = compose([_link_at(s, links, streams, ref, at, bag) for s in path], [s.inverted for s in path])
     out = Stream(topic, at, np.column_stack([trans, rot.as_quat()]))
     out.notes = [n for s in streams.values() for n in s.notes] + [f"{topic} {start} -> {goal}: {n}" for n in notes]
     out.notes += links.notes
@@ -460,9 +461,10 @@ def _unit_rotations(q: np.ndarray, t_ns: np.ndarray, what: str) -> Rotation:
     return Rotation.from_quat(q / norm[:, None])
 
 
-def body_to_imu(gt: Stream, imu_in_body: Rotation) -> np.ndarray:
-    """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu."""
-    rot = _unit_rotations(gt.values[:, 3:], gt.t_ns, gt.topic) * imu_in_body
+def body_to_imu(gt: Stream, imu_in_body: Rotation, bag: Path | None = None) -> np.ndarray:
+    """Ground-truth columns of the IMU's own orientation: R_world_imu = R_world_body R_body_imu. `bag` names the
+    file in an error."""
+    rot = _unit_rotations(gt.values[:, 3:], gt.t_ns, f"{bag}: {gt.topic}" if bag else gt.topic) * imu_in_body
     return pose_values(gt.values[:, :3], rot.as_quat())
 
 
@@ -612,7 +614,7 @@ def import_bag(
         imu.t_ns,
         imu.values,
         gt_t,
-        body_to_imu(gt, imu_in_body) if gt else None,
+        body_to_imu(gt, imu_in_body, bag) if gt else None,
         extra_files={IMPORT_RECORD: json.dumps(summary, indent=2) + "\n"},
     )
     try:

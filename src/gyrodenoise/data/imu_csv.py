@@ -13,6 +13,7 @@ import math
 import re
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +68,23 @@ def check_units(time_unit: str | None, gyro_unit: str | None, acc_unit: str | No
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:
-    return [f.strip() for f in (line.split(delimiter) if delimiter else line.split())]
+    """The fields of a line; a field in double quotes (a spreadsheet's or pandas' QUOTE_ALL export) without them."""
+    fields = [f.strip() for f in (line.split(delimiter) if delimiter else line.split())]
+    return [f[1:-1].strip() if len(f) >= 2 and f[0] == f[-1] == '"' else f for f in fields]
+
+
+COARSEST_STAMP_NS = 100_000  # a stamp written in exponent form whose last digit is worth this or more lost its time
+
+
+def _exponent_stamp_step_ns(field: str, ns_per: int) -> float | None:
+    """What the last digit of a stamp written in exponent form ('1.403715e+18') is worth in ns; None otherwise."""
+    if "e" not in field.lower():
+        return None
+    try:
+        exponent = Decimal(field).as_tuple().exponent
+    except InvalidOperation:
+        return None
+    return 10.0 ** int(exponent) * ns_per if isinstance(exponent, int) else None
 
 
 def _guess_delimiter(line: str) -> str | None:
@@ -222,6 +239,14 @@ def read_imu_csv(
                 f"{path}:{lineno}: the time column is {t_field!r}, with a fractional part, in nanoseconds "
                 "(--time-unit ns, the default): the stamps are likely seconds (or ms/us); pass --time-unit s "
                 "(ms, us) as they are."
+            )
+        step = _exponent_stamp_step_ns(t_field, ns_per)
+        if step is not None and step >= COARSEST_STAMP_NS:
+            raise DataFormatError(
+                f"{path}:{lineno}: the time column is {t_field!r}, in exponent form with too few digits: its last "
+                f"digit is worth {step * 1e-9:g} s, so the samples' times were rounded away when the file was written. "
+                "Write the stamps with all their digits: integer nanoseconds, or seconds with 9 decimals "
+                "(--time-unit s)."
             )
         try:
             try:

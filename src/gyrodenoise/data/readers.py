@@ -106,7 +106,8 @@ def read_csv_table(
     Returns (t_ns int64, values float64 with the `min_cols - 1` columns after the time, line numbers).
     Columns beyond `min_cols` are ignored (optional extras such as velocity and biases).
     `check_header(path, line, names)` sees the header: of the comment lines before the first data line, the last
-    with as many comma-separated fields as that data line (a note below the header is not it).
+    with as many comma-separated fields as that data line (a note below the header is not it), else the last that
+    names at least the `min_cols` columns read.
     """
     path = Path(path)
     if not path.is_file():
@@ -127,8 +128,11 @@ def read_csv_table(
             continue
         fields = [f.strip() for f in s.split(",")]
         if not rows and check_header is not None:
-            # the header: the last comment line with as many fields as the data (not a note below it)
-            header = next((c for c in reversed(comments) if len(c[1]) == len(fields)), None)
+            # the header: the last comment line with as many fields as the data (not a note below it), else one that
+            # names at least the columns read (a header of t, p, q over data with more columns: velocity, biases)
+            header = next((c for c in reversed(comments) if len(c[1]) == len(fields)), None) or next(
+                (c for c in reversed(comments) if len(c[1]) >= min_cols), None
+            )
             if header is not None:
                 check_header(path, *header)
         if len(fields) < min_cols:

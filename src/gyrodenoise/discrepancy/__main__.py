@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from gyrodenoise.atomic import write_json
+from gyrodenoise.atomic import output_path_problem, write_json
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
@@ -202,6 +202,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args.gt_files = gt
     if not args.knot_spacing > 0:
         p.error(f"--knot-spacing {args.knot_spacing}: must be positive (seconds between the truth spline's knots)")
+    if not 0 <= args.min_gain < 1:  # a share: 5 (meant as 5 %?) would let no effect be named, and say nothing
+        p.error(f"--min-gain {args.min_gain:g}: a share between 0 and 1 (0.05 for 5 %)")
+    if args.null_draws < 0:
+        p.error(f"--null-draws {args.null_draws}: 0 (the fixed --bic-threshold alone) or more re-simulations")
+    if problem := output_path_problem(args.out, folder=True):  # found before the minutes of work, not after
+        p.error(f"--out {args.out}: {problem}")
+    if args.network is not None:  # a wrong model is said now, not after the minutes of the effects' selection
+        from gyrodenoise.pretrained import ModelFileError, load_model
+
+        try:
+            load_model(args.network, warn=False)
+        except (ModelFileError, FileNotFoundError, ValueError) as e:
+            p.error(f"--network: {e}")
     return args
 
 

@@ -1,0 +1,155 @@
+"""Bad output paths and option values of the command-line tools (found by a bad-input audit): each is refused in one
+line naming the option and what to do, before the work, and nothing is written."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from _models import random_model
+
+from gyrodenoise.atomic import output_path_problem, write_text
+from gyrodenoise.pretrained import save_model
+
+TINY = {"name": "denoiser", "channels": (4, 8), "kernel_size": 5, "dilations": (1, 2)}
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory) -> Path:
+    m = random_model(seed=1, **{k: v for k, v in TINY.items() if k != "name"})
+    return save_model(m, TINY, tmp_path_factory.mktemp("model") / "tiny.pt", meta={"rate_hz": 200.0})
+
+
+@pytest.fixture
+def a_file(tmp_path) -> Path:
+    f = tmp_path / "afile"
+    f.write_text("not a folder\n")
+    return f
+
+
+def test_an_output_path_under_a_file_is_named(a_file):
+    assert output_path_problem(a_file.parent / "new" / "x.csv") is None
+    assert (
+        output_path_problem(a_file / "x.csv")
+        == f"{a_file} is a file, not a folder: {a_file / 'x.csv'} cannot be written under it"
+    )
+    assert output_path_problem(a_file, folder=True) == f"{a_file} is a file: give a folder"
+    assert output_path_problem(a_file.parent) == f"{a_file.parent} is a folder: give a file path"
+    with pytest.raises(NotADirectoryError, match=f"{a_file} is a file, not a folder"):  # not mkdir's bare errno
+        write_text(a_file / "sub" / "x.txt", "x")
+
+
+def test_correct_refuses_an_output_folder_that_is_a_file_before_the_work(tiny_asl_root, a_file, model_file, capsys):
+    from gyrodenoise.correct import main
+
+    imu = tiny_asl_root / "a" / "mav0" / "imu0" / "data.csv"
+    assert main([str(imu), "-m", str(model_file), "-o", str(a_file)]) == 2
+    assert f"-o {a_file}: {a_file} is a file: give a folder" in capsys.readouterr().err
+    assert (
+        main([str(imu), "-m", str(model_file), "--out-csv", str(a_file / "x.csv"), "-o", str(a_file.parent / "o")]) == 2
+    )
+    assert f"{a_file} is a file, not a folder" in capsys.readouterr().err
+    assert not (a_file.parent / "o").exists()
+
+
+def test_export_refuses_an_output_under_a_file(model_file, a_file, capsys):
+    from gyrodenoise.export import main
+
+    for flag in ("--onnx", "--pt2", "--c"):
+        with pytest.raises(SystemExit) as e:
+            main([str(model_file), flag, str(a_file / "out")])
+        assert e.value.code == 2
+        assert f"{flag} {a_file / 'out'}: {a_file} is a file, not a folder" in capsys.readouterr().err
+
+
+def test_export_refuses_an_opset_it_cannot_write(model_file, tmp_path, capsys):
+    pytest.importorskip("onnxscript", reason="pip install 'gyrodenoise[export]'")
+    from gyrodenoise.export import main
+
+    out = tmp_path / "m.onnx"
+    assert main([str(model_file), "--onnx", str(out), "--opset", "3", "--no-check"]) == 2
+    err = capsys.readouterr().err
+    assert "--opset 3: the exporter could not convert the graph to ONNX opset 3" in err
+    assert "nothing was written; give --opset 18 or higher" in err
+    assert not out.exists()
+
+
+def test_cross_validation_refuses_an_output_prefix_under_a_file(a_file, capsys):
+    from gyrodenoise.cross_validation import main
+
+    with pytest.raises(SystemExit):
+        main([str(a_file.parent), "--out", str(a_file / "cv")])
+    assert f"--out {a_file / 'cv'}: {a_file} is a file, not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "extra, said",
+    [
+        (["--out", "{file}"], "--out {file}: {file} is a file: give a folder"),
+        (["--min-gain", "5"], "--min-gain 5: a share between 0 and 1"),
+        (["--null-draws", "-1"], "--null-draws -1: 0 (the fixed --bic-threshold alone) or more"),
+        (["--network", "{file}"], "--network: {file}: not a model file"),
+        (["--network", "nosuchmodel"], "--network: model 'nosuchmodel': neither a file nor a shipped model"),
+    ],
+)
+def test_discrepancy_refuses_bad_options_before_the_work(tmp_path, a_file, capsys, extra, said):
+    from gyrodenoise.discrepancy.__main__ import parse_args
+
+    argv = ["--root", str(tmp_path), "--fit", "a", "--holdout", "b", "--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as e:
+        parse_args(argv + [x.format(file=a_file) for x in extra])
+    assert e.value.code == 2
+    assert said.format(file=a_file) in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "override, said",
+    [
+        ("dataset.train_seqs=a", r"dataset.train_seqs='a' is one name, not a list: give 'dataset.train_seqs=\[a\]'"),
+        ("dataset.test_seqs=c", r"dataset.test_seqs='c' is one name, not a list"),
+        ("dataset.sensor.rate_hz=abc", r"dataset.sensor.rate_hz='abc': a number >= 0 in SI units"),
+        ("dataset.sensor.gyro_noise_density=-1", r"dataset.sensor.gyro_noise_density=-1: a number >= 0"),
+    ],
+)
+def test_a_dataset_setting_of_the_wrong_kind_is_named(tiny_asl_root, override, said):
+    """A sequence name without brackets was read letter by letter ('sequence folder(s) not found: a'); a rate that is
+    no number stopped in the noise formula with a TypeError naming only 'dataset'."""
+    import hydra
+    from test_train import tiny_dataset
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+
+    cfg = compose_config("train", [*tiny_dataset(tiny_asl_root), "dataset=asl_folder", override])
+    with pytest.raises(Exception) as e:
+        hydra.utils.instantiate(cfg.dataset)
+    error = e.value.__cause__ if isinstance(e.value.__cause__, ConfigError) else e.value  # Hydra wraps it
+    assert isinstance(error, ConfigError)
+    assert re.search(said, str(error))
+
+
+@pytest.mark.parametrize("window", ["-32", "0", "null_not"])
+def test_a_crop_window_that_is_not_a_positive_number_of_samples_is_named(tiny_asl_root, window):
+    from test_train import tiny_dataset
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.train import check_choices
+
+    cfg = compose_config("train", [*tiny_dataset(tiny_asl_root), f"dataset.window={window}"])
+    with pytest.raises(
+        ConfigError, match=r"dataset.window=.*: the samples per training crop, a whole multiple of the "
+    ):
+        check_choices(cfg)
+
+
+@pytest.mark.parametrize("value", [[7, "x"], 7, [0], [float("nan")]])
+def test_roe_distances_that_are_not_distances_are_named(value):
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.evaluate import roe_distances
+
+    with pytest.raises(ConfigError, match=r"roe_distances=.*: a list of travelled distances in metres, each > 0"):
+        roe_distances(value)
+    assert roe_distances([7, 21.5]) == [7.0, 21.5]
