@@ -258,7 +258,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--c {args.c} is a file: give a folder for the C files")
     for flag, target, folder in (("--onnx", args.onnx, False), ("--pt2", args.pt2, False), ("--c", args.c, True)):
         if target is not None and (problem := output_path_problem(target, folder)):  # a folder above is a file
-            ap.error(f"{flag} {target}: {problem}")
+            print(f"error: {flag} {target}: cannot write: {problem}", file=sys.stderr)  # as the export's own errors
+            return 2
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
             model, meta = load_model(args.model)
