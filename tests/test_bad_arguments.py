@@ -61,6 +61,8 @@ def test_export_refuses_an_output_under_a_file(model_file, a_file, capsys):
         err = capsys.readouterr().err
         assert err.startswith(f"error: {flag} {a_file / 'out'}: cannot write: {a_file} is a file, not a folder")
         assert err.count("\n") == 1
+    assert main([str(model_file), "--c", str(a_file)]) == 2  # a folder of C files asked, a file given
+    assert capsys.readouterr().err == f"error: --c {a_file}: cannot write: {a_file} is a file: give a folder\n"
 
 
 def test_export_refuses_an_opset_it_cannot_write(model_file, tmp_path, capsys):

@@ -251,13 +251,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not (args.onnx or args.pt2 or args.c):
         ap.error("give at least one of --onnx PATH, --pt2 PATH, --c OUT_DIR")
-    for flag, target in (("--onnx", args.onnx), ("--pt2", args.pt2)):
-        if target is not None and target.is_dir():  # found only after the export's work otherwise, with a raw error
-            ap.error(f"{flag} {target} is a folder: give a file path, e.g. {target / ('model' + target.suffix)}")
-    if args.c is not None and args.c.exists() and not args.c.is_dir():
-        ap.error(f"--c {args.c} is a file: give a folder for the C files")
     for flag, target, folder in (("--onnx", args.onnx, False), ("--pt2", args.pt2, False), ("--c", args.c, True)):
-        if target is not None and (problem := output_path_problem(target, folder)):  # a folder above is a file
+        # asked before the work: otherwise a wrong path is found only when the results are written, with a raw error
+        if target is not None and (problem := output_path_problem(target, folder)):
+            if not folder and target.is_dir():
+                problem += f", e.g. {target / ('model' + flag.replace('--', '.'))}"
             print(f"error: {flag} {target}: cannot write: {problem}", file=sys.stderr)  # as the export's own errors
             return 2
     try:
