@@ -135,6 +135,15 @@ def member_file(folder, k: int, model=None, cfg=None, **meta):
     return save_model(m, cfg or {"name": "denoiser", **TINY}, folder / "model.pt", {**base, **meta})
 
 
+def test_a_one_member_ensemble_is_built_with_a_warning_that_it_has_no_spread(tmp_path):
+    a = member_file(tmp_path / "a", 0, seed=0)
+    out = tmp_path / "one.pt"
+    with pytest.warns(ModelQualityWarning, match="an ensemble of one member .* has no spread"):
+        assert ensemble_cli.main(["build", str(a), "--out", str(out)]) == 0
+    ens, meta = load_model(out)
+    assert len(ens) == 1 and meta["n_members"] == 1
+
+
 def test_build_cli_from_files_and_multirun(tmp_path, capsys):
     a = member_file(tmp_path / "a", 0, seed=0, fold=1)
     b = member_file(tmp_path / "b", 1, model=calibrated_model(1), cfg={"name": "calibrated"}, seed=1, fold=2)

@@ -32,8 +32,9 @@ from pathlib import Path
 
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
+from gyrodenoise.notices import plain_project_warnings
 from gyrodenoise.paths import portable_path
-from gyrodenoise.pretrained import load_model, save_model
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, save_model
 
 RATE_RTOL = 0.01  # members trained at rates further apart than this see different physics per sample
 
@@ -136,6 +137,13 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
             raise ValueError(f"the same member twice: {r['path']} and {seen[sha]} (identical files)")
         if sha:  # older records may lack it: not comparable
             seen[sha] = r["path"]
+    if len(members) == 1:  # allowed (it equals the member), but its uncertainty output says nothing
+        warnings.warn(
+            f"an ensemble of one member ({records[0]['path']}) has no spread: its uncertainty outputs (correct's "
+            "w_std columns, the figures' bands) are 0; give two or more member files for an uncertainty",
+            ModelQualityWarning,
+            stacklevel=2,
+        )
     beats = [r.get("beats_calibrated") for r in records]
     if any(b is False for b in beats):
         bad = [r["path"] for r in records if r.get("beats_calibrated") is False]
@@ -350,7 +358,8 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("give --out FILE")
         if not paths:
             ap.error("give member model files or --from-multirun DIR")
-        build_ensemble(paths, out, args.name, args.allow_mixed, command)
+        with plain_project_warnings():  # the members' warnings as `warning: ...` lines
+            build_ensemble(paths, out, args.name, args.allow_mixed, command)
     except (FileNotFoundError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
