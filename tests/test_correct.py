@@ -195,6 +195,23 @@ def test_a_corrupted_sample_is_refused_and_a_clipped_gyro_warns(tmp_path, model_
     assert code == 0 and "saturated" not in err
 
 
+def test_a_quantized_gyro_at_rest_is_not_called_clipped(tmp_path, model_file, capsys):
+    """A still recording of a quantized gyro repeats its largest value, a few steps, in many runs: that is not a
+    clipped range (a false warning on a 50-row EuRoC slice); the same gyro clipped at 0.5 rad/s still warns."""
+    step = np.radians(0.04)  # EuRoC's ADIS16448 step
+    t_ns, gyro, acc = synth()
+    still = np.round(np.random.default_rng(3).normal(0.0, step, gyro.shape) / step) * step
+    code, _, err = run(
+        [write_asl(tmp_path / "still.csv", t_ns, still, acc), "-m", model_file, "-o", tmp_path / "s"], capsys
+    )
+    assert code == 0 and "saturated" not in err
+    clipped = np.round(np.clip(gyro, -0.5, 0.5) / step) * step
+    code, _, err = run(
+        [write_asl(tmp_path / "clip.csv", t_ns, clipped, acc), "-m", model_file, "-o", tmp_path / "c"], capsys
+    )
+    assert code == 0 and "looks saturated" in err
+
+
 def test_acc_m_s2_read_as_g(tmp_path, model_file, capsys):
     f = bad_file(tmp_path)
     expect_error(capsys, [f, "-m", model_file, "-o", tmp_path, "--acc-unit", "g"], "--acc-unit m/s^2")

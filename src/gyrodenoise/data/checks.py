@@ -23,6 +23,9 @@ GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well 
 GYRO_ABS_MAX = 100.0  # rad/s (5730 deg/s)
 ACC_ABS_MAX = 5000.0  # m/s^2 (~510 g)
 SATURATED_RUNS = 2  # an axis at its largest magnitude in this many separate runs looks clipped
+# a clipped range spans thousands of the sensor's steps (2**15 on a 16-bit gyro); a quantized gyro at rest or in slow
+# motion repeats its largest value, a few steps, in many runs without being clipped
+SATURATED_MIN_STEPS = 256
 GAP_FACTOR = 3.0  # a step longer than this x the median period is a gap
 RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
 G_TOL_REST, G_TOL_MOVING = 0.10, 0.30  # relative |acc| - g tolerance with / without a rest period
@@ -179,6 +182,14 @@ def check_physical_range(rec: ImuRecording, report: CheckReport, force: bool = F
             )
 
 
+def _steps(mag: np.ndarray, top: float) -> float:
+    """How many of the axis's quantization steps (the smallest gap between its distinct magnitudes) `top` is; inf
+    for values that show no step (float data)."""
+    gaps = np.diff(np.unique(mag))
+    gaps = gaps[gaps > top * 1e-9]  # float rounding of one step is not a step
+    return top / gaps.min() if gaps.size else float("inf")
+
+
 def check_saturation(rec: ImuRecording, report: CheckReport) -> None:
     """Warn when a gyro axis sits at its largest magnitude in separate runs: clipped at the sensor's range."""
     for axis, name in enumerate(("wx", "wy", "wz")):
@@ -186,7 +197,8 @@ def check_saturation(rec: ImuRecording, report: CheckReport) -> None:
         top = float(mag.max())
         at = mag >= top * (1 - 1e-9)
         starts = np.flatnonzero(at & ~np.r_[False, at[:-1]])
-        if top > 0 and len(starts) >= SATURATED_RUNS and at.sum() >= 2 * SATURATED_RUNS:
+        plateau = top > 0 and len(starts) >= SATURATED_RUNS and at.sum() >= 2 * SATURATED_RUNS
+        if plateau and _steps(mag, top) >= SATURATED_MIN_STEPS:
             report.warn(
                 f"{_where(rec, int(starts[0]))}: gyro {rec.describe(name)} sits at {top:.4g} rad/s "
                 f"({np.degrees(top):.0f} deg/s), its largest magnitude, in {int(at.sum())} samples ({len(starts)} "
