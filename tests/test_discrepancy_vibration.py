@@ -218,3 +218,29 @@ def test_a_fixed_sensor_floor_is_read_through_the_named_low_pass(corner):
     fit = prof.fit(corner)
     assert np.isfinite(fit.corner_se_hz) and fit.corner_se_hz < 0.1 * corner
     assert prof.loglik(corner) > max(prof.loglik(0.8 * corner), prof.loglik(1.25 * corner))
+
+
+def test_a_levels_fit_with_a_nuisance_far_below_the_floor_stops_early_at_the_long_fits_answer(monkeypatch):
+    """Behind an exact truth the reconstruction error's PSD is < 1 % of the floor: its level has almost no information,
+    moved ~1e-7 per iteration under the ridge, and every fit ran its 50 iterations. It now stops once an iteration
+    gains < LEVELS_LL_TOL in log L, and lands where 50 iterations did."""
+    from gyrodenoise.discrepancy import spectral
+
+    rng = np.random.default_rng(4)
+    f = np.linspace(1.0, 99.9, 6000)
+    floor = np.array([8e-8, 8.3e-8, 7.9e-8])
+    E = 4e-10 * (f / 100.0)[:, None] ** 4 * np.ones(3)  # the spline error grows towards Nyquist
+    I = (floor + E) * rng.exponential(size=(len(f), 3))
+    sp = spectral.Spectra(f, I, np.zeros(len(f), int), 200.0, 1, E=E, floor=floor)
+    calls = []
+    real_psd = spectral._model_psd
+    monkeypatch.setattr(spectral, "_model_psd", lambda *a: calls.append(1) or real_psd(*a))
+    th, ll, info = spectral._fit_levels_nuisance(sp, (30.0, 2.0), None, 50)
+    assert (
+        spectral.LEVELS_LL_TOL == 1e-6 and len(calls) <= 6
+    )  # a handful of iterations (and the final evaluation), not 50
+    monkeypatch.setattr(spectral, "LEVELS_LL_TOL", -np.inf)  # the old rule: parameter steps only
+    th50, ll50, info50 = spectral._fit_levels_nuisance(sp, (30.0, 2.0), None, 50)
+    assert 0 <= ll50 - ll < 50 * 1e-6  # what 50 iterations at most add: < 50 x LEVELS_LL_TOL
+    assert np.allclose(th[:2], th50[:2], rtol=1e-4, atol=1e-6 * floor.max())
+    assert np.allclose(info, info50, rtol=1e-5)
