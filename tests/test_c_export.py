@@ -254,8 +254,7 @@ def test_cli_writes_compiles_and_checks(tmp_path, capsys, compiler):
     assert {p.name for p in (tmp_path / "out").iterdir()} == {c_export.HEADER, c_export.SOURCE, c_export.EXAMPLE}
     assert "#define GD_RATE_HZ          200.0 " in (tmp_path / "out" / c_export.HEADER).read_text()
     (tmp_path / "file").write_text("x")
-    with pytest.raises(SystemExit):
-        main([str(path), "--c", str(tmp_path / "file")])
+    assert main([str(path), "--c", str(tmp_path / "file")]) == 2  # a file where the folder of C files goes
 
 
 def test_cli_checks_a_one_member_ensemble(tmp_path, capsys, compiler):
