@@ -275,9 +275,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        for flag, target in (("--out-csv", args.out_csv), ("--out-tum", args.out_tum)):
-            if target is not None and target.is_dir():  # found after the work, it would leave half the outputs
-                raise ValueError(f"{flag} {target} is a folder: give a file path (or -o DIR for a folder)")
         path = find_imu_file(args.input)
         out_dir = args.out_dir or default_out_dir(path)
         out_csv = args.out_csv or out_dir / "imu_corrected.csv"
@@ -287,8 +284,10 @@ def main(argv: list[str] | None = None) -> int:
             ("--out-csv", out_csv, False),
             ("--out-tum", out_tum, False),
         ):
-            if target is not None and (problem := output_path_problem(target, folder)):  # not after the work
-                raise ValueError(f"{flag} {target}: {problem}")
+            # asked before the work: found after it, a wrong path would leave half the outputs
+            if target is not None and (problem := output_path_problem(target, folder)):
+                hint = " (or -o DIR for a folder)" if not folder and target.is_dir() else ""
+                raise ValueError(f"{flag} {target}: {problem}{hint}")
         try:
             model, meta = load_model(args.model, warn=False)  # its warning is listed with the others
         except RuntimeError as e:  # a state dict that does not fit the model's config
