@@ -220,3 +220,20 @@ def test_time_offset_may_be_negative():
     """A stamp error has either sign: -3 ms (early stamps) is taken as given, no random sign."""
     assert float(_effects("time_offset=-3ms").get("time_offset")) == pytest.approx(-0.003)
     assert float(_effects("time_offset=3ms").get("time_offset")) == pytest.approx(0.003)
+
+
+def test_the_fusions_quaternion_steps_are_scipys():
+    """The complementary filter's per-sample quaternion arithmetic (plain floats, for speed) is scipy's Rotation:
+    product, inverse, rotation vector to quaternion and back, small angles included."""
+    from gyrodenoise.testworld.mocap import _conj, _exp, _log, _mul
+
+    rng = np.random.default_rng(4)
+    a, b = Rotation.random(2, random_state=5)
+    qa, qb = tuple(a.as_quat()), tuple(b.as_quat())
+    assert np.allclose(_mul(qa, qb), (a * b).as_quat(), atol=1e-15)
+    assert np.allclose(_log(_mul(_conj(qa), qb)), (a.inv() * b).as_rotvec(), atol=1e-14)
+    for angle in (0.0, 1e-9, 1e-4, 9e-4, 2e-3, 0.5, 3.0):
+        v = rng.standard_normal(3)
+        v *= angle / np.linalg.norm(v)
+        assert np.allclose(_exp(tuple(v)), Rotation.from_rotvec(v).as_quat(), rtol=0, atol=1e-16)
+        assert np.allclose(_log(tuple(Rotation.from_rotvec(v).as_quat())), v, rtol=1e-14, atol=1e-20)

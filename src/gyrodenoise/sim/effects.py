@@ -23,7 +23,12 @@ from scipy import signal
 
 from gyrodenoise import fft_threads
 from gyrodenoise.allan import fit_allan_noise
+from gyrodenoise.sim.array_memo import ArrayMemo, digest
 from gyrodenoise.sim.context import FitContext, SignalContext
+
+# the discrepancy workflow low-passes the same rate at the same corner, and reads the floor shape at the same
+# frequencies, many times over (`array_memo`)
+_MEMO = ArrayMemo(96 << 20)
 
 DEG = np.pi / 180.0
 G0 = 9.80665
@@ -546,6 +551,11 @@ class SensorBandwidth(Effect):
         if not np.isfinite(corner_hz):
             return x
         x = np.asarray(x, dtype=np.float64)
+        key = digest(cls.__name__, x, float(corner_hz), float(rate_hz))
+        return _MEMO.get(key, lambda: cls._filter_rate(x, float(corner_hz), float(rate_hz)))
+
+    @classmethod
+    def _filter_rate(cls, x: np.ndarray, corner_hz: float, rate_hz: float) -> np.ndarray:
         tau_samples = rate_hz / (2 * np.pi * corner_hz)
         pad = min(int(np.ceil(10.0 * tau_samples)) + 64, len(x) - 1)
         # odd reflection about each end: value and slope continue, so the band-limited signal has no kink there;
@@ -572,11 +582,18 @@ class SensorBandwidth(Effect):
         f = np.asarray(f, dtype=np.float64)
         if not np.isfinite(corner_hz):
             return np.ones_like(f)
+        # the images' frequencies and sinc^2 weights do not depend on the corner, which a fit varies: kept
+        images = _MEMO.get(digest("floor_images", f, float(rate_hz), cls.ALIASES), lambda: cls._images(f, rate_hz))
         out = np.zeros_like(f)
-        for k in range(-cls.ALIASES, cls.ALIASES + 1):
-            fk = f + k * rate_hz
-            out += np.sinc(fk / rate_hz) ** 2 / (1.0 + (fk / corner_hz) ** 2)
+        for fk, weight in images:
+            out += weight / (1.0 + (fk / corner_hz) ** 2)
         return out
+
+    @classmethod
+    def _images(cls, f: np.ndarray, rate_hz: float) -> np.ndarray:
+        """(2 ALIASES + 1, 2, ...) f + k rate and sinc^2((f + k rate) / rate), k = -ALIASES..ALIASES."""
+        fks = [f + k * rate_hz for k in range(-cls.ALIASES, cls.ALIASES + 1)]
+        return np.stack([np.stack([fk, np.sinc(fk / rate_hz) ** 2]) for fk in fks])
 
 
 # ===================================================================== stochastic effects

@@ -11,6 +11,7 @@ f = R^T (a - g); quaternions scalar-last (x, y, z, w).
 
 from __future__ import annotations
 
+import uuid
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -20,8 +21,11 @@ from scipy.interpolate import BSpline, make_lsq_spline
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.data.readers import DataFormatError, read_groundtruth
+from gyrodenoise.sim.array_memo import ArrayMemo, digest
 
 GRAVITY = np.array([0.0, 0.0, -9.80665])
+# the time offset's regressor reads the rate at the same shifted times several times over (`array_memo`)
+_RATES = ArrayMemo(96 << 20)
 
 
 @dataclass
@@ -76,6 +80,9 @@ class SmoothTrajectory:
         self.t_start, self.t_end, self.t0_ns = float(t_start), float(t_end), int(t0_ns)
         self._dq, self._ddq = quat.derivative(1), quat.derivative(2)
         self._dp, self._ddp = pos.derivative(1), pos.derivative(2)
+        # names this trajectory in `_RATES`: unique across processes (an id() is reused once freed; a copy or an
+        # unpickled trajectory keeps the token, and its splines with it)
+        self._token = uuid.uuid4().hex
 
     @classmethod
     def fit(
@@ -147,6 +154,10 @@ class SmoothTrajectory:
         """`sample_mean(t, period_s, nodes).omega` alone (the same numbers), without the orientation, position,
         acceleration and specific force: the time offset's regressor reads the rate at shifted times only."""
         t = np.asarray(t, dtype=np.float64)
+        key = digest(self._token, t, float(period_s), int(nodes))
+        return _RATES.get(key, lambda: self._rate_mean(t, period_s, nodes))
+
+    def _rate_mean(self, t: np.ndarray, period_s: float, nodes: int) -> np.ndarray:
         x, w = np.polynomial.legendre.leggauss(nodes)
         rates = [self._rate(self.quat(ti), self._dq(ti))[2] for ti in (t + 0.5 * period_s * xi for xi in x)]
         return sum(wi * r for wi, r in zip(w, rates, strict=True)) / 2.0
