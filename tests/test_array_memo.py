@@ -39,6 +39,18 @@ def test_the_least_recently_used_result_is_dropped_beyond_the_bound():
     assert memo.misses == 4 and memo.get(b"c", lambda: np.zeros(10))[0] == 0.0  # "c" went to make room for "b"
 
 
+def test_a_read_only_memo_hands_out_its_kept_array_and_holds_a_number_of_entries():
+    """Keyed by identity (`time_only_rows`): the kept array itself, read-only, and the arrays of `keep` kept alive."""
+    memo = ArrayMemo(max_entries=2, read_only=True)
+    x = np.arange(3.0)
+    first = memo.get(("rows", id(x)), lambda: x * 2, keep=(x,))
+    assert memo.get(("rows", id(x)), lambda: x * 3) is first and not first.flags.writeable
+    assert memo._kept[("rows", id(x))][0][0] is x
+    memo.get("b", lambda: np.zeros(1))
+    memo.get("c", lambda: np.zeros(1))  # a third entry: the first goes
+    assert len(memo) == 2 and ("rows", id(x)) not in memo._kept
+
+
 def test_memoised_filters_and_rates_equal_the_direct_computation():
     rng = np.random.default_rng(0)
     x = rng.standard_normal((2000, 3))

@@ -5,17 +5,17 @@ columns that follow the motion change with the corner."""
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
 
+from gyrodenoise.sim.array_memo import ArrayMemo
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect
 
 MAX_ENTRIES = 32  # a selection over a few sequences needs a handful; each entry is one effect's rows of one sequence
 
-_rows: OrderedDict[tuple, tuple[tuple, np.ndarray]] = OrderedDict()
+_rows = ArrayMemo(max_entries=MAX_ENTRIES, read_only=True)  # keyed by the identity of the arrays the rows are of
 
 
 def rows_key(effect: Effect, fc: FitContext, sigma: np.ndarray, width: int) -> tuple[tuple, tuple] | None:
@@ -33,13 +33,4 @@ def rows_key(effect: Effect, fc: FitContext, sigma: np.ndarray, width: int) -> t
 def cached_rows(key: tuple, keep: tuple, compute: Callable[[], np.ndarray]) -> np.ndarray:
     """`compute()`, or what it gave for the same key (read-only). The entry keeps the arrays of `keep` alive, so no
     other array can take their ids while it is there."""
-    hit = _rows.get(key)
-    if hit is not None:
-        _rows.move_to_end(key)
-        return hit[1]
-    rows = compute()
-    rows.flags.writeable = False
-    _rows[key] = (keep, rows)
-    if len(_rows) > MAX_ENTRIES:
-        _rows.popitem(last=False)
-    return rows
+    return _rows.get(key, compute, keep)

@@ -1,17 +1,21 @@
-"""Results of pure functions of arrays, kept by the content of their inputs.
+"""Results of pure functions of arrays, kept for when the same inputs come again (a bounded LRU memo).
 
 The discrepancy workflow asks for the same low-passed rate, and the same true rate at shifted times, many times over
 (the same sequence and corner from several candidates and steps: ~4 and ~3 times on average in the quick-start
-notebook). A memo keyed by a digest of the inputs' bytes returns the numbers computed the first time, copied so that
-a caller may change its array; hashing costs a few per cent of recomputing. The memo is bounded in bytes and forgets
-the least recently used results first.
+notebook). Two ways to key a result:
+- by content (`digest` of the inputs' bytes): safe whatever the caller does to its arrays, hashing costs a few per cent
+  of recomputing; the results are handed out as copies, so a caller may change its own;
+- by identity (`id()` of the inputs, which the entry keeps alive through `keep`, so that no other array takes those
+  ids while it is there): free, for inputs that are never changed in place (`discrepancy.time_only_rows`); the results
+  are handed out read-only, not copied.
+The memo forgets the least recently used results first, beyond `max_bytes` or `max_entries`.
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 
 import numpy as np
 
@@ -31,29 +35,39 @@ def digest(*parts: object) -> bytes:
 
 
 class ArrayMemo:
-    """An LRU memo of arrays of at most `max_bytes` in all."""
+    """An LRU memo of arrays: at most `max_bytes` in all and `max_entries` results (None: no such bound);
+    `read_only`: results handed out as the kept arrays themselves, made read-only, instead of copies."""
 
-    def __init__(self, max_bytes: int) -> None:
-        self.max_bytes = int(max_bytes)
-        self._kept: OrderedDict[bytes, np.ndarray] = OrderedDict()
+    def __init__(self, max_bytes: int | None = None, max_entries: int | None = None, read_only: bool = False) -> None:
+        self.max_bytes, self.max_entries, self.read_only = max_bytes, max_entries, read_only
+        self._kept: OrderedDict[Hashable, tuple[object, np.ndarray]] = OrderedDict()
         self._bytes = 0
         self.hits = self.misses = 0
 
-    def get(self, key: bytes, compute: Callable[[], np.ndarray]) -> np.ndarray:
-        """The array kept for `key`, else `compute()` kept for next time; a copy either way."""
-        kept = self._kept.get(key)
-        if kept is not None:
+    def get(self, key: Hashable, compute: Callable[[], np.ndarray], keep: object = None) -> np.ndarray:
+        """The array kept for `key`, else `compute()`, kept for next time together with `keep`."""
+        entry = self._kept.get(key)
+        if entry is not None:
             self.hits += 1
             self._kept.move_to_end(key)
-            return kept.copy()
+            return entry[1] if self.read_only else entry[1].copy()
         self.misses += 1
-        value = np.array(compute())
-        if value.nbytes <= self.max_bytes:
-            self._kept[key] = value
+        value = compute()
+        if self.read_only:
+            value.flags.writeable = False
+        else:
+            value = np.array(value)  # its own copy: the kept one stays as computed
+        if self.max_bytes is None or value.nbytes <= self.max_bytes:
+            self._kept[key] = (keep, value)
             self._bytes += value.nbytes
-            while self._bytes > self.max_bytes:
-                self._bytes -= self._kept.popitem(last=False)[1].nbytes
-        return value.copy()
+            while (self.max_bytes is not None and self._bytes > self.max_bytes) or (
+                self.max_entries is not None and len(self._kept) > self.max_entries
+            ):
+                self._bytes -= self._kept.popitem(last=False)[1][1].nbytes
+        return value if self.read_only else value.copy()
+
+    def __len__(self) -> int:
+        return len(self._kept)
 
     def clear(self) -> None:
         self._kept.clear()
