@@ -55,16 +55,15 @@ class ArrayMemo:
         value = compute()
         if self.read_only:
             value.flags.writeable = False
-        else:
-            value = np.array(value)  # its own copy: the kept one stays as computed
-        if self.max_bytes is None or value.nbytes <= self.max_bytes:
-            self._kept[key] = (keep, value)
-            self._bytes += value.nbytes
+        kept = value if self.read_only else np.array(value)  # a copy of its own: the caller may change `value`
+        if self.max_bytes is None or kept.nbytes <= self.max_bytes:
+            self._kept[key] = (keep, kept)
+            self._bytes += kept.nbytes
             while (self.max_bytes is not None and self._bytes > self.max_bytes) or (
                 self.max_entries is not None and len(self._kept) > self.max_entries
             ):
                 self._bytes -= self._kept.popitem(last=False)[1][1].nbytes
-        return value if self.read_only else value.copy()
+        return value
 
     def __len__(self) -> int:
         return len(self._kept)
