@@ -15,7 +15,15 @@ import pytest
 from scipy import stats
 
 from gyrodenoise import ablation, ablation_report, ablation_stats
-from gyrodenoise.ablation_stats import PairedDiff, check, claim_verdict, paired_diff, seeds_to_resolve
+from gyrodenoise.ablation_stats import (
+    PairedDiff,
+    check,
+    claim_verdict,
+    detectable_difference,
+    fold_seed_spread,
+    paired_diff,
+    seeds_to_resolve,
+)
 
 SEEDS = [0, 2, 3, 5]
 BASE = [2.1, 2.9, 2.5, 3.3]  # reference test AOE per seed: a spread much larger than the noise below
@@ -397,3 +405,32 @@ def test_a_confirmation_on_fresh_seeds_gets_its_title_intro_and_a_command_that_s
         "model.act=gelu,elu seed=$s dataset.cv_fold=$((s - 6)); done`" in md
     )
     assert "**test AOE**: 1 arm compared with the reference; 1 resolved by their own 95 % interval" in md
+
+
+def test_the_detectable_difference_has_the_power_it_names():
+    for n in (6, 12):
+        delta = detectable_difference(1.0, n)
+        crit = stats.t.ppf(0.975, n - 1)
+        nc = delta * math.sqrt(n)  # the t statistic's noncentrality at that true difference
+        exact = stats.nct.sf(crit, n - 1, nc) + stats.nct.cdf(-crit, n - 1, nc)
+        assert exact == pytest.approx(0.8, abs=0.03), (n, delta, exact)
+    assert detectable_difference(2.0, 6) == pytest.approx(2 * detectable_difference(1.0, 6))
+    assert math.isnan(detectable_difference(1.0, 1))
+
+
+def test_fold_seed_spread_splits_a_hand_example_and_recovers_a_simulated_one():
+    s = fold_seed_spread(np.array([[1.0, 3.0], [5.0, 7.0]]))  # within: var 2 per fold; fold means 2 and 6
+    assert (s.mean, s.within_sd, s.between_sd) == pytest.approx((4.0, math.sqrt(2.0), math.sqrt(7.0)))
+    assert s.interaction_f == pytest.approx(8.0) and s.interaction_p == pytest.approx(stats.f.sf(8.0, 1, 2))
+    assert s.fold_mean_sd(2) == pytest.approx(math.sqrt(7.0 + 1.0)) and s.fold_mean_sd(math.inf) == s.between_sd
+    assert s.seeds_for(s.detectable(5)) == pytest.approx(5) and s.seeds_for(0.99 * s.detectable(math.inf)) == math.inf
+
+    rng = np.random.default_rng(3)
+    d = 0.5 + rng.normal(0.0, 1.0, (4000, 1)) + rng.normal(0.0, 0.5, (4000, 3))
+    s = fold_seed_spread(d)
+    assert (s.between_sd, s.within_sd, s.mean) == pytest.approx((1.0, 0.5, 0.5), abs=0.04)
+    assert s.interaction_p < 1e-12
+    no_fold_effect = fold_seed_spread(rng.normal(0.0, 0.5, (4000, 3)))
+    assert no_fold_effect.between_sd < 0.05 and no_fold_effect.interaction_p > 1e-3
+    with pytest.raises(ValueError, match="2 folds"):
+        fold_seed_spread(np.ones((6, 1)))

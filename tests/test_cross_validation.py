@@ -241,3 +241,31 @@ def test_each_job_leaves_the_table_of_the_folds_finished_so_far(tmp_path):
     (tmp_path / "cross_validation.json").unlink()
     cv.CrossValidationCallback().on_job_end(config)
     assert not (tmp_path / "cross_validation.json").exists()
+
+
+def test_the_seed_and_fold_split_of_the_rounds_reads_the_runs_the_screens_read(monkeypatch):
+    """benchmarks/cv_power.py pairs the committed runs as the screen of the same round did (its mean d is the
+    screen's), and its committed result is what it computes from them."""
+    import importlib.util
+
+    import numpy as np
+
+    from gyrodenoise.ablation_stats import fold_seed_spread
+
+    spec = importlib.util.spec_from_file_location("cv_power", REPO / "benchmarks" / "cv_power.py")
+    cv_power = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cv_power)
+    monkeypatch.chdir(REPO)  # the script reads reports/... from the repository root
+    arm, ref = cv_power.trained_pairs("wdiff", "euroc_whole_diff")
+    screen = json.loads((REPO / "benchmarks/results/euroc_whole_diff_round.json").read_text())
+    spread = fold_seed_spread(arm - ref)
+    assert spread.mean == pytest.approx(screen["d_val_wdiff"]["mean"], abs=1e-9)
+    committed = json.loads((REPO / "benchmarks/results/cv_power.json").read_text())["arms"]
+    (label,) = [k for k in committed if k.startswith("wdiff:")]
+    assert committed[label]["deg"]["between_sd"] == pytest.approx(spread.between_sd, abs=1e-9)
+    assert committed[label]["log"]["within_sd"] == pytest.approx(
+        fold_seed_spread(np.log(arm) - np.log(ref)).within_sd, abs=1e-9
+    )
+    tracked, plain = cv_power.tracker_pairs()
+    round8 = json.loads((REPO / "benchmarks/results/cv_tracker_confirm.json").read_text())["decision"]
+    assert fold_seed_spread(tracked - plain).mean == pytest.approx(round8["diff_mean"], abs=1e-9)

@@ -72,6 +72,63 @@ def seeds_to_resolve(mean: float, sd: float, n: int, confidence: float = CONFIDE
     return float(max(math.ceil((t * sd / abs(mean)) ** 2), n + 1))
 
 
+def detectable_difference(sd: float, n: int, power: float = 0.8, confidence: float = CONFIDENCE) -> float:
+    """The smallest true mean difference that a two-sided paired t-test on n values of this sd finds with `power`:
+    (t_{(1+c)/2, n-1} + t_{power, n-1}) sd / sqrt(n), the usual approximation. nan below 2 values."""
+    if n < 2 or not math.isfinite(sd):
+        return math.nan
+    t = stats.t.ppf(0.5 + confidence / 2, n - 1) + stats.t.ppf(power, n - 1)
+    return float(t * sd / math.sqrt(n))
+
+
+@dataclass(frozen=True)
+class FoldSeedSpread:
+    """A paired difference measured at several seeds on each of several folds, split into what more seeds average
+    away and what they do not: d[k, s] = mean + a_k + e[k, s], with the fold's own effect a_k (sd `between_sd`:
+    how the two recipes' difference changes from one held-out flight to the next) and the seed's e (sd
+    `within_sd`). Method of moments of the one-way random-effects model; `interaction_p` is the F-test of
+    between_sd = 0."""
+
+    n_folds: int
+    n_seeds: int
+    mean: float
+    between_sd: float
+    within_sd: float
+    interaction_f: float
+    interaction_p: float
+
+    def fold_mean_sd(self, seeds: float) -> float:
+        """The sd of one fold's mean difference over `seeds` seeds (inf: the fold's effect alone)."""
+        return math.sqrt(self.between_sd**2 + (0.0 if math.isinf(seeds) else self.within_sd**2 / seeds))
+
+    def detectable(self, seeds: float, folds: int | None = None, power: float = 0.8) -> float:
+        """The smallest difference a t-test over the fold means finds with `power`, at `seeds` seeds per fold."""
+        return detectable_difference(self.fold_mean_sd(seeds), folds or self.n_folds, power)
+
+    def seeds_for(self, difference: float, folds: int | None = None, power: float = 0.8) -> float:
+        """Seeds per fold at which `difference` becomes `detectable` (inf: not even with every seed, the fold
+        effect alone is too large; nan: no spread to go by)."""
+        per_unit_sd = detectable_difference(1.0, folds or self.n_folds, power)
+        room = (abs(difference) / per_unit_sd) ** 2 - self.between_sd**2  # what the seeds' share may be
+        if self.within_sd == 0.0:
+            return 1.0 if room >= 0 else math.inf
+        return self.within_sd**2 / room if room > 0 else math.inf
+
+
+def fold_seed_spread(d: np.ndarray) -> FoldSeedSpread:
+    """`d`: (folds, seeds) paired differences, every fold at the same seeds (at least 2 of each)."""
+    d = np.asarray(d, dtype=float)
+    k, s = d.shape
+    if k < 2 or s < 2 or not np.isfinite(d).all():
+        raise ValueError(f"fold_seed_spread needs finite differences at >= 2 folds x >= 2 seeds, got {d.shape}")
+    ms_within = float(d.var(axis=1, ddof=1).mean())  # k (s - 1) degrees of freedom
+    ms_between = float(s * d.mean(axis=1).var(ddof=1))  # k - 1 degrees of freedom
+    f = ms_between / ms_within if ms_within > 0 else math.inf
+    p = float(stats.f.sf(f, k - 1, k * (s - 1))) if math.isfinite(f) else 0.0
+    between = math.sqrt(max(0.0, (ms_between - ms_within) / s))
+    return FoldSeedSpread(k, s, float(d.mean()), between, math.sqrt(ms_within), f, p)
+
+
 @dataclass(frozen=True)
 class PairedDiff:
     """d = AOE(arm) - AOE(reference) per paired seed (deg): positive means the arm is worse."""
