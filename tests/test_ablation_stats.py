@@ -434,3 +434,5 @@ def test_fold_seed_spread_splits_a_hand_example_and_recovers_a_simulated_one():
     assert no_fold_effect.between_sd < 0.05 and no_fold_effect.interaction_p > 1e-3
     with pytest.raises(ValueError, match="2 folds"):
         fold_seed_spread(np.ones((6, 1)))
+    with pytest.raises(ValueError, match="2 folds"):
+        fold_seed_spread(np.ones(6))

@@ -107,7 +107,7 @@ class FoldSeedSpread:
 
     def seeds_for(self, difference: float, folds: int | None = None, power: float = 0.8) -> float:
         """Seeds per fold at which `difference` becomes `detectable` (inf: not even with every seed, the fold
-        effect alone is too large; nan: no spread to go by)."""
+        effect alone is too large)."""
         per_unit_sd = detectable_difference(1.0, folds or self.n_folds, power)
         room = (abs(difference) / per_unit_sd) ** 2 - self.between_sd**2  # what the seeds' share may be
         if self.within_sd == 0.0:
@@ -118,9 +118,9 @@ class FoldSeedSpread:
 def fold_seed_spread(d: np.ndarray) -> FoldSeedSpread:
     """`d`: (folds, seeds) paired differences, every fold at the same seeds (at least 2 of each)."""
     d = np.asarray(d, dtype=float)
-    k, s = d.shape
-    if k < 2 or s < 2 or not np.isfinite(d).all():
+    if d.ndim != 2 or min(d.shape) < 2 or not np.isfinite(d).all():
         raise ValueError(f"fold_seed_spread needs finite differences at >= 2 folds x >= 2 seeds, got {d.shape}")
+    k, s = d.shape
     ms_within = float(d.var(axis=1, ddof=1).mean())  # k (s - 1) degrees of freedom
     ms_between = float(s * d.mean(axis=1).var(ddof=1))  # k - 1 degrees of freedom
     f = ms_between / ms_within if ms_within > 0 else math.inf
