@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyrodenoise import plots
 from gyrodenoise.ablation_stats import FoldSeedSpread, fold_seed_spread
 from gyrodenoise.atomic import write_json, write_text
 
@@ -69,6 +70,24 @@ def row(label: str, s: FoldSeedSpread, scale=lambda x: x) -> str:
     )
 
 
+def figure(raw: dict[str, FoldSeedSpread]):
+    """The detectable difference against the seeds per fold, one line per arm, its measured |mean d| marked."""
+    fig, ax = plots.subplots(figsize=(7.0, 4.2))
+    seeds = np.geomspace(1, 300, 80)
+    for i, (label, s) in enumerate(raw.items()):
+        color = f"C{i}"
+        ax.plot(seeds, [s.detectable(n) for n in seeds], color=color, label=label.split(":")[0])
+        ax.axhline(abs(s.mean), color=color, linestyle=":", linewidth=1)
+    ax.set_xscale("log")
+    ax.set_xlabel("seeds per fold (6 folds)")
+    ax.set_ylabel("detectable difference, 80 % power (deg)")
+    ax.set_title("held-out flight AOE: what more seeds buy (dotted: each arm's measured |mean d|)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def percent(x: float) -> float:
     """A difference of natural-log AOE in log-percent (100 ln ratio: ~% for small values, symmetric for large)."""
     return 100.0 * x
@@ -97,6 +116,8 @@ def main() -> int:
         "that many seeds per fold; 'inf' is the fold effect alone. The last column: the seeds per fold at which the "
         "measured mean d would be detectable if it were the truth ('never': the fold effect alone is larger). A "
         "design aid for the next round: it re-decides no committed round.",
+        "",
+        "![detectable difference against seeds per fold](cv_power.png)",
         "",
         "## In degrees",
         "",
@@ -140,6 +161,7 @@ def main() -> int:
     OUT.parent.mkdir(parents=True, exist_ok=True)
     write_json(OUT.with_suffix(".json"), result)
     write_text(OUT.with_suffix(".md"), "\n".join(md))
+    plots.save(figure(raw), OUT.with_suffix(".png"))
     print("\n".join(md))
     return 0
 
