@@ -19,17 +19,18 @@ import math
 from pathlib import Path
 
 import numpy as np
+from euroc_cv_screen import read, run_path  # a sibling script: run as python benchmarks/cv_power.py
 
 from gyrodenoise import plots
 from gyrodenoise.ablation_stats import FoldSeedSpread, fold_seed_spread
 from gyrodenoise.atomic import write_json, write_text
 
-RUNS = Path("reports/accuracy_runs")
+REF_RUNS = "euroc_cv{2|3}"  # ref's and whole's CPU runs of rounds 2 (seeds 100+k, 200+k) and 3 (300+k)
 OUT = Path("benchmarks/results/cv_power")
 FOLDS = range(6)
 SEEDS = (100, 200, 300)  # seed s + k on fold k
-TRAINED_ARMS = {  # run-name prefix -> (folder, what the arm is); folder None: rounds 2-3 (seed < 300: cv2, else cv3)
-    "whole": (None, "whole training flights (rounds 2-3)"),
+TRAINED_ARMS = {  # run-name prefix -> (folder under reports/accuracy_runs, what the arm is)
+    "whole": (REF_RUNS, "whole training flights (rounds 2-3)"),
     "tilt": ("euroc_cv4", "tilt augmentation (round 4)"),
     "diff": ("euroc_acc_input_cv", "the accelerometer's first difference (its round)"),
     "wdiff": ("euroc_whole_diff", "whole flights with the first difference (its round)"),
@@ -37,18 +38,10 @@ TRAINED_ARMS = {  # run-name prefix -> (folder, what the arm is); folder None: r
 SEED_COUNTS = (1, 3, 10, math.inf)
 
 
-def held_out_aoe(folder: str | None, prefix: str, fold: int, seed: int) -> float:
-    folder = folder or f"euroc_cv{2 if seed < 300 else 3}"
-    path = RUNS / folder / f"{prefix}_f{fold}_s{seed + fold}.json"
-    summary = json.loads(path.read_text())
-    assert summary["config"]["dataset"]["cv_fold"] == fold, path
-    return float(summary["val"]["val/aoe_deg"])
-
-
-def trained_pairs(prefix: str, folder: str | None) -> tuple[np.ndarray, np.ndarray]:
-    """(arm, ref) held-out AOE, (6 folds, 3 seeds)."""
-    arm = np.array([[held_out_aoe(folder, prefix, k, s) for s in SEEDS] for k in FOLDS])
-    ref = np.array([[held_out_aoe(None, "ref", k, s) for s in SEEDS] for k in FOLDS])
+def trained_pairs(prefix: str, folder: str) -> tuple[np.ndarray, np.ndarray]:
+    """(arm, ref) held-out AOE, (6 folds, 3 seeds), read as the screens read them."""
+    arm = np.array([[read(run_path(folder, prefix, k, s))["val"] for s in SEEDS] for k in FOLDS])
+    ref = np.array([[read(run_path(REF_RUNS, "ref", k, s))["val"] for s in SEEDS] for k in FOLDS])
     return arm, ref
 
 
@@ -98,7 +91,7 @@ def main() -> int:
     pairs["tracker: gravity-aided bias tracker on the same models (round 8)"] = tracker_pairs()
     raw = {label: fold_seed_spread(a - r) for label, (a, r) in pairs.items()}
     log = {label: fold_seed_spread(np.log(a) - np.log(r)) for label, (a, r) in pairs.items()}
-    _, ref = trained_pairs("whole", None)
+    _, ref = trained_pairs("whole", REF_RUNS)
     ref_seed_sd = ref.std(axis=1, ddof=1)
 
     head = (

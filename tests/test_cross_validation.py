@@ -252,6 +252,7 @@ def test_the_seed_and_fold_split_of_the_rounds_reads_the_runs_the_screens_read(m
 
     from gyrodenoise.ablation_stats import fold_seed_spread
 
+    monkeypatch.syspath_prepend(str(REPO / "benchmarks"))  # it imports its sibling euroc_cv_screen
     spec = importlib.util.spec_from_file_location("cv_power", REPO / "benchmarks" / "cv_power.py")
     cv_power = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(cv_power)
