@@ -10,8 +10,10 @@ from pathlib import Path
 
 import pytest
 from _asl import TINY_TRAINING, run_train, write_asl_sequence
+from scipy import stats
 
 from gyrodenoise import cross_validation as cv
+from gyrodenoise.ablation_stats import detectable_difference
 
 REPO = Path(__file__).resolve().parents[1]
 RUNS = REPO / "reports"
@@ -48,6 +50,15 @@ def test_reproduces_round_2_of_the_selection_from_the_committed_runs(tmp_path):
     assert [len(f["seeds"]) for f in got["folds"].values()] == [3] * 6 and got["missing_folds"] == []
     md = out.with_suffix(".md").read_text()
     assert "| 0: MH_01_easy | 3 (" in md and "not resolved at n=6" in md
+    # the split of the difference into fold and seed: together they make the fold means' spread, which the interval
+    # of the paired difference was taken from (t_{0.975,5} sd / sqrt(6) its half-width)
+    split = got["seed_split"]
+    assert split["seeds_per_fold"] == 3 and "what more seeds would buy" in md
+    lo, hi = got["recipe_minus_reference"]["t_ci"]
+    fold_means_sd = (hi - lo) / 2 / stats.t.ppf(0.975, 5) * math.sqrt(6)
+    assert math.hypot(split["between_folds_sd"], split["within_fold_sd"] / math.sqrt(3)) == pytest.approx(fold_means_sd)
+    assert split["detectable_deg"]["3"] == pytest.approx(detectable_difference(fold_means_sd, 6))
+    assert split["detectable_deg"]["unlimited"] == pytest.approx(detectable_difference(split["between_folds_sd"], 6))
 
 
 def _summary(path: Path, fold: int | None, val: float, cal: float, seed: int = 0) -> Path:
@@ -80,6 +91,20 @@ def test_folds_left_out_and_runs_that_are_not_cross_validation_are_named(tmp_pat
     with pytest.raises(ValueError, match="none of the 1 runs is a cross-validation run"):
         cv.load([files[-1]])
     assert cv.main([str(tmp_path / "no such folder")]) == 2
+
+
+def test_the_seed_split_needs_the_same_seeds_in_both_recipes_on_every_fold(tmp_path):
+    arm = [_summary(tmp_path / f"a{k}{s}.json", k, 3.0 + k + s / 10, 5.0, seed=s) for k in range(3) for s in (0, 1)]
+    ref = [_summary(tmp_path / f"r{k}{s}.json", k, 3.0 + s / 5, 5.0, seed=s) for k in range(3) for s in (0, 1)]
+    (result, _), (reference, _) = cv.load(arm), cv.load(ref)
+    spread, why = cv.seed_split(result, reference)
+    assert spread.n_seeds == 2 and why == "" and spread.mean == pytest.approx(1.0 - 0.05)
+    assert spread.within_sd == pytest.approx(0.05 * math.sqrt(2)) and spread.between_sd > 0.9
+    (fewer, _) = cv.load(ref[:-1])  # fold 2 has one seed left
+    spread, why = cv.seed_split(result, fewer)
+    assert spread is None and why == "not split: the folds have 1/2 seeds run in both recipes"
+    md, data = cv.report(result, fewer)
+    assert f"- {why}" in md and data["seed_split"] == {"why_not": why}
 
 
 def _tiny(tmp_path: Path) -> list[str]:

@@ -46,7 +46,7 @@ from gyrodenoise.ablation_runs import (
     same_value,
     with_ext,
 )
-from gyrodenoise.ablation_stats import PairedDiff
+from gyrodenoise.ablation_stats import FoldSeedSpread, PairedDiff, fold_seed_spread
 from gyrodenoise.atomic import output_path_problem, write_json, write_text
 from gyrodenoise.tables import markdown_table
 
@@ -157,6 +157,35 @@ def paired_by_fold(a: dict[str, float], b: dict[str, float]) -> PairedDiff:
     return PairedDiff(tuple(keys), tuple(a[k] - b[k] for k in keys))
 
 
+def seed_split(cv: CrossValidation, reference: CrossValidation) -> tuple[FoldSeedSpread | None, str]:
+    """recipe - reference per fold and seed (runs of the same seed on the same held-out flight), split into the
+    fold's effect and the seed's (`ablation_stats.fold_seed_spread`); None, with why, unless every paired fold has
+    the same number (>= 2) of seeds run in both."""
+    ref = {f.held_out: dict(zip(f.seeds, f.network, strict=True)) for f in reference.folds.values()}
+    rows = []
+    for f in cv.folds.values():
+        if f.held_out in ref:
+            own = dict(zip(f.seeds, f.network, strict=True))
+            rows.append([own[s] - ref[f.held_out][s] for s in sorted(set(own) & set(ref[f.held_out]))])
+    counts = sorted({len(r) for r in rows})
+    if len(rows) < 2 or counts[0] < 2 or len(counts) > 1:
+        return None, f"not split: the folds have {'/'.join(map(str, counts)) or 'no'} seeds run in both recipes"
+    if not all(math.isfinite(x) for r in rows for x in r):
+        return None, "not split: a run without a held-out figure"
+    return fold_seed_spread(rows), ""
+
+
+def _seed_split_line(spread: FoldSeedSpread) -> str:
+    at = [spread.n_seeds, *(n for n in (3, 10) if n > spread.n_seeds)]
+    return (
+        f"what more seeds would buy: the difference's sd is {spread.between_sd:.2f} deg between folds (no number of "
+        f"seeds averages it away) and {spread.within_sd:.2f} between seeds of a fold; the difference detectable with "
+        "80 % power is "
+        + ", ".join(f"{spread.detectable(n):.2f} deg at {n} seeds per fold" for n in at)
+        + f", {spread.detectable(math.inf):.2f} with unlimited seeds (benchmarks/cv_power.py)"
+    )
+
+
 def _cell(x: float) -> str:
     return f"{x:.2f}" if math.isfinite(x) else "-"
 
@@ -238,6 +267,20 @@ def report(
         out["reference_per_fold"] = ref
         out["reference_seeds"] = {str(k): f.seeds for k, f in reference.folds.items()}
         out["recipe_minus_reference"] = {"mean": d.mean, "t_ci": list(d.t_ci), "verdict": d.verdict}
+        spread, why = seed_split(cv, reference)
+        md.append(f"- {_seed_split_line(spread) if spread else why}")
+        out["seed_split"] = (
+            {
+                "seeds_per_fold": spread.n_seeds,
+                "between_folds_sd": spread.between_sd,
+                "within_fold_sd": spread.within_sd,
+                "fold_effect_p": spread.interaction_p,
+                "detectable_deg": {str(n): spread.detectable(n) for n in (spread.n_seeds, 3, 10)}
+                | {"unlimited": spread.detectable(math.inf)},
+            }
+            if spread
+            else {"why_not": why}
+        )
         if reference.flights != cv.flights:
             warning = (
                 f"the reference's training flights are {reference.flights}, not {cv.flights} (folds paired by "
