@@ -182,7 +182,7 @@ def _seed_split_line(spread: FoldSeedSpread) -> str:
         f"seeds averages it away) and {spread.within_sd:.2f} between seeds of a fold; the difference detectable with "
         "80 % power is "
         + ", ".join(f"{spread.detectable(n):.2f} deg at {n} seeds per fold" for n in at)
-        + f", {spread.detectable(math.inf):.2f} with unlimited seeds (benchmarks/cv_power.py)"
+        + f", {spread.detectable(math.inf):.2f} with unlimited seeds (docs/training.md, 'Cross-validating a recipe')"
     )
 
 
