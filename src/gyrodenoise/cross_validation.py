@@ -175,14 +175,20 @@ def seed_split(cv: CrossValidation, reference: CrossValidation) -> tuple[FoldSee
     return fold_seed_spread(rows), ""
 
 
+def _detectable_at(spread: FoldSeedSpread) -> dict[str, float]:
+    """The difference detectable with 80 % power at the seeds per fold run, at 3 and 10 where more, and unlimited."""
+    at = [spread.n_seeds, *(n for n in (3, 10) if n > spread.n_seeds), math.inf]
+    return {"unlimited" if math.isinf(n) else str(n): spread.detectable(n) for n in at}
+
+
 def _seed_split_line(spread: FoldSeedSpread) -> str:
-    at = [spread.n_seeds, *(n for n in (3, 10) if n > spread.n_seeds)]
+    *counted, (_, unlimited) = _detectable_at(spread).items()
     return (
         f"what more seeds would buy: the difference's sd is {spread.between_sd:.2f} deg between folds (no number of "
         f"seeds averages it away) and {spread.within_sd:.2f} between seeds of a fold; the difference detectable with "
         "80 % power is "
-        + ", ".join(f"{spread.detectable(n):.2f} deg at {n} seeds per fold" for n in at)
-        + f", {spread.detectable(math.inf):.2f} with unlimited seeds (docs/training.md, 'Cross-validating a recipe')"
+        + ", ".join(f"{d:.2f} deg at {n} seeds per fold" for n, d in counted)
+        + f", {unlimited:.2f} with unlimited seeds (docs/training.md, 'Cross-validating a recipe')"
     )
 
 
@@ -275,8 +281,7 @@ def report(
                 "between_folds_sd": spread.between_sd,
                 "within_fold_sd": spread.within_sd,
                 "fold_effect_p": spread.interaction_p,
-                "detectable_deg": {str(n): spread.detectable(n) for n in (spread.n_seeds, 3, 10)}
-                | {"unlimited": spread.detectable(math.inf)},
+                "detectable_deg": _detectable_at(spread),
             }
             if spread
             else {"why_not": why}
