@@ -249,6 +249,8 @@ def test_rate_differs_from_model_warns_then_resamples(tmp_path, model_file, caps
     f = write_asl(tmp_path / "r100.csv", t_ns, gyro, acc)
     code, _, err = run([f, "-m", model_file, "-o", tmp_path / "a"], capsys)
     assert code == 0 and "100 Hz" in err and "200 Hz" in err and "--resample" in err
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "a", "--strict"], capsys)  # the model does not fit
+    assert code == 3 and "1 warning(s) above that the model does not fit" in err
     code, out, err = run([f, "-m", model_file, "-o", tmp_path / "b", "--resample"], capsys)
     assert code == 0 and "resampled to 200 Hz" in out and err == ""
     d, _ = read_out(tmp_path / "b")
@@ -435,6 +437,32 @@ def test_a_second_run_into_the_same_folder_says_it_replaces_the_first(tmp_path, 
     assert code == 0 and "replacing the outputs of an earlier run" in err
 
 
+def test_an_interrupted_rerun_leaves_none_of_the_earlier_outputs(tmp_path, model_file, capsys, monkeypatch):
+    """The earlier run's CSV stayed, whole, beside nothing that said which model wrote it."""
+    import gyrodenoise.correct as correct_module
+
+    f = bad_file(tmp_path)
+    assert run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)[0] == 0
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(correct_module, "write_text", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run([f, "-m", model_file, "-o", tmp_path / "o"], capsys)
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == []
+
+
+def test_outputs_that_would_replace_the_input_or_each_other_are_refused(tmp_path, model_file, capsys):
+    f = bad_file(tmp_path)
+    before = f.read_bytes()
+    expect_error(capsys, [f, "-m", model_file, "--out-csv", f], "--out-csv and the input are the same file")
+    both = tmp_path / "o" / "x.txt"
+    expect_error(capsys, [f, "-m", model_file, "--out-csv", both, "--out-tum", both], "--out-tum and --out-csv are")
+    assert f.read_bytes() == before and not both.exists()
+    expect_error(capsys, [f, "-m", model_file, "-o", "/proc/gyrodenoise_out"], "the folder /proc/gyrodenoise_out")
+
+
 def _user_csv(path, header, t_ns, gyro, acc, order=(0, 1, 2, 3, 4, 5, 6), t_scale=1e-9, g_scale=1.0, a_scale=1.0):
     cols = np.column_stack([(t_ns - T0) * t_scale, gyro * g_scale, acc * a_scale])[:, list(order)]
     np.savetxt(path, cols, delimiter=",", header=header, comments="", fmt="%.12g")
@@ -519,3 +547,49 @@ def test_a_csv_with_every_field_in_quotes_is_read(tmp_path):
     rec = read_imu_csv(quoted, columns="timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z")
     np.testing.assert_array_equal(rec.t_ns, t)
     np.testing.assert_array_equal(rec.gyro, read_imu_csv(plain).gyro)
+
+
+def test_nanosecond_stamps_read_as_seconds_are_refused_in_one_line(tmp_path, model_file, capsys):
+    """ns stamps read as s (--time-unit s, or a header that says s) overflowed int64 with a traceback; the CLI and the
+    array API now name the line and the unit to pass."""
+    t, g, a = synth()
+    f = write_asl(tmp_path / "ns.csv", t, g, a)
+    expect_error(capsys, [f, "-m", model_file, "-o", tmp_path, "--time-unit", "s"], f"{f}:2", "int64", "--time-unit ns")
+    from gyrodenoise.correct import correct_arrays
+
+    with pytest.raises(DataFormatError, match="beyond what int64 nanoseconds hold.*time_unit='ns'"):
+        correct_arrays(t, g, a, model_file, time_unit="s")
+
+
+def test_decimal_stamps_are_read_exactly_and_a_nan_stamp_is_named(tmp_path):
+    """'1600000000.005000' s read through a float moved the stamps by up to ~100 ns; they are exact now. A stamp
+    'nan' stopped the reader with a bare StopIteration."""
+    t, g, a = synth(400)
+    lines = write_asl(tmp_path / "plain.csv", t, g, a).read_text().splitlines()
+    seconds = [divmod(int(x.split(",", 1)[0]), 10**9) for x in lines[1:]]
+    rows = [f"{s}.{ns // 1000:06d}," + x.split(",", 1)[1] for (s, ns), x in zip(seconds, lines[1:], strict=True)]
+    assert rows[1].startswith("1600000000.005000,")
+    (tmp_path / "s.csv").write_text("\n".join(["t [s],wx,wy,wz,ax,ay,az", *rows]) + "\n")
+    rec = read_imu_csv(tmp_path / "s.csv")
+    assert rec.units["time"] == "s"
+    np.testing.assert_array_equal(rec.t_ns, t)  # exact to the ns
+    rows[3] = "nan," + rows[3].split(",", 1)[1]
+    (tmp_path / "nan.csv").write_text("\n".join(["t [s],wx,wy,wz,ax,ay,az", *rows]) + "\n")
+    with pytest.raises(DataFormatError, match=r"nan.csv:5: column 1 is 'nan', not a finite time"):
+        read_imu_csv(tmp_path / "nan.csv")
+
+
+def test_a_one_member_ensemble_writes_no_spread_columns(tmp_path, model_file, capsys):
+    """Its spread is 0 by construction, which read as perfect confidence; the C example writes no std columns for it
+    either."""
+    from gyrodenoise import ensemble as ensemble_cli
+    from gyrodenoise.pretrained import ModelQualityWarning
+
+    one = tmp_path / "one.pt"
+    with pytest.warns(ModelQualityWarning, match="one member"):
+        assert ensemble_cli.main(["build", str(model_file), "--out", str(one)]) == 0
+    f = bad_file(tmp_path)
+    for engine in ("batch", "streaming"):
+        assert run([f, "-m", one, "-o", tmp_path / engine, "--engine", engine], capsys)[0] == 0
+        header = (tmp_path / engine / "imu_corrected.csv").read_text().splitlines()[0]
+        assert "w_std" not in header and header.count(",") == 6

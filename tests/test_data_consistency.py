@@ -205,3 +205,31 @@ def test_every_dataset_config_takes_the_override_the_stop_names(dataset):
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         cfg = compose("train", overrides=[f"dataset={dataset}", "dataset.inconsistent_truth=warn"])
     assert cfg.dataset.inconsistent_truth == "warn"
+
+
+@pytest.mark.parametrize(("factor", "unit"), [(1 / 9.80665, "g"), (1000 / 9.80665, "mg")])
+def test_an_accelerometer_in_g_or_milli_g_is_an_error(seq, factor, unit):
+    """Training read an accelerometer in g as m/s^2 silently (inputs 9.8 times too small) while the corrector refused
+    the same file: both stop now, naming the factor."""
+    with pytest.raises(consistency.AccUnitError, match=rf"looks like {unit}\. .* multiply the accelerometer"):
+        consistency.check(dataclasses.replace(seq, acc=seq.acc * factor))
+    with pytest.warns(consistency.DataConsistencyWarning, match="accelerometer's norm is 4.9"):
+        consistency.check(dataclasses.replace(seq, acc=seq.acc * 0.5))
+
+
+def test_increments_across_an_imu_gap_are_left_out(seq):
+    """An increment that spans a gap in the IMU stamps holds motion the gyro never saw: the loss and the calibrated fit
+    leave it out, as they leave out increments without ground truth (a 1-s gap made a calibrated fit 15 x worse)."""
+    from gyrodenoise.data.sequence import gt_increments
+
+    keep = np.ones(len(seq.t), bool)
+    keep[2005:2205] = False  # 1 s of IMU missing between samples 2004 and 2205
+    gap = dataclasses.replace(
+        seq, t=seq.t[keep], gyro=seq.gyro[keep], acc=seq.acc[keep], rot=seq.rot[keep], gt_mask=seq.gt_mask[keep]
+    )
+    _, ok_whole = gt_increments(seq, 16)
+    dR, ok = gt_increments(gap, 16)
+    assert ok_whole.all() and len(dR) == len(ok) == (len(gap) - 1) // 16
+    assert np.flatnonzero(~ok).tolist() == [2004 // 16]  # the step 2004 -> 2005 (after the cut) lies in increment 125
+    masked = dataclasses.replace(gap, gt_mask=np.r_[np.ones(100, bool), False, np.ones(len(gap) - 101, bool)])
+    assert np.flatnonzero(~gt_increments(masked, 16)[1]).tolist() == [6, 2004 // 16]  # sample 100: 96..112

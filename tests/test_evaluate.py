@@ -204,6 +204,10 @@ def test_training_overlap_warning():
     assert training_overlap_warning(first50, [("room1", 50.0), ("room3", 50.0)]) is None
     assert "first 50 s of room1" in training_overlap_warning(first50, [("room1", 0.0)])
     assert training_overlap_warning({"name": "user"}, [("room1", 0.0)]) is None
+    # own data reuses names: a recording that starts at another stamp than the one trained on is another recording
+    mine = {**whole, "name": "model.pt", "train_t0_ns": {"room1": 1_000, "room3": 2_000}}
+    assert training_overlap_warning(mine, [("room1", 0.0)], [5_000]) is None
+    assert "whole of room1" in training_overlap_warning(mine, [("room1", 0.0)], [1_000])
 
 
 def test_a_model_of_another_imu_is_named():

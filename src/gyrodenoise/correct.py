@@ -37,12 +37,14 @@ from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning
 from gyrodenoise.data.imu_csv import (
     ACC_UNITS,
     GYRO_UNITS,
+    INT64_MAX,
     TIME_UNITS,
     ImuRecording,
     asl_text,
     check_units,
     read_imu_csv,
     resample,
+    time_units_for_period,
 )
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
@@ -95,13 +97,16 @@ def correct_gyro(
     """(N, 6) raw IMU -> ((N, 3) corrected gyro, (N, 3) ensemble std or None), by the batch model or
     the streaming corrector."""
     if engine == "batch":
-        return predict_with_spread(model, imu)
-    if engine == "streaming":
+        gyro, std = predict_with_spread(model, imu)
+    elif engine == "streaming":
         sc = StreamingCorrector(model)
         parts = [sc.push_chunk_with_spread(imu[i : i + STREAM_CHUNK]) for i in range(0, len(imu), STREAM_CHUNK)]
         gyro = np.concatenate([g for g, _ in parts])
-        return gyro, (None if parts[0][1] is None else np.concatenate([s for _, s in parts]))
-    raise ValueError(f"engine={engine!r}; choose one of {ENGINES}")
+        std = None if parts[0][1] is None else np.concatenate([s for _, s in parts])
+    else:
+        raise ValueError(f"engine={engine!r}; choose one of {ENGINES}")
+    # a one-member ensemble's spread is 0, not a certainty: no std columns, as the C example writes none
+    return gyro, (std if len(getattr(model, "members", ())) > 1 else None)
 
 
 STD_HEADER = ",w_std_x [rad s^-1],w_std_y [rad s^-1],w_std_z [rad s^-1]"
@@ -194,6 +199,13 @@ def correct_arrays(
     if t_in.shape != (len(gyro),) or len(acc) != len(gyro):
         raise ValueError(f"t {t_in.shape}, gyro {gyro.shape}, acc {acc.shape}: give one stamp and one row per sample")
     check_units(time_unit, gyro_unit, acc_unit)
+    largest = float(np.abs(t_in).max()) if t_in.size else 0.0
+    if largest * TIME_UNITS[time_unit] > INT64_MAX:  # would wrap around in int64 ns
+        fits = time_units_for_period(float(np.median(np.diff(t_in)))) if t_in.size > 1 else []
+        raise DataFormatError(
+            f"t: {largest:.4g} {time_unit} is beyond what int64 nanoseconds hold (the year 2262): the stamps are in "
+            f"a finer unit than {time_unit}" + (f"; pass time_unit={fits[0]!r}." if fits else ".")
+        )
     if np.issubdtype(t_in.dtype, np.integer):  # int stamps stay exact (float64 ns of a 2014 epoch: 256-ns steps)
         t_ns = t_in.astype(np.int64) * TIME_UNITS[time_unit]
     else:
@@ -261,7 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--strict",
         action="store_true",
         help="exit 3 (the outputs still written) when a warning says the model does not fit: it did not beat the "
-        "calibrated baseline, or its ensemble disagrees on this recording far more than on its training data",
+        "calibrated baseline, its ensemble disagrees on this recording far more than on its training data, or the "
+        "recording's rate is not the model's (without --resample)",
     )
     ap.add_argument("--engine", choices=ENGINES, default="batch", help="batch model or streaming corrector")
     ap.add_argument(
@@ -288,6 +301,12 @@ def main(argv: list[str] | None = None) -> int:
             if target is not None and (problem := output_path_problem(target, folder)):
                 hint = " (or -o DIR for a folder)" if not folder and target.is_dir() else ""
                 raise ValueError(f"{flag} {target}: {problem}{hint}")
+        refuse_colliding_outputs(path, out_csv, out_tum)
+        for flag, folder in (("--out-csv", out_csv.parent), ("--out-tum", out_tum.parent)):
+            try:  # made now: a folder that cannot be made (read-only, /proc) is found before the work, not after
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise ValueError(f"{flag}: the folder {folder} cannot be made ({e.strerror})") from None
         try:
             model, meta = load_model(args.model, warn=False)  # its warning is listed with the others
         except RuntimeError as e:  # a state dict that does not fit the model's config
@@ -324,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
         except (ValueError, AttributeError):  # not our summary: it is replaced all the same
             earlier = "?"
         print(f"note: replacing the outputs of an earlier run in {out_csv.parent} (model {earlier})", file=sys.stderr)
-    for stale in (summary_file, out_tum):  # an interrupted rerun must not leave them beside the new CSV
+    for stale in (summary_file, out_tum, out_csv):  # an interrupted rerun must not leave an earlier run's outputs
         stale.unlink(missing_ok=True)
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))
     write_text(
@@ -374,10 +393,23 @@ def main(argv: list[str] | None = None) -> int:
             "'Train on your own ASL folders')",
             file=sys.stderr,
         )
-    if args.strict and model_warnings:  # a script can tell a correction the model itself distrusts
-        print(f"exit 3 (--strict): {len(model_warnings)} model warning(s) above", file=sys.stderr)
+    misfits = model_warnings + res.report.misfits
+    if args.strict and misfits:  # a script can tell a correction the model itself distrusts
+        print(f"exit 3 (--strict): {len(misfits)} warning(s) above that the model does not fit", file=sys.stderr)
         return 3
     return 0
+
+
+def refuse_colliding_outputs(input_path: Path, out_csv: Path, out_tum: Path) -> None:
+    """ValueError when an output would replace the input recording, or the other output, or the run's summary."""
+    named = {"the input": input_path, "--out-csv": out_csv, "--out-tum": out_tum}
+    named["the summary"] = out_csv.parent / "correct_summary.json"
+    seen: dict[Path, str] = {}
+    for what, p in named.items():
+        key = p.resolve()
+        if key in seen:
+            raise ValueError(f"{what} and {seen[key]} are the same file, {p}: give the outputs other paths")
+        seen[key] = what
 
 
 def trained_on(meta: dict) -> str | None:

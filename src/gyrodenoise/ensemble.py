@@ -73,6 +73,7 @@ def member_record(path: str | Path, meta: dict) -> dict:
         "fold": meta.get("fold"),
         "train_seqs": meta.get("train_seqs"),
         "train_duration_s": meta.get("train_duration_s"),
+        "train_t0_ns": meta.get("train_t0_ns"),
         "val_aoe_deg": meta.get("val_aoe_deg"),
         "test_aoe_deg": test.get("test/aoe_deg"),
         "test": test,
@@ -139,8 +140,8 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
             seen[sha] = r["path"]
     if len(members) == 1:  # allowed (it equals the member), but its uncertainty output says nothing
         warnings.warn(
-            f"an ensemble of one member ({records[0]['path']}) has no spread: its uncertainty outputs (correct's "
-            "w_std columns, the figures' bands) are 0; give two or more member files for an uncertainty",
+            f"an ensemble of one member ({records[0]['path']}) has no spread: correct writes no w_std columns for it "
+            "and the figures' bands are 0; give two or more member files for an uncertainty",
             ModelQualityWarning,
             stacklevel=2,
         )
@@ -157,6 +158,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
         "rate_hz": float(sum(rates) / len(rates)) if len(rates) == len(records) else None,
         "train_seqs": _common(records, "train_seqs"),
         "train_duration_s": _common(records, "train_duration_s"),
+        "train_t0_ns": _common(records, "train_t0_ns"),
         "n_members": len(members),
         "members": records,
         "member_val_aoe_deg": [r.get("val_aoe_deg") for r in records],

@@ -244,7 +244,10 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     ]
     for w in estimate_warnings:
         warnings.warn(w, DataConsistencyWarning, stacklevel=2)
-    model_warnings = [w for w in (training_overlap_warning(m, parts) for m in (proposed_meta, calibrated_meta)) if w]
+    first_stamps = [int(seq.t0_ns) for seq in sequences.values()]
+    model_warnings = [
+        w for m in (proposed_meta, calibrated_meta) if (w := training_overlap_warning(m, parts, first_stamps))
+    ]
     model_warnings += [
         w
         for m, setting in ((proposed_meta, "weights.proposed"), (calibrated_meta, "weights.calibrated"))

@@ -76,7 +76,7 @@ def is_shipped(path: str | Path) -> bool:
     return p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve()
 
 
-RUN_FACTS = ("dataset", "sensor", "rate_hz", "train_seqs", "train_duration_s", "beats_calibrated")
+RUN_FACTS = ("dataset", "sensor", "rate_hz", "train_seqs", "train_duration_s", "train_t0_ns", "beats_calibrated")
 
 
 def _run_meta(ckpt: Path) -> dict:
@@ -215,16 +215,29 @@ def not_better_warning(meta: dict) -> str | None:
     return f"model {name} did not beat the 12-parameter calibrated baseline on its validation data{numbers}: {advice}."
 
 
-def training_overlap_warning(meta: dict, parts: list[tuple[str, float]]) -> str | None:
+def training_overlap_warning(
+    meta: dict, parts: list[tuple[str, float]], first_stamps_ns: list[int] | None = None
+) -> str | None:
     """The warning for scoring a model on data it was trained on, else None.
 
     parts: (sequence name, start in seconds) of each evaluated part. A model trained on the first
     `train_duration_s` of its `train_seqs` (None: the whole sequences) overlaps a part of one of them that
     starts before that time. Metadata without `train_seqs` (older files, user models) cannot be checked.
+    first_stamps_ns: each part's recording's first IMU stamp; where the model recorded that of its training
+    recording of the same name (`train_t0_ns`) and they differ, the part is another recording (own data often
+    reuses names such as seq01).
     """
     trained = meta.get("train_seqs") or []
     duration = meta.get("train_duration_s")
-    seen = [n for n, start in parts if n in trained and (duration is None or start < float(duration))]
+    recorded = meta.get("train_t0_ns") or {}
+    stamps = first_stamps_ns if first_stamps_ns is not None else [None] * len(parts)
+    seen = [
+        n
+        for (n, start), t0 in zip(parts, stamps, strict=True)
+        if n in trained
+        and (duration is None or start < float(duration))
+        and (t0 is None or n not in recorded or int(recorded[n]) == int(t0))
+    ]
     if not seen:
         return None
     name = meta.get("name", meta.get("path", "this model"))

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording
-from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ, DataFormatError, burst_advice, burst_rate_hz
+from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording, time_units_for_period
+from gyrodenoise.data.readers import GAP_FACTOR, IMU_RATE_RANGE_HZ, DataFormatError, burst_advice, burst_rate_hz
 
 GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well below at the 99th percentile
 # beyond these no MEMS IMU measures (gyro full scales stop at ~4000 deg/s, accelerometers at a few hundred g):
@@ -26,7 +26,6 @@ SATURATED_RUNS = 2  # an axis at its largest magnitude in this many separate run
 # a clipped range spans thousands of the sensor's steps (2**15 on a 16-bit gyro); a quantized gyro at rest or in slow
 # motion repeats its largest value, a few steps, in many runs without being clipped
 SATURATED_MIN_STEPS = 256
-GAP_FACTOR = 3.0  # a step longer than this x the median period is a gap
 RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
 G_TOL_REST, G_TOL_MOVING = 0.10, 0.30  # relative |acc| - g tolerance with / without a rest period
 
@@ -45,6 +44,7 @@ class CheckReport:
     g_measured: float = float("nan")
     rest_fraction: float = 0.0
     warnings: list[str] = field(default_factory=list)
+    misfits: list[str] = field(default_factory=list)  # of the warnings, those that say the model does not fit (rate)
 
     def warn(self, msg: str) -> None:
         self.warnings.append(msg)
@@ -112,7 +112,7 @@ def check_time_unit(rec: ImuRecording, report: CheckReport) -> None:
     burst = burst_rate_hz(rec.t_ns)
     if burst is not None and lo <= burst <= hi:  # not a unit: the stamps of reads, not of samples
         raise SanityCheckError(f"{rec.path}: {rec.describe('t')}: {burst_advice(period_ns, burst)}.")
-    fits = [u for u, ns in TIME_UNITS.items() if lo <= 1e9 / (period_ns / given * ns) <= hi]
+    fits = time_units_for_period(period_ns / given)
     hint = f"pass --time-unit {fits[0]}" if fits else "check --time-unit and the time column (--columns)"
     raise SanityCheckError(
         f"{rec.path}: {rec.describe('t')} read as {rec.units['time']} gives a median sample period of "
@@ -207,37 +207,64 @@ def check_saturation(rec: ImuRecording, report: CheckReport) -> None:
             )
 
 
-def check_acc_at_rest(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
-    """|acc| at rest must be g (the model needs specific force, gravity included, in m/s^2)."""
-    acc_norm = np.linalg.norm(rec.acc, axis=1)
-    w_norm = np.linalg.norm(rec.gyro, axis=1)
-    n = max(5, int(round(0.5 * report.rate_hz))) if np.isfinite(report.rate_hz) else 50
-    m = len(rec) // n
+@dataclass
+class GravityNorm:
+    """|acc| where the IMU rests (else its median over the recording), as the accelerometer unit check reads it."""
+
+    g: float  # m/s^2 as read
+    rest_fraction: float  # share of half-second windows at rest
+    where: str  # for messages: 'at rest (N half-second windows)' or '(median over the whole recording ...)'
+    tolerance: float  # relative |g / G0 - 1| accepted (tighter at rest)
+
+    @property
+    def ok(self) -> bool:
+        return abs(self.g / G0 - 1.0) <= self.tolerance
+
+    def unit_guess(self) -> str | None:
+        """The unit the accelerometer is likely in when it was read as m/s^2: 'g', 'mg', 'near zero' or None."""
+        r = self.g / G0
+        return "near zero" if r < 0.05 else "g" if 0.07 < r < 0.15 else "mg" if 70.0 < r < 130.0 else None
+
+
+def gravity_norm(acc: np.ndarray, gyro: np.ndarray, rate_hz: float) -> GravityNorm:
+    """|acc| at rest: half-second windows whose |acc| varies by under 3 % and whose gyro stays under 0.2 rad/s."""
+    acc_norm = np.linalg.norm(acc, axis=1)
+    w_norm = np.linalg.norm(gyro, axis=1)
+    n = max(5, int(round(0.5 * rate_hz))) if np.isfinite(rate_hz) else 50
+    m = len(acc) // n
     rest = np.zeros(0, dtype=bool)
     if m:
         a = acc_norm[: m * n].reshape(m, n)
         w = w_norm[: m * n].reshape(m, n)
         med = np.median(a, axis=1)
         rest = (a.std(axis=1) < 0.03 * np.abs(med) + 1e-9) & (w.mean(axis=1) < 0.2)
-    report.rest_fraction = float(rest.mean()) if rest.size else 0.0
+    fraction = float(rest.mean()) if rest.size else 0.0
     if rest.any():
-        g, tol, where = float(np.median(a[rest])), G_TOL_REST, f"at rest ({int(rest.sum())} half-second windows)"
-    else:
-        g, tol, where = float(np.median(acc_norm)), G_TOL_MOVING, "(median over the whole recording: no rest found)"
-    report.g_measured = g
-    if abs(g / G0 - 1.0) <= tol:
+        return GravityNorm(
+            float(np.median(a[rest])), fraction, f"at rest ({int(rest.sum())} half-second windows)", G_TOL_REST
+        )
+    return GravityNorm(
+        float(np.median(acc_norm)), fraction, "(median over the whole recording: no rest found)", G_TOL_MOVING
+    )
+
+
+def check_acc_at_rest(rec: ImuRecording, report: CheckReport, force: bool = False) -> None:
+    """|acc| at rest must be g (the model needs specific force, gravity included, in m/s^2)."""
+    norm = gravity_norm(rec.acc, rec.gyro, report.rate_hz)
+    report.rest_fraction, report.g_measured = norm.rest_fraction, norm.g
+    if norm.ok:
         return
-    r = g / G0
-    if r < 0.05:
+    g, where, r, guess = norm.g, norm.where, norm.g / G0, norm.unit_guess()
+    if guess == "near zero":
         todo = (
             "Near zero: these columns may not be the accelerometer, or hold gravity-free linear "
             "acceleration; the model needs the raw specific force, gravity included. Check --columns."
         )
-    elif 0.07 < r < 0.15:
+    elif guess == "g":
         todo = "That is about 1: the file is probably in g: pass --acc-unit g."
     elif 7.0 < r < 13.0:
         todo = f"The file is probably in m/s^2 but was read as {rec.units['acc']}: pass --acc-unit m/s^2."
-    elif 70.0 < r < 130.0:
+    elif guess == "mg":
         todo = "That is about 1000: the file is probably in milli-g: pass --acc-unit mg."
     else:
         todo = "Check the accelerometer unit (--acc-unit) and that --columns maps the accelerometer axes."
@@ -264,13 +291,14 @@ def check_rate(
     if abs(report.rate_hz / model_rate_hz - 1.0) <= RATE_TOL:
         return False
     up = " (upsampling interpolates: it cannot restore the bandwidth the recording lacks, and may not help)"
-    report.warn(
+    report.misfits.append(
         f"{rec.path}: sampled at {report.rate_hz:.4g} Hz but the model was trained at {model_rate_hz:.4g} Hz. "
         "Its dilated convolutions span a fixed number of samples, so at another rate it sees another "
         f"time window and noise level: pass --resample to resample to {model_rate_hz:.4g} Hz"
         + (up if report.rate_hz < model_rate_hz else "")
         + ", or train a model on data at this rate."
     )
+    report.warn(report.misfits[-1])
     return False
 
 

@@ -23,8 +23,9 @@ import numpy as np
 from scipy.signal import correlate
 from scipy.spatial.transform import Rotation
 
-from gyrodenoise.data.checks import GAP_FACTOR  # the corrector's gap: a step > 3 x the median period
-from gyrodenoise.data.readers import DataFormatError
+from gyrodenoise.data.checks import gravity_norm
+from gyrodenoise.data.imu_csv import G0
+from gyrodenoise.data.readers import GAP_FACTOR, DataFormatError  # GAP_FACTOR: the corrector's gap, as training's
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.paths import portable_path
 
@@ -49,6 +50,11 @@ class GyroUnitError(DataFormatError):
     def __init__(self, message: str, ratio: float) -> None:
         super().__init__(message)
         self.ratio = ratio
+
+
+class AccUnitError(DataFormatError):
+    """The accelerometer's norm at rest is ~1 or ~1000, not 9.81: g or milli-g read as m/s^2, inputs 9.8 or 1000 times
+    off those the models learn from."""
 
 
 class DataConsistencyWarning(UserWarning):
@@ -184,6 +190,7 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
             "columns by pi/180 (0.0174533).",
             m.rate_ratio,
         )
+    _check_acc_unit(seq, where)
     cropped = int(seq.meta.get("imu_samples_cropped", 0))
     if cropped > MAX_CROPPED_SHARE * (cropped + len(seq)):  # EuRoC/TUM-VI: 0-2.8 %, the IMU running before the mocap
         warnings.warn(
@@ -194,8 +201,10 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
         )
     if m.gaps:
         warnings.warn(
-            f"{where}: {m.gaps} gap(s) in the IMU timestamps (the longest {m.longest_step_s:.3f} s); the network "
-            "treats samples as consecutive and the integration crosses a gap in one step.",
+            f"{where}: {m.gaps} gap(s) in the IMU timestamps (the longest {m.longest_step_s:.3f} s). Training and "
+            "the calibrated fit leave out the increments across a gap, but the open-loop attitude crosses it in one "
+            "step, so its error after the gap is not the method's: split the recording at its gaps (one sequence "
+            "folder each).",
             DataConsistencyWarning,
             stacklevel=2,
         )
@@ -209,6 +218,29 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
     for problem in problems:
         warnings.warn(f"{where}: {problem}", DataConsistencyWarning, stacklevel=2)
     return m
+
+
+def _check_acc_unit(seq: Sequence, where: str) -> None:
+    """Raise for an accelerometer in g or milli-g, warn for any other norm far from g (as the corrector's check)."""
+    if len(seq) < 2:
+        return
+    norm = gravity_norm(seq.acc, seq.gyro, 1.0 / float(np.median(np.diff(seq.t))))
+    if norm.ok:
+        return
+    found = f"{where}: the accelerometer's norm is {norm.g:.4g} m/s^2 {norm.where}, where gravity alone gives {G0}"
+    guess = norm.unit_guess()
+    if guess in ("g", "mg"):
+        factor = G0 if guess == "g" else G0 / 1000.0
+        raise AccUnitError(
+            f"{found}: it looks like {guess}. gyrodenoise reads m/s^2 (the ASL format's unit): multiply the "
+            f"accelerometer columns by {factor:g}."
+        )
+    warnings.warn(
+        f"{found}: check the accelerometer's unit (m/s^2) and that its columns hold the raw specific force, gravity "
+        "included.",
+        DataConsistencyWarning,
+        stacklevel=3,
+    )
 
 
 def _truth_problems(m: Consistency) -> list[str]:

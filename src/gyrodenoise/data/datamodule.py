@@ -261,6 +261,8 @@ class ImuDataModule(L.LightningDataModule):
             "rate_hz": float(f"{self.rate_hz:.9g}"),  # stamps' rounding (100.00000000000213) is not a rate
             "train_seqs": list(self.train_names),
             "train_duration_s": self.train_duration_s,
+            # each training recording's first IMU stamp: another recording of the same name is not training data
+            "train_t0_ns": {s.name: int(s.t0_ns) for s in self.train_part},
         }
 
     def origin(self, seq: Sequence) -> tuple[str, float]:

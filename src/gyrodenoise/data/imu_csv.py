@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrodenoise.data import asl_header
 from gyrodenoise.data.asl_write import IMU_HEADER as ASL_HEADER
-from gyrodenoise.data.readers import DataFormatError, text_lines
+from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ, DataFormatError, text_lines
 
 G0 = 9.80665  # standard gravity, m/s^2 per g
 TIME_UNITS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}  # ns per unit
@@ -85,6 +85,45 @@ def _exponent_stamp_step_ns(field: str, ns_per: int) -> float | None:
     except InvalidOperation:
         return None
     return 10.0 ** int(exponent) * ns_per if isinstance(exponent, int) else None
+
+
+def _stamp_ns(field: str, ns_per: int) -> int:
+    """A time field in int ns, exact for integers and for decimals ('1403715273.262142' s: a float would move it by up
+    to ~100 ns); ValueError when it is not a finite number."""
+    try:
+        return int(field) * ns_per
+    except ValueError:
+        pass
+    try:
+        value = Decimal(field)
+    except InvalidOperation:
+        raise ValueError(field) from None
+    if not value.is_finite():
+        raise ValueError(field)
+    return int((value * ns_per).to_integral_value())
+
+
+INT64_MAX = np.iinfo(np.int64).max  # int64 ns end in the year 2262
+
+
+def time_units_for_period(period: float) -> list[str]:
+    """The time units in which a median step of `period` (the file's own numbers) is an IMU's sample period."""
+    lo, hi = IMU_RATE_RANGE_HZ
+    return [u for u, ns in TIME_UNITS.items() if lo <= 1e9 / (period * ns) <= hi]
+
+
+def _refuse_stamps_beyond_int64(stamps: list[int], lines: np.ndarray, path: Path, unit: str) -> None:
+    """Stamps that do not fit int64 ns were read in too coarse a unit (nanoseconds read as seconds)."""
+    if max(stamps) <= INT64_MAX and min(stamps) >= -INT64_MAX:
+        return
+    k = next(i for i, s in enumerate(stamps) if abs(s) > INT64_MAX)
+    raw = np.diff(np.array(stamps, dtype=object)) / TIME_UNITS[unit]
+    fits = time_units_for_period(float(np.median(raw.astype(np.float64)))) if len(raw) else []
+    hint = f"pass --time-unit {fits[0]}" if fits else "check --time-unit and the time column (--columns)"
+    raise DataFormatError(
+        f"{path}:{lines[k]}: the time column read as {unit} is {stamps[k] / 1e9:.3g} s, beyond what int64 nanoseconds "
+        f"hold (the year 2262): the stamps are in a finer unit than {unit}; {hint}."
+    )
 
 
 def _guess_delimiter(line: str) -> str | None:
@@ -249,22 +288,21 @@ def read_imu_csv(
                 "(--time-unit s)."
             )
         try:
-            try:
-                stamps.append(int(t_field) * ns_per)  # integers stay exact
-            except ValueError:
-                stamps.append(round(float(t_field) * ns_per))
-            rows.append([float(fields[i]) for i in idx[1:]])
+            stamp = _stamp_ns(t_field, ns_per)
+            row = [float(fields[i]) for i in idx[1:]]
         except ValueError:
-            del stamps[len(rows) :]  # the stamp of this line was appended, its values were not
-            bad = next(i for i in idx if not _is_number(fields[i]))
+            bad = next((i for i in idx if not _is_number(fields[i])), idx[0])  # else a stamp 'nan' or 'inf'
             problems.append(
                 (
                     lineno,
-                    f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a number; fix or remove that line, "
-                    "or check --columns/--delimiter.",
+                    f"{path}:{lineno}: column {bad + 1} is {fields[bad]!r}, not a "
+                    + ("finite time" if bad == idx[0] else "number")
+                    + "; fix or remove that line, or check --columns/--delimiter.",
                 )
             )
             continue
+        stamps.append(stamp)
+        rows.append(row)
         line_numbers.append(lineno)
     if short_lines and short_lines == len(problems) and not rows:  # every line short: the file lacks the columns
         first = problems[0][0]
@@ -294,6 +332,7 @@ def read_imu_csv(
         raise DataFormatError(messages[0] + more + "\n".join(messages[1:6]))
     if not rows:
         raise DataFormatError(f"{path}: no data lines (only comments, a header or empty lines).")
+    _refuse_stamps_beyond_int64(stamps, lines, path, units["time"])
     desc = {
         f: f"column {i + 1}" + (f" ({names[i]})" if i < len(names) else "") for f, i in zip(FIELDS, idx, strict=True)
     }

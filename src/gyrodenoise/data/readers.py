@@ -259,6 +259,7 @@ def _header_check(problem: Callable[[list[str]], str | None]) -> Callable[[Path,
 # an IMU sampling outside this has its stamps in another unit (µs stamps at 200 Hz read as ns: 200 kHz); shared
 # by the ASL reader and the corrector's checks (`checks.check_time_unit`)
 IMU_RATE_RANGE_HZ = (5.0, 20_000.0)
+GAP_FACTOR = 3.0  # an IMU step longer than this x the median period is a gap
 BURST_FACTOR = 3.0  # a mean step this many times the median: stamps in bursts
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from gyrodenoise.data.readers import DataFormatError, GroundTruthData, ImuData
+from gyrodenoise.data.readers import GAP_FACTOR, DataFormatError, GroundTruthData, ImuData
 
 
 @dataclass
@@ -75,12 +75,15 @@ class Sequence:
 
 
 def gt_increments(seq: Sequence, step: int) -> tuple[np.ndarray, np.ndarray]:
-    """dR_k = R_{k*step}^T R_{(k+1)*step} and its availability (ground truth at every sample of it)."""
+    """dR_k = R_{k*step}^T R_{(k+1)*step} and its availability: ground truth at every sample of it, and no IMU gap
+    inside (the gyro did not see the motion during a gap: a loss or a fit on such an increment learns that motion)."""
     n = (len(seq) - 1) // step
     R = seq.rot[: n * step + 1 : step]
     dR = np.swapaxes(R[:-1], -1, -2) @ R[1:]
     m = seq.gt_mask[: n * step + 1]
-    ok = np.array([m[k * step : (k + 1) * step + 1].all() for k in range(n)], dtype=bool)
+    dt = np.diff(seq.t)
+    gap = dt[: n * step] > GAP_FACTOR * np.median(dt) if len(dt) else dt.astype(bool)
+    ok = m[:-1].reshape(n, step).all(1) & m[step::step] & ~gap.reshape(n, step).any(1)
     return dR, ok
 
 
