@@ -303,14 +303,20 @@ def test_cli_with_a_cross_compiler_in_cc_is_one_line(tmp_path, capsys, monkeypat
 
 
 def test_cli_removes_files_that_do_not_compile_and_names_a_missing_cc(tmp_path, capsys, monkeypatch, compiler):
-    """Files the compiler refuses are removed like files that compute something else (none left to look whole);
+    """Files the compiler refuses are not written, like files that compute something else (none left to look whole,
+    and an earlier export in the folder stays as it was);
     a $CC that is not on the PATH is named, and the host compiler checks instead."""
     path = save_model(random_model(**SMALL), {"name": "denoiser", **SMALL}, tmp_path / "m.pt")
+    assert main([str(path), "--c", str(tmp_path / "bad"), "--no-check"]) == 0  # an earlier export, kept
+    earlier = (tmp_path / "bad" / c_export.SOURCE).read_text()
     monkeypatch.setenv("CC", f"{compiler} -include {tmp_path / 'no_such_header.h'}")
-    assert main([str(path), "--c", str(tmp_path / "bad")]) == 2
+    assert main([str(path), "--c", str(tmp_path / "bad"), "--c-prefix", "other"]) == 2
     err = capsys.readouterr().err
-    assert "do not compile or run" in err and "so they were removed" in err
-    assert not (tmp_path / "bad" / c_export.SOURCE).exists()
+    assert "do not compile or run" in err and "so they were not written" in err
+    assert (tmp_path / "bad" / c_export.SOURCE).read_text() == earlier  # the failed export replaced nothing
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad", "m.pt"]  # and left no staging folder
+    assert main([str(path), "--c", str(tmp_path / "new")]) == 2
+    assert not (tmp_path / "new").exists()
     monkeypatch.setenv("CC", "no-such-cross-gcc")
     assert main([str(path), "--c", str(tmp_path / "good")]) == 0
     assert "$CC=no-such-cross-gcc is not on the PATH: checked with" in capsys.readouterr().out

@@ -328,3 +328,22 @@ def test_table_headers_name_a_model_file_by_its_run_not_its_whole_path():
         == "2026-11-27_08-25-25/model.pt"
     )
     assert model_label("ens.pt") == "ens.pt"
+
+
+def test_a_rerun_into_the_same_folder_removes_the_earlier_evaluations_outputs(tmp_path, capsys):
+    """A rerun with other models or figures=false left the earlier run's figures and trajectories beside the new
+    tables, with nothing to tell them apart; files of the user's stay."""
+    from gyrodenoise.evaluate import clear_earlier_outputs
+
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "trajectories" / "MH_04").mkdir(parents=True)
+    (tmp_path / "results.json").write_text(json.dumps({"models": {"proposed": "euroc"}}))
+    earlier = ["table.md", "roe.csv", "figures/orientation_MH_04.png", "figures/uncertainty_calibration.png"]
+    earlier += ["trajectories/MH_04/proposed.txt"]
+    for f in earlier:
+        (tmp_path / f).write_text("x")
+    (tmp_path / "figures" / "notes.txt").write_text("the user's")
+    clear_earlier_outputs(tmp_path)
+    assert "replacing the outputs of an earlier evaluation" in capsys.readouterr().err
+    left = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert left == ["figures", "figures/notes.txt"]

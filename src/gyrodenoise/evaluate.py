@@ -28,7 +28,10 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import sys
 import time
 import warnings
 from collections.abc import Callable
@@ -156,6 +159,31 @@ def table_rows(results: dict[str, dict], averaged: list[str], methods: tuple[str
     return rows
 
 
+OWN_FILES = ("table.md", "table.csv", "roe.md", "roe.csv")
+OWN_FIGURES = ("orientation_*.png", "error_*.png", "correction_*.png", "roe.png", "uncertainty_calibration.png")
+
+
+def clear_earlier_outputs(out: Path) -> None:
+    """Remove what an earlier evaluation wrote into `out` (its tables, figures and trajectories: a rerun with other
+    models or sequences would leave some of them beside the new ones), saying so when it had finished. results.json,
+    written last, is the mark of a finished evaluation and goes first."""
+    summary = out / "results.json"
+    if summary.is_file():
+        try:
+            models = json.loads(summary.read_text()).get("models", {}).get("proposed", "?")
+        except (ValueError, AttributeError):
+            models = "?"
+        print(f"note: replacing the outputs of an earlier evaluation in {out} (model {models})", file=sys.stderr)
+    summary.unlink(missing_ok=True)
+    stale = [out / f for f in OWN_FILES] + [f for pattern in OWN_FIGURES for f in (out / "figures").glob(pattern)]
+    stale += list((out / "trajectories").glob("*/*.txt"))
+    for f in stale:
+        f.unlink(missing_ok=True)
+    for folder in [*(out / "trajectories").glob("*"), out / "trajectories", out / "figures"]:
+        with contextlib.suppress(OSError):  # kept when it holds files of the user's
+            folder.rmdir()
+
+
 def evaluate(cfg: DictConfig) -> dict:
     """Table 1, the figures and the TUM trajectories of a composed evaluate config (`compose_config("evaluate",
     [...])`; from Python it needs `out_dir=...`). Returns the summary written to `out_dir/results.json`; torch's
@@ -181,9 +209,7 @@ def roe_distances(value: object) -> list[float]:
 
 def _evaluate(cfg: DictConfig, out: Path) -> dict:
     start = time.time()
-    # results.json, written last, is the mark of a finished evaluation: an earlier one's must not outlive a rerun
-    # stopped halfway beside the new tables
-    (out / "results.json").unlink(missing_ok=True)
+    clear_earlier_outputs(out)
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")

@@ -25,6 +25,7 @@ import copy
 import importlib.metadata
 import os
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -234,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         metavar="OUT_DIR",
         help=f"write the streaming step as plain C99 ({c_export.HEADER}, {c_export.SOURCE}, {c_export.EXAMPLE}): no "
-        "runtime, no allocation, <math.h> only",
+        "runtime, no allocation, <math.h>, <string.h> and <stdint.h> only",
     )
     ap.add_argument(
         "--c-prefix",
@@ -294,38 +295,70 @@ def main(argv: list[str] | None = None) -> int:
 def write_c(
     model: CorrectionModel, out_dir: Path, meta: dict, check: bool = True, prefix: str = c_export.DEFAULT_PREFIX
 ) -> str:
-    """Write the C export; with `check`, compile it and compare it with the streaming corrector (files removed and
-    ValueError when they differ by more than c_export.PARITY_TOL_RAD_S). Returns what to print."""
-    paths = c_export.export_c(model, out_dir, meta, prefix)
-    msg = f"wrote {', '.join(str(p) for p in paths)}"
+    """Write the C export; with `check`, compile it and compare it with the streaming corrector first, in a folder
+    beside `out_dir`: files that do not compile or differ by more than c_export.PARITY_TOL_RAD_S (ValueError), or an
+    interrupted check, leave `out_dir` as it was (an earlier export in it included). Returns what to print."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"--c {out_dir} is a file: give a folder to write the C files into")
     if not check:
-        return msg
-    if (cc := c_export.find_c_compiler()) is None:
-        return msg + " (not compiled nor checked: no C compiler found: cc, gcc, clang or $CC)"
-    if (wanted := os.environ.get("CC")) and cc != wanted:
-        msg += f" ($CC={wanted} is not on the PATH: checked with {cc})"
+        return f"wrote {', '.join(str(p) for p in c_export.export_c(model, out_dir, meta, prefix))}"
     try:
-        err = c_export.c_parity(model, out_dir, compiler=cc)
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        staging = tempfile.TemporaryDirectory(dir=out_dir.parent, prefix=f".{out_dir.name}.")
+    except OSError as e:
+        raise ValueError(f"--c {out_dir}: cannot write the C files there ({e.strerror or e})") from None
+    with staging as tmp:
+        staged = c_export.export_c(model, tmp, meta, prefix)
+        try:
+            note = _checked_c(model, Path(tmp), out_dir)
+        except _NotCheckable as e:  # built for another machine: the files may be right for it, so they are written
+            _move_into(staged, out_dir)
+            raise ValueError(f"the C files were written but not checked: {e}") from None
+        paths = _move_into(staged, out_dir)
+    return f"wrote {', '.join(str(p) for p in paths)}{note}"
+
+
+class _NotCheckable(Exception):
+    """The compiler builds for another machine: the example cannot run here."""
+
+
+def _move_into(staged: list[Path], out_dir: Path) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    moved = [out_dir / p.name for p in staged]
+    for src, dst in zip(staged, moved, strict=True):
+        os.replace(src, dst)
+    return moved
+
+
+def _checked_c(model: CorrectionModel, staged_dir: Path, out_dir: Path) -> str:
+    """Compile the staged files and compare them with the model: what to add to the 'wrote' line, or ValueError."""
+    if (cc := c_export.find_c_compiler()) is None:
+        return " (not compiled nor checked: no C compiler found: cc, gcc, clang or $CC)"
+    note = (
+        f" ($CC={wanted} is not on the PATH: checked with {cc})"
+        if (wanted := os.environ.get("CC")) and cc != wanted
+        else ""
+    )
+    try:
+        err = c_export.c_parity(model, staged_dir, compiler=cc)
     except RuntimeError as e:  # the generated code fails to compile or to run: say the compiler's first error
         lines = str(e).splitlines()
         first = next((ln for ln in lines if "error" in ln), lines[-1]).strip()
-        if "cannot run here" in first:  # built for another machine: the files may be right for it, so they stay
-            raise ValueError(f"the C files were written but not checked: {first}") from None
-        for p in paths:  # files that do not compile are not an export: none is left to look whole
-            p.unlink(missing_ok=True)
+        if "cannot run here" in first:
+            raise _NotCheckable(first) from None
         raise ValueError(
-            f"the C files do not compile or run with {cc}, so they were removed (--no-check keeps them): {first}"
+            f"the C files do not compile or run with {cc}, so they were not written to {out_dir} (--no-check "
+            f"writes them): {first}"
         ) from None
     worst = max(err.values())
     if not worst <= c_export.PARITY_TOL_RAD_S:  # NaN included
-        for p in paths:
-            p.unlink(missing_ok=True)
         raise ValueError(
             f"{out_dir}: the C code does not reproduce the model (max |diff| {worst:.2e} rad/s > "
-            f"{c_export.PARITY_TOL_RAD_S:g}), so its files were removed; --no-check keeps them"
+            f"{c_export.PARITY_TOL_RAD_S:g}), so its files were not written; --no-check writes them"
         )
     what = ", ".join(k.replace("gyro_batch", "gyro vs the batch model") for k in err)
-    return msg + (
+    return note + (
         f" ({cc} -O2 vs StreamingCorrector and the batch model on 1500 random samples: max |diff| {worst:.2e} rad/s "
         f"over {what})"
     )
