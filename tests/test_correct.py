@@ -96,12 +96,16 @@ def test_initial_orientation_from_gravity(tmp_path, model_file, capsys):
     tilt = np.array([0.0, np.sin(0.3), np.cos(0.3)]) * G0  # tilted by 0.3 rad about x
     acc = acc - [0, 0, G0] + tilt
     f = write_asl(tmp_path / "data.csv", t_ns, gyro, acc)
-    assert run([f, "-m", model_file, "-o", tmp_path / "o", "--initial-orientation", "gravity"], capsys)[0] == 0
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "o", "--initial-orientation", "gravity"], capsys)
+    assert code == 0 and "initial-orientation" not in err  # synth() rests for its first 2 s
     _, q = read_out(tmp_path / "o")
     from scipy.spatial.transform import Rotation
 
     up = Rotation.from_quat(q[0, 4:]).apply(tilt / G0)
     np.testing.assert_allclose(up, [0, 0, 1], atol=1e-2)
+    moving = write_asl(tmp_path / "moving.csv", t_ns[400:], gyro[400:], acc[400:])  # starts in motion
+    code, _, err = run([moving, "-m", model_file, "-o", tmp_path / "m", "--initial-orientation", "gravity"], capsys)
+    assert code == 0 and "gravity takes roll and pitch from the first 0.5 s, but the IMU moves there" in err
 
 
 def test_real_euroc_slice_batch_equals_streaming(euroc_root, tmp_path, model_file, capsys):

@@ -71,7 +71,8 @@ def test_a_truth_about_other_axes_warns(seq):
         m = consistency.check(dataclasses.replace(seq, rot=swapped))
     assert m.axes_angle_deg > 30 and 0.5 < m.rate_ratio < 2  # the magnitude checks alone pass it
     tilted = (Rotation.from_matrix(seq.rot) * Rotation.from_euler("x", 20, degrees=True)).as_matrix()
-    with pytest.warns(consistency.DataConsistencyWarning, match="20 deg away"):  # the pose of another body
+    fitted = r"20 deg away.*quaternion w, x, y, z = 0\.98\d\d, 0\.17\d\d, -?0\.0\d\d\d, -?0\.0\d\d\d; right-multiply"
+    with pytest.warns(consistency.DataConsistencyWarning, match=fitted):  # the pose of another body, and its rotation
         consistency.check(dataclasses.replace(seq, rot=tilted))
     assert consistency.measure(seq).axes_angle_deg < 1.0
 
@@ -128,6 +129,21 @@ def test_a_truth_100_ms_late_warns_with_the_shift_to_apply(seq):
         consistency.DataConsistencyWarning, match=r"add -0\.(095|100|105) s to the ground truth's timestamps"
     ):
         consistency.check(late)
+
+
+def test_a_clock_offset_is_named_before_the_comparisons_it_spoils(seq):
+    """Half a second off the clock, the axes compared at the stamps were 'over 100 deg away' and that came first, with
+    the offset after an 'Also'."""
+    shift = 100
+    late = dataclasses.replace(
+        seq, t=seq.t[shift:], gyro=seq.gyro[shift:], acc=seq.acc[shift:], rot=seq.rot[:-shift],
+        pos=seq.pos[:-shift], gt_mask=seq.gt_mask[shift:],
+    )  # fmt: skip
+    with pytest.raises(consistency.InconsistentTruthError) as e:
+        consistency.check(late, stop=True)
+    said = str(e.value)
+    assert said.index("add -0.") < min(said.find(w) % len(said) for w in ("deg away", "times the rate", "mirror"))
+    assert "right-multiply" not in said  # off the clock, a fitted rotation is no frame's
 
 
 def test_a_large_gyro_about_other_axes_is_not_called_deg_s(seq):

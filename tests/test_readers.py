@@ -308,3 +308,32 @@ def test_a_header_naming_fewer_columns_than_the_data_is_still_checked(tmp_path):
         read_groundtruth(f)
     note = "# recorded by a logger, v1.2\n"  # a comment of few fields above the data is no header: read as before
     read_groundtruth(write(tmp_path / "ok.csv", GT_HEADER + note, gt_rows(extra=",0,0,0,0,0,0,0,0,0")))
+
+
+def test_a_semicolon_file_and_exponent_stamps_get_their_own_advice(tmp_path):
+    """A ';' file was blamed on a truncated line, and ns stamps in exponent form on a header without its '#'."""
+    semi = write(tmp_path / "semi.csv", IMU_HEADER, [r.replace(",", ";") for r in imu_rows()])
+    with pytest.raises(
+        DataFormatError, match=r"semi.csv:2: .*separated by ';': the ASL format separates them by comma"
+    ):
+        read_imu(semi)
+    expo = write(tmp_path / "expo.csv", IMU_HEADER, [f"{1e18 + k * 5e6:.6e}" + r[r.index(",") :] for k, r in
+                                                      enumerate(imu_rows())])  # fmt: skip
+    with pytest.raises(DataFormatError, match=r"expo.csv:2: .*'1.000000e\+18'.*write the nanoseconds as integers") as e:
+        read_imu(expo)
+    assert "header" not in str(e.value)
+
+
+def test_a_sequence_folder_in_another_layout_is_not_called_missing(tmp_path):
+    """rec_a/ holding imu.csv and gt.csv was 'not found', with 'did you mean rec_c?'."""
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    write(tmp_path / "rec_a" / "imu.csv", IMU_HEADER, imu_rows())
+    write(tmp_path / "rec_c" / "mav0" / "imu0" / "data.csv", IMU_HEADER, imu_rows())
+    said = r"rec_a exists but is not in the ASL layout: it has no mav0/ \(it holds imu.csv\); put the IMU in rec_a/mav0"
+    with pytest.raises(FileNotFoundError, match=said):
+        load_sequence(tmp_path, "rec_a", cache_dir="")
+    dm = ImuDataModule(name="mine", root=str(tmp_path), train_seqs=["rec_a"], test_seqs=["rec_c"])
+    with pytest.raises(FileNotFoundError, match=said) as e:
+        dm.check_sequences()
+    assert "did you mean" not in str(e.value)

@@ -124,13 +124,27 @@ def corrected_csv_text(t_ns: np.ndarray, gyro: np.ndarray, acc: np.ndarray, std:
     return "\n".join(out) + "\n"
 
 
-def initial_rotation(spec: str, rec: ImuRecording) -> np.ndarray:
-    """identity | gravity (roll/pitch from the mean acc of the first 0.5 s, yaw 0) | qx,qy,qz,qw."""
+START_REST_DEG_S = 2.0  # a gravity start from a first 0.5 s turning faster than this on average is said to move
+
+
+def initial_rotation(spec: str, rec: ImuRecording, report: CheckReport | None = None) -> np.ndarray:
+    """identity | gravity (roll/pitch from the mean acc of the first 0.5 s, yaw 0) | qx,qy,qz,qw. With `report`, a
+    gravity start whose first 0.5 s is not at rest is said there (the motion's acceleration tilts it)."""
     if spec == "identity":
         return np.eye(3)
     if spec == "gravity":
         first = rec.t_ns <= rec.t_ns[0] + 500_000_000
         f = rec.acc[first].mean(0)  # specific force at rest points up in the world (z up)
+        turning = float(np.degrees(np.linalg.norm(rec.gyro[first], axis=1).mean()))
+        norm = np.linalg.norm(rec.acc[first], axis=1)
+        varies = float(norm.std() / np.median(norm))
+        if report is not None and (turning > START_REST_DEG_S or varies > 0.03):  # the rest test of the unit check
+            report.warn(
+                f"{rec.path}: --initial-orientation gravity takes roll and pitch from the first 0.5 s, but the IMU "
+                f"moves there (gyro {turning:.1f} deg/s on average, |acc| varies by {100 * varies:.0f} %): "
+                "the motion's acceleration tilts that start. Start the recording at rest, or give the start as a "
+                "quaternion qx,qy,qz,qw."
+            )
         R, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [f / np.linalg.norm(f)])
         return R.as_matrix()
     try:
@@ -162,7 +176,7 @@ def correct_recording(
     gyro, std = correct_gyro(model, rec.imu, engine)
     t = (rec.t_ns - rec.t_ns[0]) * 1e-9
     dt = np.diff(t, prepend=t[0])
-    R = integrate_gyro(initial_rotation(initial, rec), gyro, dt)
+    R = integrate_gyro(initial_rotation(initial, rec, report), gyro, dt)
     return Correction(rec, gyro, std, R, report, rate if need_resample else None)
 
 

@@ -244,8 +244,17 @@ def _check_acc_unit(seq: Sequence, where: str) -> None:
 
 
 def _truth_problems(m: Consistency) -> list[str]:
-    """What makes the ground truth a wrong description of the gyro: scale, axes, clock (each a sentence)."""
+    """What makes the ground truth a wrong description of the gyro: clock, scale, axes (each a sentence). A clock
+    offset comes first: the scale and the axes are compared at the stamps as they are, and an offset alone spoils
+    both comparisons (0.5 s on a hand-held recording: axes 126 deg away)."""
     problems = []
+    if clock_offset(m):
+        problems.append(
+            f"the gyro's rate magnitude matches the ground truth's best {m.best_lag_s:+.3f} s away from "
+            f"the stamps (correlation {m.corr_at_best:.2f} there, {m.corr_at_zero:.2f} at zero lag): the ground "
+            f"truth is probably not on the IMU's clock; add {m.best_lag_s:+.3f} s to the ground truth's timestamps "
+            "first (the comparisons below, if any, are at the stamps as they are, and may follow from the offset)."
+        )
     if np.isfinite(m.rate_ratio) and not RATIO_RANGE[0] <= m.rate_ratio <= RATIO_RANGE[1]:
         problems.append(
             f"the gyro is {m.rate_ratio:.3g} times the rate of the ground truth's orientation (about 1 "
@@ -268,12 +277,17 @@ def _truth_problems(m: Consistency) -> list[str]:
             "read so gives ~100 deg or more), it may be the pose of another body than the IMU, or world-in-body "
             f"instead of body-in-world; or{'' if m.mirrored else ' a gyro axis is flipped or permuted, or'} the gyro "
             "columns are the accelerometer's. Scores against it mean nothing: fix the file or rotate the truth into "
-            "the IMU frame."
-        )
-    if clock_offset(m):
-        problems.append(
-            f"the gyro's rate magnitude matches the ground truth's best {m.best_lag_s:+.3f} s away from "
-            f"the stamps (correlation {m.corr_at_best:.2f} there, {m.corr_at_zero:.2f} at zero lag): the ground "
-            f"truth is probably not on the IMU's clock; add {m.best_lag_s:+.3f} s to the ground truth's timestamps."
+            "the IMU frame" + _fitted_rotation(m) + "."
         )
     return problems
+
+
+def _fitted_rotation(m: Consistency) -> str:
+    """The body-to-IMU rotation the comparison fitted, to apply to the truth when it is the pose of another body."""
+    if m.mirrored or m.axes_fit is None or clock_offset(m):  # off the clock, the fitted rotation is no frame's
+        return ""
+    x, y, z, w = m.axes_fit.as_quat()
+    return (
+        f" (the fitted rotation from the truth's body axes to the IMU's, gyro = R truth rate: quaternion w, x, y, z = "
+        f"{w:.4f}, {x:.4f}, {y:.4f}, {z:.4f}; right-multiply each truth orientation by its inverse)"
+    )

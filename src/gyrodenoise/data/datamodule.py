@@ -30,7 +30,14 @@ from gyrodenoise.data.augment import AugmentConfig, augment_window
 from gyrodenoise.data.cache import load_sequence
 from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.data.fetch import DATASETS as FETCHABLE
-from gyrodenoise.data.sequence import Sequence, gt_increments, misspelt, root_level_hint, sequences_in
+from gyrodenoise.data.sequence import (
+    Sequence,
+    gt_increments,
+    misspelt,
+    not_asl_note,
+    root_level_hint,
+    sequences_in,
+)
 
 
 def sequence_item(seq: Sequence, step: int, block: int) -> dict:
@@ -235,10 +242,13 @@ class ImuDataModule(L.LightningDataModule):
         if missing:
             only_test = set(missing) <= set(self.test_names)
             here = sequences_in(self.root)
-            typo = "; ".join(f"{n}: did you mean {c}?" for n in missing if (c := misspelt(n, here)))
+            layout = "".join(not_asl_note(self.root, n) for n in missing)
+            absent = [n for n in missing if not not_asl_note(self.root, n)]  # not a folder of other files
+            typo = "; ".join(f"{n}: did you mean {c}?" for n in absent if (c := misspelt(n, here)))
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "
                 f"<root>/<sequence>/mav0/imu0/data.csv). "
+                + layout
                 + (f"{typo} " if typo else "")
                 + (f"The folder holds {', '.join(here)}. " if here else "")
                 + "Check the names, or set dataset.root to the folder that holds them"

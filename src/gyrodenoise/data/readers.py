@@ -136,14 +136,20 @@ def read_csv_table(
             if header is not None:
                 check_header(path, *header)
         if len(fields) < min_cols:
+            other = next((d for d in (";", "\t") if len(s.split(d)) >= min_cols), None) if len(fields) == 1 else None
             raise DataFormatError(
-                f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least "
-                f"{min_cols}. Fix or remove the truncated line."
+                f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least {min_cols}. "
+                + (
+                    f"Its columns are separated by {other!r}: the ASL format separates them by commas; convert the "
+                    f"file (e.g. sed 's/{other}/,/g'; gyrodenoise-correct --delimiter reads it as it is)."
+                    if other
+                    else "Fix or remove the truncated line."
+                )
             )
         try:
             stamps.append(int(fields[0]))
         except ValueError:
-            named = not rows and any(c.isalpha() for c in s)  # a header line without its '#'
+            named = not rows and any(c.isalpha() for c in s) and not _is_float(fields[0])  # a header without its '#'
             raise DataFormatError(
                 f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number of nanoseconds."
                 + (" A header line must start with '#'." if named else _decimal_stamp_hint(fields[0]))
@@ -170,6 +176,14 @@ def read_csv_table(
     t_ns, values, lines = _drop_repeated_lines(path, t_ns, values, lines, what)
     _check_time(path, t_ns, lines, what)
     return t_ns, values, lines
+
+
+def _is_float(field: str) -> bool:
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
 
 
 def _decimal_stamp_hint(field: str) -> str:

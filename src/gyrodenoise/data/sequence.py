@@ -171,10 +171,25 @@ def sequences_in(root: str | Path) -> list[str]:
     return sorted(p.parent.name for p in Path(root).glob("*/mav0") if p.is_dir())
 
 
+def not_asl_note(root: str | Path, name: str) -> str:
+    """'' unless <root>/<name> exists without mav0/: then what it holds (a folder of other files is not missing)."""
+    folder = Path(root) / name
+    if not folder.is_dir():
+        return ""
+    held = sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir())
+    listed = ", ".join(held[:8]) + (f" and {len(held) - 8} more" if len(held) > 8 else "") if held else "nothing"
+    return (
+        f"{folder} exists but is not in the ASL layout: it has no mav0/ (it holds {listed}); put the IMU in "
+        f"{name}/mav0/imu0/data.csv and the truth in {name}/mav0/state_groundtruth_estimate0/data.csv. "
+    )
+
+
 def sequence_folder(root: str | Path, name: str) -> Path:
     """<root>/<name>/mav0, with an error that says what was looked for and what the root holds."""
     mav0 = Path(root) / name / "mav0"
     if not mav0.is_dir():
+        if note := not_asl_note(root, name):
+            raise FileNotFoundError(f"{mav0}: sequence folder not found. {note.rstrip()}")
         here = sequences_in(root)
         typo = misspelt(name, here)
         raise FileNotFoundError(
