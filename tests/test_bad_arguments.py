@@ -155,3 +155,15 @@ def test_roe_distances_that_are_not_distances_are_named(value):
     with pytest.raises(ConfigError, match=r"roe_distances=.*: a list of travelled distances in metres, each > 0"):
         roe_distances(value)
     assert roe_distances([7, 21.5]) == [7.0, 21.5]
+
+
+@pytest.mark.parametrize("override", ["figures=fals", "trajectories=0"])
+def test_an_evaluate_switch_that_is_not_true_or_false_is_named(tmp_path, override):
+    """'figures=fals' was a non-empty string, so the figures were drawn."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.evaluate import evaluate
+
+    key = override.split("=")[0]
+    with pytest.raises(ConfigError, match=rf"{key}=.*: give {key}=true or {key}=false"):
+        evaluate(compose_config("evaluate", [override, f"out_dir={tmp_path}"]))

@@ -597,3 +597,10 @@ def test_a_one_member_ensemble_writes_no_spread_columns(tmp_path, model_file, ca
         assert run([f, "-m", one, "-o", tmp_path / engine, "--engine", engine], capsys)[0] == 0
         header = (tmp_path / engine / "imu_corrected.csv").read_text().splitlines()[0]
         assert "w_std" not in header and header.count(",") == 6
+
+
+def test_columns_from_python_may_be_a_list(tmp_path):
+    t, g, a = synth(200)
+    f = write_asl(tmp_path / "x.csv", t, g, a)
+    by_list = read_imu_csv(f, columns=["timestamp [ns]", "w_x", "w_y", "w_z", "a_x", "a_y", "a_z"])
+    np.testing.assert_array_equal(by_list.gyro, read_imu_csv(f, columns=[1, 2, 3, 4, 5, 6, 7]).gyro)

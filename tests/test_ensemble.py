@@ -205,6 +205,11 @@ def test_scale_cli_calibrates_the_spread_and_keeps_the_mean(tmp_path, capsys):
     assert np.array_equal(m0, m1) and s0.mean() > 1e-4 and np.allclose(s1, 1.6 * s0, rtol=1e-6)
     assert meta1["model"]["spread_scale"] == 1.6 and meta1["spread_scale"]["fitted_by"] == "fold check"
     assert meta1["spread_scale"]["previous"] == 1.0 and meta1["n_members"] == 3  # the rest of the metadata kept
+    assert meta1["name"] == "ens (spread x1.6)"  # not "ens": outputs name the model that ran
+    named = tmp_path / "named.pt"
+    assert ensemble_cli.main(["build", *map(str, files), "--out", str(named), "--name", "mine"]) == 0
+    argv = ["scale", str(named), "--by", "2", "--fitted-by", "x", "--out", str(tmp_path / "n2.pt")]
+    assert ensemble_cli.main(argv) == 0 and load_model(tmp_path / "n2.pt")[1]["name"] == "mine (spread x2)"
     # a new ensemble built from a scaled one starts again from the raw spread, and says so
     with pytest.warns(UserWarning, match="spread_scale 1.6 .* not carried"):
         assert ensemble_cli.main(["build", str(scaled), "--out", str(tmp_path / "re.pt")]) == 0
@@ -570,3 +575,11 @@ def test_ensemble_of_members_that_all_failed_warns_and_duplicates_are_refused(tm
         ensemble_cli.make_ensemble([paths[0], paths[0]])
     with pytest.raises(ValueError, match="the same member twice"):  # an ensemble brings its members
         ensemble_cli.make_ensemble([ens, paths[1]])
+
+
+def test_reference_without_its_data_says_how_to_give_the_folder(tmp_path, capsys):
+    argv = ["reference", "euroc", "--out", str(tmp_path / "r.pt"), "dataset=euroc", f"dataset.root={tmp_path / 'no'}"]
+    assert ensemble_cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "data folder not found" in err and "dataset.root=FOLDER" in err and "GYRODENOISE_DATA" in err
+    assert not (tmp_path / "r.pt").exists()

@@ -183,7 +183,11 @@ def scale_spread(
         raise ValueError(f"{model_path}: an ensemble of one member has no spread to scale")
     cfg = {**dict(meta["model"]), "spread_scale": float(scale)}
     scaled = EnsembleCorrection(list(model.members), scale)
-    meta = {k: v for k, v in meta.items() if k not in ("model", "path")}
+    meta_name = meta.get("name")
+    named = meta_name != portable_path(meta["path"])  # a shipped name or one the file records, not its path
+    meta = {k: v for k, v in meta.items() if k not in ("model", "path", "name")}
+    if named:  # not the original's name alone: "with euroc" would describe another model than the one that ran
+        meta["name"] = f"{meta_name} (spread x{float(scale):g})"
     meta["spread_scale"] = {
         "value": float(scale),
         "previous": model.spread_scale,
@@ -217,6 +221,12 @@ def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | P
     names = meta.get("train_seqs") or []
     if not names:
         raise ValueError("the ensemble's metadata names no training sequences to take the spread reference on")
+    if not Path(dm.root).is_dir():
+        raise FileNotFoundError(
+            f"{dm.root}: data folder not found (relative paths start at {Path.cwd()}); the spread reference reads the "
+            f"members' training recordings ({', '.join(names)}) from it. Give the folder as an override, "
+            f"dataset.root=FOLDER, or set GYRODENOISE_DATA to the folder that holds '{dm.name}/'."
+        )
     reference = spread_reference(model, ((n, dm.load(n).imu) for n in names))
     cfg = dict(meta["model"])
     meta = {k: v for k, v in meta.items() if k not in ("model", "path")}

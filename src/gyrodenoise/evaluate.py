@@ -214,6 +214,9 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
     distances = roe_distances(cfg.roe_distances)  # before the data are read, not after the scoring
+    for key in ("figures", "trajectories"):  # 'figures=fals' is a non-empty string, true to Python
+        if not isinstance(value := cfg.get(key, True), bool):
+            raise ConfigError(f"{key}={value!r}: give {key}=true or {key}=false")
     if split == "test" and OmegaConf.is_missing(cfg.dataset, "train_seqs"):  # asl_folder's '???': not read to test
         cfg = cfg.copy()
         with open_dict(cfg):

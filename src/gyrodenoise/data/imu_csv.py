@@ -218,7 +218,7 @@ def _header_units(
 
 def read_imu_csv(
     path: str | Path,
-    columns: str = "1,2,3,4,5,6,7",
+    columns: str | list[str | int] = "1,2,3,4,5,6,7",
     time_unit: str | None = None,
     gyro_unit: str | None = None,
     acc_unit: str | None = None,
@@ -230,6 +230,8 @@ def read_imu_csv(
     (ns, rad/s, m/s^2); `ImuRecording.units_from_header` names those taken from the header."""
     path = Path(path)
     check_units(time_unit, gyro_unit, acc_unit)
+    if isinstance(columns, list | tuple):  # from Python a list reads as naturally as the command line's string
+        columns = ",".join(str(c) for c in columns)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: IMU file not found.")
     header: list[str] | None = None
