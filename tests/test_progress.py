@@ -82,3 +82,25 @@ def test_with_a_bar_the_run_log_still_gets_the_plain_lines(tmp_path):
 def test_rejects_nonpositive_interval():
     with pytest.raises(ValueError, match="print_every_n_epochs"):
         EpochProgressBar(print_every_n_epochs=0)
+
+
+def test_a_handler_made_in_one_job_writes_into_the_next_jobs_log(tmp_path):
+    """Lightning's console handler, made at its import inside the first job of a sequential sweep, kept that job's
+    tee: from the second job on every record was a '--- Logging error --- I/O operation on closed file'."""
+    import logging
+
+    from gyrodenoise.job_log import console_to_job_log
+
+    log = logging.getLogger("gyrodenoise.test.sweep")
+    log.propagate = False
+    try:
+        with console_to_job_log(tmp_path / "0.log"):
+            handler = logging.StreamHandler()  # binds sys.stderr: job 0's tee
+            log.addHandler(handler)
+            log.warning("job 0")
+        with console_to_job_log(tmp_path / "1.log"):
+            log.warning("job 1")
+    finally:
+        log.removeHandler(handler)
+    assert (tmp_path / "0.log").read_text() == "job 0\n"
+    assert (tmp_path / "1.log").read_text() == "job 1\n"

@@ -21,12 +21,19 @@ from hydra.core.hydra_config import HydraConfig
 
 
 class _Tee(io.TextIOBase):
-    """A text stream that writes to the console and, without bar redraws, to a log file."""
+    """A text stream that writes to the console and, without bar redraws, to a log file.
 
-    def __init__(self, console: TextIO, log: TextIO) -> None:
-        self.console, self.log = console, log
+    A logging handler made while a job ran keeps this stream after the job (Lightning's console handler, made at its
+    import in the first job of a sequential sweep): once the job's log is closed, what it writes goes to the stream
+    that stands in for `sys.<stream>` now, the next job's tee, not to the closed file."""
+
+    def __init__(self, console: TextIO, log: TextIO, stream: str = "stderr") -> None:
+        self.console, self.log, self.stream = console, log, stream
 
     def write(self, s: str) -> int:
+        if self.log.closed:
+            now = getattr(sys, self.stream)
+            return (now if now is not self else self.console).write(s)
         self.console.write(s)
         if "\r" not in s and "\x1b[" not in s:  # a bar's redraw or cursor move (tqdm's nested bars) is not text
             self.log.write(s)
@@ -34,7 +41,8 @@ class _Tee(io.TextIOBase):
 
     def flush(self) -> None:
         self.console.flush()
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
 
     def isatty(self) -> bool:  # the progress bar decides bars vs plain lines by the console
         return self.console.isatty()
@@ -71,7 +79,7 @@ def console_to_job_log(path: Path | None = None) -> Iterator[Path | None]:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a", encoding="utf-8", buffering=1) as log:
         out, err = sys.stdout, sys.stderr
-        sys.stdout, sys.stderr = _Tee(out, log), _Tee(err, log)
+        sys.stdout, sys.stderr = _Tee(out, log, "stdout"), _Tee(err, log, "stderr")
         try:
             yield path
         except Exception:  # Hydra prints the traceback after this block: the log would end without it
