@@ -130,10 +130,17 @@ def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
     first = "+callbacks.first._target_=test_damaged_inputs.FirstEpoch"
     assert train(config(root, tmp_path / "fresh", first, every_2, "trainer.max_epochs=4", "auto_resume=false"))
     assert FirstEpoch.seen == [0, 1, 2, 3] and "auto_resume: " not in capsys.readouterr().out
+    # resuming with other settings is refused: they would be recorded in summary.json and not used
+    changed = config(root, tmp_path / "run", every_2, "trainer.max_epochs=4", "optim.lr=0.003")
+    with pytest.raises(ConfigError, match=r"trained with other settings \(optim.lr=0.01 there, 0.003 here\)"):
+        train(changed)
     # the same command in the same folder (a requeued cluster job) goes on from that checkpoint and finishes
     summary = train(config(root, tmp_path / "run", every_2, "trainer.max_epochs=4"))
     assert "auto_resume: " in capsys.readouterr().out and summary["epochs"] == 4
     assert not (tmp_path / "run" / "checkpoints" / "interrupted.ckpt").exists()  # removed at a normal end
+    # a finished run's folder takes no second run: its checkpoints, logs and curves would be mixed with the new ones
+    with pytest.raises(ConfigError, match="holds a finished run"):
+        train(config(root, tmp_path / "run", every_2, "trainer.max_epochs=4"))
 
 
 def test_an_interrupted_correct_rerun_leaves_no_earlier_summary(root, tmp_path, monkeypatch):

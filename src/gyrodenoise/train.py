@@ -300,7 +300,39 @@ def train(cfg: DictConfig) -> dict:
     with torch_threads(cfg.get("threads")):
         if all_folds.wants_all_folds(cfg):  # every fold in turn: the protocol's figure as val/aoe_deg
             return all_folds.train_all_folds(cfg, out_dir, _train)
+        if (out_dir / "model.pt").is_file():  # a second run there would leave a mix of both runs' files
+            raise ConfigError(
+                f"{out_dir} holds a finished run (model.pt): a new run there would mix its outputs with that run's "
+                "(checkpoints, logs, curves). Give another folder (hydra.run.dir=...), or remove that one first."
+            )
         return _train(cfg, out_dir)
+
+
+RUNTIME_ONLY = ("figure_every_n_val", "optim.cuda_graph")  # settings that do not change what a run learns
+
+
+def _flat(tree: object, prefix: str = "") -> dict[str, object]:
+    if isinstance(tree, dict):
+        return {k: v for key, sub in tree.items() for k, v in _flat(sub, f"{prefix}{key}.").items()}
+    return {prefix[:-1]: list(tree) if isinstance(tree, tuple) else tree}
+
+
+def check_resumed_settings(ckpt_path: str, hparams: dict) -> None:
+    """ConfigError when the command's model, optimiser, schedule or loss differ from those the checkpoint was trained
+    with: the resumed fit goes on with the checkpoint's weights, optimiser and schedule, so the new values would be
+    recorded in summary.json but not used (a changed network ends in a size-mismatch traceback)."""
+
+    saved = torch.load(ckpt_path, map_location="cpu", weights_only=False).get("hyper_parameters") or {}
+    was = _flat(OmegaConf.to_container(OmegaConf.create(dict(saved)), resolve=True))
+    now = _flat(OmegaConf.to_container(OmegaConf.create(hparams), resolve=True))
+    differ = [k for k in sorted(set(was) | set(now)) if k not in RUNTIME_ONLY and was.get(k) != now.get(k)]
+    if differ:
+        listed = "; ".join(f"{k}={was.get(k)!r} there, {now.get(k)!r} here" for k in differ[:6])
+        raise ConfigError(
+            f"resuming from {ckpt_path}, whose run was trained with other settings ({listed}): a resumed run goes on "
+            "with the checkpoint's weights, optimiser and schedule, so these would be recorded but not used. Give the "
+            "run's settings to resume it, or start afresh (auto_resume=false, or another hydra.run.dir)."
+        )
 
 
 def _resume_point(out_dir: Path) -> Path | None:
@@ -347,6 +379,8 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
             "their test figures are not held out"
         )
     module = build_module(cfg)
+    if cfg.get("ckpt_path"):
+        check_resumed_settings(cfg.ckpt_path, dict(module.hparams))
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     if not loggers:  # Lightning refuses a learning-rate monitor without a logger
