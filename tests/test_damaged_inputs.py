@@ -251,3 +251,25 @@ def test_what_reading_a_file_said_is_said_again_when_it_comes_from_the_cache(roo
         warnings.simplefilter("error")
         load_sequence(root, "a", cache_dir=tmp_path / "cache")  # a clean file says nothing, from either path
         load_sequence(root, "a", cache_dir=tmp_path / "cache")
+
+
+def test_a_resumed_run_keeps_the_csv_curves_before_its_interruption(root, tmp_path, capsys):
+    """Lightning's CSVLogger deleted the metrics.csv it found: a run resumed in its folder lost its earlier curves."""
+    import csv
+
+    handler = signal.getsignal(signal.SIGINT)
+    cb = "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtEpoch"
+    settings = ["logger=csv", "trainer.max_epochs=4", "trainer.log_every_n_steps=1"]
+    try:
+        with pytest.raises(SystemExit):
+            train(config(root, tmp_path / "run", cb, *settings))
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    train(config(root, tmp_path / "run", *settings))
+    assert "curves before the resume are kept in" in capsys.readouterr().out
+    (before,) = (tmp_path / "run" / "csv").glob("metrics_before_resume_*.csv")
+
+    def epochs(path: Path) -> set[int]:
+        return {int(r["epoch"]) for r in csv.DictReader(path.open()) if r.get("epoch")}
+
+    assert epochs(before) == {0, 1} and epochs(tmp_path / "run" / "csv" / "metrics.csv") == {2, 3}

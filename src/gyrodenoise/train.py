@@ -335,6 +335,19 @@ def check_resumed_settings(ckpt_path: str, hparams: dict) -> None:
         )
 
 
+def _keep_earlier_csv_curves(loggers: list) -> None:
+    """Lightning's CSVLogger deletes the metrics.csv it finds in its folder; a run resumed in its own folder keeps the
+    curves up to the interruption under another name (TensorBoard and MLflow keep theirs by themselves)."""
+    from lightning.pytorch.loggers import CSVLogger
+
+    for lg in loggers:
+        metrics = Path(lg.log_dir) / "metrics.csv" if isinstance(lg, CSVLogger) else None
+        if metrics is not None and metrics.is_file():
+            kept = metrics.with_name(f"metrics_before_resume_{time.strftime('%Y%m%d-%H%M%S')}.csv")
+            metrics.rename(kept)
+            print(f"note: the curves before the resume are kept in {kept} (this run's {metrics.name} goes on from it)")
+
+
 def _resume_point(out_dir: Path) -> Path | None:
     """The newest readable checkpoint of an unfinished run in `out_dir` (no model.pt): checkpoints/last.ckpt (every
     50 epochs), checkpoints/interrupted.ckpt (written when the run was stopped) or a checkpoint of Lightning's SLURM
@@ -393,6 +406,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     # one optimiser step per epoch: log_every_n_steps counts steps across epochs, as intended here
     warnings.filterwarnings("ignore", message=r"The number of training batches \(\d+\) is smaller than the logging")
     if cfg.get("ckpt_path"):
+        _keep_earlier_csv_curves(loggers)
         # Lightning warns that a checkpoint from another folder does not bring its best-score bookkeeping: true and
         # expected when resuming into a new run folder; said once, plainly
         warnings.filterwarnings("ignore", message=r"The dirpath has changed from")
