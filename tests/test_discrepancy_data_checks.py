@@ -59,22 +59,83 @@ def test_a_gyro_in_deg_s_is_refused_in_one_line(world, tmp_path, capsys):
     assert not (tmp_path / "out" / "report.md").exists()
 
 
-def test_a_truth_read_in_the_wrong_quaternion_order_is_flagged_in_the_report(world, tmp_path, capsys):
+def test_a_truth_read_in_the_wrong_quaternion_order_stops_the_workflow(world, tmp_path, capsys):
+    """It was flagged in the report, and the workflow went on to name effects from rates compared about the wrong axes
+    (a verdict and an error_model.yaml that meant nothing); it stops now, as a training does."""
+
     def xyzw(r):  # the file holds w, x, y, z after the position; store x, y, z, w instead
         r = r.copy()
         r[:, 3:7] = r[:, [4, 5, 6, 3]]
         return r
 
     damaged_copy(world, tmp_path / "data", "b", truth=xyzw)
-    assert main(argv(tmp_path / "data", tmp_path / "out")) == 0
+    assert main(argv(tmp_path / "data", tmp_path / "out")) == 2
     err = capsys.readouterr().err
-    assert err.count("quaternion order") == 1 and "warning: b (" in err
-    report = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert len(report["data_warnings"]) == 1 and "quaternion order" in report["data_warnings"][0]
-    assert "**Data check:** b (" in (tmp_path / "out" / "report.md").read_text()
+    assert "turns about other axes than the gyro" in err and "quaternion as w, x, y, z" in err
+    assert not (tmp_path / "out" / "report.json").exists() and not (tmp_path / "out" / "error_model.yaml").exists()
 
 
 def test_consistent_sequences_leave_no_data_warning(world, tmp_path, capsys):
     assert main(argv(world, tmp_path / "out")) == 0
     assert "warning:" not in capsys.readouterr().err
     assert json.loads((tmp_path / "out" / "report.json").read_text())["data_warnings"] == []
+
+
+def test_arguments_that_would_skew_or_be_ignored_are_refused(world, tmp_path, capsys):
+    """A sequence given twice counted its evidence twice (delta BIC doubled, standard errors / sqrt 2); a --gt-file for
+    a sequence not in the run fell back to the default truth without a word."""
+    with pytest.raises(SystemExit):
+        main(["--root", str(world), "--fit", "a", "a", "--holdout", "b", "--out", str(tmp_path / "o")])
+    assert "--fit names a more than once" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*argv(world, tmp_path / "o"), "--gt-file", "c=mocap0/data.csv"])
+    assert "c is not among this run's sequences (a, b)" in capsys.readouterr().err
+
+
+def test_a_slow_truth_and_a_short_recording_get_one_line_each(world, tmp_path, capsys):
+    """A 20 Hz truth (EuRoC's recomputed V1_01) ended in a spline's 'nc > m' traceback; 8 samples in an IndexError."""
+    # every tenth truth sample: 10 Hz
+    for seq in ("a", "b"):
+        for sub in ("imu0", "state_groundtruth_estimate0"):
+            src = world / seq / "mav0" / sub / "data.csv"
+            header, *lines = src.read_text().splitlines()
+            lines = lines[::10] if sub != "imu0" else lines
+            (tmp_path / "slow" / seq / "mav0" / sub).mkdir(parents=True)
+            (tmp_path / "slow" / seq / "mav0" / sub / "data.csv").write_text("\n".join([header, *lines]) + "\n")
+            header, *lines = src.read_text().splitlines()
+            (tmp_path / "short" / seq / "mav0" / sub).mkdir(parents=True)
+            kept = lines[100:108] if sub == "imu0" else lines  # 8 IMU samples inside the truth's span
+            (tmp_path / "short" / seq / "mav0" / sub / "data.csv").write_text("\n".join([header, *kept]) + "\n")
+    assert main(argv(tmp_path / "slow", tmp_path / "o")) == 2
+    assert "sampled at 10 Hz, too slow for knots every 0.05 s" in capsys.readouterr().err
+    assert main(argv(tmp_path / "short", tmp_path / "o")) == 2
+    err = capsys.readouterr().err
+    assert "too short" in err and "Traceback" not in err
+
+
+def test_a_rerun_into_the_same_folder_leaves_none_of_the_earlier_files(world, tmp_path, capsys):
+    """A rerun kept the earlier run's figures (drift.png of a longer recording) beside the new report."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text(json.dumps({"command": "python -m gyrodenoise.discrepancy --earlier"}))
+    (out / "drift.png").write_bytes(b"earlier")
+    (out / "mine.txt").write_text("the user's")
+    assert main(argv(world, out)) == 0
+    assert "replacing the outputs of an earlier run" in capsys.readouterr().err
+    assert (out / "mine.txt").read_text() == "the user's"
+    assert not (out / "drift.png").is_file() or (out / "drift.png").read_bytes() != b"earlier"
+
+
+def test_splits_stop_at_a_failed_split(world, tmp_path, capsys):
+    """A split that failed was followed by the next one and a summary built from whatever report.json was there."""
+    import shutil
+
+    from gyrodenoise.discrepancy.splits import main as splits_main
+
+    shutil.copytree(world, tmp_path / "data")
+    shutil.rmtree(tmp_path / "data" / "b" / "mav0" / "state_groundtruth_estimate0")
+    with pytest.raises(SystemExit) as e:
+        splits_main(["--sequences", "a", "b", "--root", str(tmp_path / "data"), "--out", str(tmp_path / "s")])
+    assert e.value.code == 2
+    assert "the split with a held out failed (above): the splits stop here" in capsys.readouterr().err
+    assert not (tmp_path / "s" / "summary.json").exists()

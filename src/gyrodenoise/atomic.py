@@ -88,3 +88,31 @@ def jsonable(x: object) -> object:
 def write_json(path: str | Path, data: dict) -> Path:
     """`data` as strict JSON (NaN / inf written as null), atomically."""
     return write_text(path, json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
+
+
+def remove_earlier_outputs(folder: str | Path, marker: str, patterns: tuple[str, ...]) -> dict | None:
+    """Before a command writes into `folder`: remove what an earlier run of it wrote there, so that a rerun (other
+    inputs, fewer figures) leaves none of the earlier files beside its own. `marker` (written last, the sign of a
+    finished run) goes first, then every file matching `patterns` (globs relative to `folder`); files of the
+    user's and folders that still hold them stay. Returns the earlier marker's JSON (for a note), else None."""
+    folder = Path(folder)
+    earlier: dict | None = None
+    if (folder / marker).is_file():
+        try:
+            earlier = json.loads((folder / marker).read_text())
+        except ValueError:
+            earlier = {}
+        earlier = earlier if isinstance(earlier, dict) else {}
+    (folder / marker).unlink(missing_ok=True)
+    stale = [f for pattern in patterns for f in folder.glob(pattern) if f.is_file()]
+    for f in stale:
+        f.unlink(missing_ok=True)
+    for parent in sorted({f.parent for f in stale} - {folder}, key=lambda p: -len(p.parts)):
+        for up in [parent, *parent.parents]:  # the emptied folders below `folder`, deepest first
+            if up == folder or folder not in up.parents:
+                break
+            try:
+                up.rmdir()
+            except OSError:  # kept when it holds files of the user's
+                break
+    return earlier

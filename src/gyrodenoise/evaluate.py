@@ -28,8 +28,6 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 
 from __future__ import annotations
 
-import contextlib
-import json
 import math
 import sys
 import time
@@ -42,7 +40,7 @@ import numpy as np
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from gyrodenoise import plots, uncertainty
-from gyrodenoise.atomic import write_json, write_text
+from gyrodenoise.atomic import remove_earlier_outputs, write_json, write_text
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.data.cache import load_sequence
@@ -159,29 +157,27 @@ def table_rows(results: dict[str, dict], averaged: list[str], methods: tuple[str
     return rows
 
 
-OWN_FILES = ("table.md", "table.csv", "roe.md", "roe.csv")
-OWN_FIGURES = ("orientation_*.png", "error_*.png", "correction_*.png", "roe.png", "uncertainty_calibration.png")
+OWN_OUTPUTS = (
+    "table.md",
+    "table.csv",
+    "roe.md",
+    "roe.csv",
+    "figures/orientation_*.png",
+    "figures/error_*.png",
+    "figures/correction_*.png",
+    "figures/roe.png",
+    "figures/uncertainty_calibration.png",
+    "trajectories/*/*.txt",
+)
 
 
 def clear_earlier_outputs(out: Path) -> None:
     """Remove what an earlier evaluation wrote into `out` (its tables, figures and trajectories: a rerun with other
-    models or sequences would leave some of them beside the new ones), saying so when it had finished. results.json,
-    written last, is the mark of a finished evaluation and goes first."""
-    summary = out / "results.json"
-    if summary.is_file():
-        try:
-            models = json.loads(summary.read_text()).get("models", {}).get("proposed", "?")
-        except (ValueError, AttributeError):
-            models = "?"
-        print(f"note: replacing the outputs of an earlier evaluation in {out} (model {models})", file=sys.stderr)
-    summary.unlink(missing_ok=True)
-    stale = [out / f for f in OWN_FILES] + [f for pattern in OWN_FIGURES for f in (out / "figures").glob(pattern)]
-    stale += list((out / "trajectories").glob("*/*.txt"))
-    for f in stale:
-        f.unlink(missing_ok=True)
-    for folder in [*(out / "trajectories").glob("*"), out / "trajectories", out / "figures"]:
-        with contextlib.suppress(OSError):  # kept when it holds files of the user's
-            folder.rmdir()
+    models or sequences would leave some of them beside the new ones), saying so when it had finished."""
+    earlier = remove_earlier_outputs(out, "results.json", OWN_OUTPUTS)
+    if earlier is not None:
+        model = (earlier.get("models") or {}).get("proposed", "?")
+        print(f"note: replacing the outputs of an earlier evaluation in {out} (model {model})", file=sys.stderr)
 
 
 def evaluate(cfg: DictConfig) -> dict:

@@ -179,9 +179,14 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
     for a gyro/truth scale far from 1, a truth about other axes or off the IMU's clock, warn, or raise
     `InconsistentTruthError` with `stop` (training sequences: their scores and their training mean nothing).
     Returns the measures."""
-    m = measure(seq)
     files = [portable_path(f) if f else "?" for f in (seq.meta.get("imu_file"), seq.meta.get("gt_file"))]
     where = f"{seq.name} ({files[0]}, truth {files[1]})"  # portable: the message is kept in reports
+    if len(seq) < 2 or len(seq) <= 2 * max(1, int(round(RATE_WINDOW_S / float(np.median(np.diff(seq.t)))))) + 1:
+        raise DataFormatError(
+            f"{where}: {len(seq)} samples with ground truth ({seq.t[-1] - seq.t[0]:.3f} s): too short to check against "
+            "its truth, or to train or score on; give a recording of at least a few seconds."
+        )
+    m = measure(seq)
     same_axes = not m.axes_angle_deg > AXES_MAX_DEG and not m.mirrored  # nan (too little motion) counts as the same
     if np.isfinite(m.rate_ratio) and 0.6 * DEG_PER_RAD <= m.rate_ratio <= 1.4 * DEG_PER_RAD and same_axes:
         raise GyroUnitError(

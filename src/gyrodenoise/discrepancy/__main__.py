@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
 from pathlib import Path
 
-from gyrodenoise.atomic import output_path_problem, write_json
+from gyrodenoise.atomic import output_path_problem, remove_earlier_outputs, write_json
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
@@ -25,6 +26,7 @@ from gyrodenoise.discrepancy.gyro_lines import sentence as lines_sentence
 from gyrodenoise.discrepancy.null import DRAWS
 from gyrodenoise.discrepancy.rank import MIN_GAIN
 from gyrodenoise.discrepancy.report import write_report
+from gyrodenoise.discrepancy.report_plots import PLOT_NAMES
 from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
@@ -193,11 +195,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     overlap = set(args.fit) & set(args.holdout)
     if overlap:
         p.error(f"sequences {sorted(overlap)} are both fitted and held out; the gap must be measured on unseen data")
+    for flag, names in (("--fit", args.fit), ("--holdout", args.holdout)):
+        if twice := sorted({n for n in names if names.count(n) > 1}):  # counted twice, its evidence would be too
+            p.error(f"{flag} names {', '.join(twice)} more than once: give each sequence once")
     gt = {}
     for item in args.gt_file:
         if "=" not in item:
             p.error(f"--gt-file {item!r}: expected NAME=PATH (path relative to <root>/NAME/mav0)")
         k, v = item.split("=", 1)
+        if k not in (*args.fit, *args.holdout):  # a misspelt name would fall back to the default truth silently
+            p.error(f"--gt-file {item!r}: {k} is not among this run's sequences ({', '.join(args.fit + args.holdout)})")
         gt[k] = v
     args.gt_files = gt
     if not args.knot_spacing > 0:
@@ -227,9 +234,15 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
     return out
 
 
+OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES))
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
+    if (earlier := remove_earlier_outputs(args.out, "report.json", OWN_OUTPUTS)) is not None:
+        said = earlier.get("command", "?")  # an earlier run's figures would otherwise stay beside this run's report
+        print(f"note: replacing the outputs of an earlier run in {args.out} ({said})", file=sys.stderr)
     code = code_version_text()  # now: a run takes minutes, in which the checkout may move
 
     left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
@@ -251,7 +264,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         fit, holdout = load(args.fit), load(args.holdout)
     except (FileNotFoundError, DataFormatError) as e:  # a wrong --root, sequence name or file: one line, not a trace
-        print(f"error: {e}", file=sys.stderr)
+        said = re.sub(r"\+dataset\.gt_files\.(\S+)=", r"--gt-file \1=", str(e))  # this command's option, not training's
+        print(f"error: {said}", file=sys.stderr)
         return 2
 
     null_cache: dict = {}  # a second selection on other held-out sequences reuses the null distribution

@@ -3,6 +3,7 @@ simulated gyros: residuals, Allan deviation, Welch spectra, cross-correlations, 
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from gyrodenoise.sim.trajectory import SmoothTrajectory
 from gyrodenoise.so3 import integrate_gyro
 
 MAX_GT_GAP_S = 0.25  # a longer ground-truth gap splits a sequence: a spline cannot bridge it at hand-held rates
+KNOTS_PER_TRUTH_PERIOD = 2.0  # knot spacing over the truth's sample period, at least (20 Hz truth: 0.1 s)
 MIN_STRETCH_S = 10.0  # shorter gap-free stretches are left out (and listed): too short for spectra and drift
 
 
@@ -53,7 +55,17 @@ def load_fit_contexts(
     gt_path = mav0 / gt_file if gt_file else find_groundtruth_file(mav0)
     imu = read_imu(mav0 / "imu0" / "data.csv")
     gt = read_groundtruth(gt_path)
-    consistency.check(build_sequence(name, imu, gt))
+    m = consistency.check(build_sequence(name, imu, gt))
+    # a scale or a clock that disagrees is what the workflow names (scale factor, time offset); a truth about other
+    # axes (x, y, z, w read as w, x, y, z; another body) is not: rates compared axis by axis would name noise
+    if (m.mirrored or m.axes_angle_deg > consistency.AXES_MAX_DEG) and not consistency.clock_offset(m):
+        raise DataFormatError(
+            f"{gt_path}: the ground truth turns about other axes than the gyro of {imu.path} ("
+            + ("a mirror image" if m.mirrored else f"{m.axes_angle_deg:.0f} deg away")
+            + "): the workflow compares the rates axis by axis, so its verdict would mean nothing. Fix the truth "
+            "first: the ASL files hold the quaternion as w, x, y, z, of the IMU's body in the world (not another "
+            "body's, not world-in-body)."
+        )
     stretches = gap_free_stretches(gt.t_ns, max_gap_s)
     if len(stretches) == 1:
         return [_context(name, name, imu, gt, gt_path, knot_spacing, margin_s)], []
@@ -105,13 +117,28 @@ def _context(
     of the ground truth, each the mean over the IMU period centred on its stamp. Time 0 is the sequence's
     first IMU sample."""
     t_gt = (gt.t_ns - gt.t_ns[0]) * 1e-9
+    period = float(np.median(np.diff(t_gt))) if len(t_gt) > 1 else math.inf
+    if knot_spacing < KNOTS_PER_TRUTH_PERIOD * period:  # a knot per truth sample: no data to bind the fit
+        need = math.ceil(KNOTS_PER_TRUTH_PERIOD * period * 100) / 100
+        raise DataFormatError(
+            f"{gt_path}: the ground truth is sampled at {1 / period:.4g} Hz, too slow for knots every "
+            f"{knot_spacing:g} s (the truth spline needs at least {KNOTS_PER_TRUTH_PERIOD:g} truth samples between "
+            f"knots): pass --knot-spacing {need:g} or more."
+        )
     traj = SmoothTrajectory.fit(t_gt, gt.quat_xyzw, gt.pos, knot_spacing, t0_ns=int(gt.t_ns[0]), source=str(gt_path))
     t_imu = (imu.t_ns - traj.t0_ns) * 1e-9
     keep = (t_imu >= traj.t_start + margin_s) & (t_imu <= traj.t_end - margin_s)
     if keep.sum() < 100:
+        overlap = min(t_imu[-1], traj.t_end) - max(t_imu[0], traj.t_start)
+        short = len(t_imu) < 100 or overlap > 0  # the streams meet: the recording, not the clock, is too short
         raise DataFormatError(
-            f"{gt_path}: fewer than 100 IMU samples of {imu.path} fall inside the "
-            "ground-truth span. Both files must share one clock (ns)."
+            f"{gt_path}: fewer than 100 IMU samples of {imu.path} fall inside the ground-truth span"
+            + (
+                f" less {margin_s:g} s at each end ({int(keep.sum())} of {len(t_imu)}): the recording is too short to "
+                "compare; the workflow needs tens of seconds of motion."
+                if short
+                else ". Both files must share one clock (ns)."
+            )
         )
     t = t_imu[keep]
     rate = float(1.0 / np.median(np.diff(t)))

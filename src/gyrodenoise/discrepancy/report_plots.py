@@ -11,6 +11,7 @@ from gyrodenoise.plots import save as save_figure
 from gyrodenoise.plots import subplots
 
 AXES = "xyz"
+PLOT_NAMES = ("allan", "spectrum", "residual", "drift", "gap", "unexplained")  # <name>.png beside report.md
 
 
 def plots(out: Path, arrays: dict, report: dict) -> list[str]:

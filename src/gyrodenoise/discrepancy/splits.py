@@ -46,7 +46,10 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
     rows = []
     for held in sequences:
         fit = [s for s in sequences if s != held]
-        discrepancy_main([*passthrough, "--fit", *fit, "--holdout", held, "--out", str(out / held)])
+        code = discrepancy_main([*passthrough, "--fit", *fit, "--holdout", held, "--out", str(out / held)])
+        if code:  # its error is above; the other splits' verdicts would not be the same workflow's
+            print(f"error: the split with {held} held out failed (above): the splits stop here", file=sys.stderr)
+            raise SystemExit(code)
         report = json.loads((out / held / "report.json").read_text())
         named = [e["name"] for e in report["named_effects"]]
         tf = report.get("truth_followed") or {}
