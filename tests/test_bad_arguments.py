@@ -167,3 +167,21 @@ def test_an_evaluate_switch_that_is_not_true_or_false_is_named(tmp_path, overrid
     key = override.split("=")[0]
     with pytest.raises(ConfigError, match=rf"{key}=.*: give {key}=true or {key}=false"):
         evaluate(compose_config("evaluate", [override, f"out_dir={tmp_path}"]))
+
+
+@pytest.mark.parametrize(
+    ("override", "said"),
+    [
+        ("optim.lr=abc", "optim.lr='abc': give a number, e.g. optim.lr=0.01"),
+        ("seed=abc", "seed='abc': give a whole number"),
+        ("trainer.max_epochs=2.5", "trainer.max_epochs=2.5: give a whole number"),
+    ],
+)
+def test_a_setting_that_is_not_a_number_ends_in_one_line(override, said):
+    """'optim.lr=abc' ended in a TypeError from a comparison deep in the optimiser, 'seed=abc' in a ValueError."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.config import compose_config
+    from gyrodenoise.train import check_choices
+
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        check_choices(compose_config("train", [override, "paths.output_dir=unused"]))

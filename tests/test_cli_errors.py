@@ -105,9 +105,14 @@ def test_a_misspelt_config_key_is_named_with_the_key_it_was_meant_to_be(tmp_path
     assert said("dataset=tumvi", "dataset.train_seq=[a]").endswith("did you mean dataset.train_seqs?")
     far = said("dataset.sequnces=[a]")
     assert "dataset has name, root, train_seqs" in far and "+key=value" in far
-    # right keys, '+' additions, sweeps and Hydra's own options are not ours to judge
-    for fine in [("trainer.max_epochs=3",), ("+trainer.foo=1",), ("-m", "sed=1,2"), ("hydra.run.dir=x",)]:
+    # a sweep's keys too, by their first value (Hydra's own message advised '+model.dropot', which trains and
+    # ignores the key)
+    assert said("-m", "model.dropot=0.1,0.2").endswith("did you mean model.dropout?")
+    assert said("--multirun", "optim.lrr=range(1,3)", "seed=0,1").endswith("did you mean optim.lr?")
+    # right keys, '+' additions, good sweeps and Hydra's own options are not ours to judge
+    for fine in [("trainer.max_epochs=3",), ("+trainer.foo=1",), ("-m", "seed=1,2"), ("hydra.run.dir=x",)]:
         assert said(*fine) is None, fine
+    assert said("-m", "model=denoiser,calibrated", "loss.increments=[8,16],[16,32]") is None
     assert said("weights=x", config="evaluate") is None
     # end to end: one line and status 2, before Hydra's advice to add the key with '+'
     proc = subprocess.run(

@@ -54,9 +54,11 @@ def misspelt_key_message(config_name: str, overrides: Sequence[str]) -> str | No
     fails inside the Trainer; a misspelling deserves the key it was meant to be. Anything else (sweeps, Hydra's
     own settings, a missing config group option, whose message already lists the options) is left to Hydra.
     """
-    if any(a.startswith("-") for a in overrides):  # -m, --config-name, ...: Hydra's business
+    if any(a.startswith("-") and a not in MULTIRUN_FLAGS for a in overrides):  # --config-name, ...: Hydra's business
         return None
-    plain = [a for a in overrides if "=" in a and not a.startswith(("hydra.", "hydra/", "+", "~"))]
+    plain = [
+        one_sweep_value(a) for a in overrides if "=" in a and not a.startswith(("hydra.", "hydra/", "+", "~"))
+    ]  # a sweep's keys are checked with its first value: a misspelt key fails every job
     try:
         _compose(config_name, plain)
         return None
@@ -83,6 +85,30 @@ def misspelt_key_message(config_name: str, overrides: Sequence[str]) -> str | No
     siblings = [k.rpartition(".")[2] for k in keys if k.rpartition(".")[0] == parent and not k.endswith("_")]
     hint = f"{parent or 'The config'} has {', '.join(siblings)}. " if siblings else ""
     return f"{key} is not a key of the '{config_name}' config. {hint}To add a key the config lacks, write +key=value."
+
+
+MULTIRUN_FLAGS = ("-m", "--multirun")
+SWEEP_FUNCTIONS = ("range(", "choice(", "interval(", "glob(", "tag(", "int(", "float(", "shuffle(", "sort(")
+
+
+def one_sweep_value(override: str) -> str:
+    """`key=a,b` (a multirun's sweep) as `key=a`; `key=range(...)` and the like as `key=0`; anything else as it is."""
+    key, _, value = override.partition("=")
+    if value.startswith(SWEEP_FUNCTIONS):
+        return f"{key}=0"
+    depth, quote = 0, ""
+    for i, c in enumerate(value):  # the first comma outside brackets and quotes ends the first value
+        if quote:
+            quote = "" if c == quote else quote
+        elif c in "'\"":
+            quote = c
+        elif c in "[({":
+            depth += 1
+        elif c in "])}":
+            depth -= 1
+        elif c == "," and depth == 0:
+            return f"{key}={value[:i]}"
+    return override
 
 
 def _dotted_keys(node: Any, prefix: str = "") -> list[str]:

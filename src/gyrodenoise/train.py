@@ -179,11 +179,27 @@ def schedule_cut_note(cfg: DictConfig) -> str | None:
     )
 
 
+NUMBERS = (  # (key, whole number?, an example) of the settings a run reads as numbers
+    ("seed", True, "0"),
+    ("optim.lr", False, "0.01"),
+    ("optim.weight_decay", False, "0.1"),
+    ("model.dropout", False, "0.1"),
+    ("loss.huber_delta", False, "0.005"),
+    ("loss.weight", False, "1e6"),
+    ("trainer.max_epochs", True, "600"),
+)
+
+
 def check_choices(cfg: DictConfig) -> None:
     """The choices that need neither data nor a model (`select`, the loss increments against the crop length): a bad
     one ends the command at once, before any data is read."""
     if cfg.select not in ("last", "best_val"):
         raise ConfigError(f"select={cfg.select!r}: choose 'last' (final weights) or 'best_val'")
+    for key, whole, example in NUMBERS:  # 'optim.lr=abc' ended in a comparison's TypeError deep in the optimiser
+        value = OmegaConf.select(cfg, key, default=None)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int if whole else (int, float))):
+            kind = "a whole number" if whole else "a number"
+            raise ConfigError(f"{key}={value!r}: give {kind}, e.g. {key}={example}")
     data_inc, loss_inc = cfg.dataset.get("increments"), cfg.get("loss", {}).get("increments")
     if data_inc is not None and loss_inc is not None and list(data_inc) != list(loss_inc):
         raise ConfigError(
