@@ -181,10 +181,17 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
     Returns the measures."""
     files = [portable_path(f) if f else "?" for f in (seq.meta.get("imu_file"), seq.meta.get("gt_file"))]
     where = f"{seq.name} ({files[0]}, truth {files[1]})"  # portable: the message is kept in reports
-    if len(seq) < 2 or len(seq) <= 2 * max(1, int(round(RATE_WINDOW_S / float(np.median(np.diff(seq.t)))))) + 1:
-        raise DataFormatError(
+    if len(seq) < 2 or len(seq) <= max(1, int(round(RATE_WINDOW_S / float(np.median(np.diff(seq.t)))))) + 1:
+        cropped = int(seq.meta.get("imu_samples_cropped", 0))
+        raise DataFormatError(  # shorter than the window the rates are compared over
             f"{where}: {len(seq)} samples with ground truth ({seq.t[-1] - seq.t[0]:.3f} s): too short to check against "
-            "its truth, or to train or score on; give a recording of at least a few seconds."
+            "its truth, or to train or score on; give a recording of at least a few seconds"
+            + (
+                f" (the truth covers only these: {cropped} IMU samples lie outside it; check that the ground truth "
+                "covers the recording)."
+                if cropped
+                else "."
+            )  # fmt: skip
         )
     m = measure(seq)
     same_axes = not m.axes_angle_deg > AXES_MAX_DEG and not m.mirrored  # nan (too little motion) counts as the same
