@@ -49,7 +49,7 @@ from gyrodenoise.data.imu_csv import (
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
-from gyrodenoise.notices import plain_project_warnings
+from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_rate, not_better_warning, sensor_model
 from gyrodenoise.so3 import integrate_gyro
@@ -300,6 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+@interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
     with plain_project_warnings():  # e.g. a cut last line: one 'warning: ...' line, not Python's two
         return _main(argv)

@@ -35,7 +35,7 @@ from torch import nn
 from gyrodenoise import c_export
 from gyrodenoise.atomic import atomic_path, output_path_problem
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
-from gyrodenoise.notices import plain_project_warnings, quiet_library_notices
+from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings, quiet_library_notices
 from gyrodenoise.pretrained import load_model, sensor_model
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
 from gyrodenoise.stateful_graph import StatefulCorrection
@@ -210,6 +210,7 @@ def export_onnx(
     return path
 
 
+@interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
     quiet_library_notices()
     ap = argparse.ArgumentParser(

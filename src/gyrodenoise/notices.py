@@ -10,9 +10,12 @@ log or warn is left alone.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
+import sys
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 LIGHTNING_LOGGER = "lightning.pytorch.utilities.rank_zero"
 ONNX_REGISTRATION_LOGGER = "torch.onnx._internal.exporter._registration"
@@ -78,3 +81,18 @@ def device_lines_said() -> Iterator[None]:
         yield
     finally:
         log.removeFilter(drop)
+
+
+def interrupt_in_one_line(main: Callable[..., int]) -> Callable[..., int]:
+    """A command's `main` that Ctrl-C ends with one line and status 130 (the shell's for SIGINT), not a traceback:
+    its outputs are written whole or not at all (`atomic`), so there is nothing more to say."""
+
+    @functools.wraps(main)
+    def wrapped(*args: Any, **kwargs: Any) -> int:
+        try:
+            return main(*args, **kwargs)
+        except KeyboardInterrupt:
+            print("interrupted: no output of this run was left half-written", file=sys.stderr)
+            return 130
+
+    return wrapped

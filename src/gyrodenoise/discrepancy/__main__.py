@@ -31,6 +31,7 @@ from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
 from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import run
+from gyrodenoise.notices import interrupt_in_one_line
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.provenance import code_version_text, machine_description
 from gyrodenoise.sim.effects import EFFECTS
@@ -237,6 +238,7 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
 OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES))
 
 
+@interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
