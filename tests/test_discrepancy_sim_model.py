@@ -85,3 +85,14 @@ def test_error_model_entries_are_checked_field_by_field(tmp_path, entry, message
     f.write_text(f"error_model:\n  - {{name: g_sensitivity, units: datasheet, params: {{matrix: {nine}}}}}\n"
                  "  - {name: white_noise, units: si, params: {density: 1.0e-4}}\n")  # fmt: skip
     assert len(load_error_model(f)[0]) == 2
+
+
+def test_one_fitted_sequence_leaves_the_simulators_bias_spread_as_it_is(tmp_path):
+    """One sequence's bias says nothing of the spread between recordings: the file wrote 0.0, which replaced the
+    simulated dataset's own setting; it writes null now, which leaves it."""
+    bias = {"bias": [0.01, 0.02, 0.03], "bias_per_sequence": [[0.01, 0.02, 0.03]]}
+    one = {**REPORT, "base_params": {**REPORT["base_params"], "bias": bias}}
+    path = write_simulator_model(tmp_path / "error_model.yaml", one)
+    assert load_error_model(path)[1] is None
+    gen = with_error_model_file({"bias_jitter_rad_s": 0.005, "error_model": [], "error_model_file": str(path)})
+    assert gen["bias_jitter_rad_s"] == 0.005

@@ -6,7 +6,8 @@ simulated dataset's `generation` settings, so the next simulation includes the e
 
     python -m gyrodenoise.train dataset=sim dataset.generation.error_model_file=REPORT_DIR/error_model.yaml
 
-The turn-on bias is the mean over the fit sequences, and its spread between them becomes `bias_jitter_rad_s`.
+The turn-on bias is the mean over the fit sequences, and its spread between them becomes `bias_jitter_rad_s` (null
+with one fitted sequence: a spread it cannot measure, so the simulated dataset keeps its own setting).
 Lines of the raw gyro above the compared band that are in every fitted recording are added as band-limited
 vibrations (`gyro_lines.simulator_vibration`): the truth cannot judge them, but a simulator of this gyro needs them.
 """
@@ -26,13 +27,13 @@ def simulator_model(report: dict) -> dict:
     """{'error_model': [{name, units: si, params}], 'bias_jitter_rad_s': ..., 'source': ...} from a report dict;
     every entry is checked to build (`sim.effects.effect_from_config`)."""
     entries = []
-    jitter = 0.0
+    jitter: float | None = None  # one fitted sequence says nothing of the spread: the simulator's setting stays
     for name, params in (report.get("base_params") or {}).items():
         params = dict(params)
         if name == "bias":  # per sequence in the data; the simulator draws it around the mean
             per_seq = np.asarray(params.pop("bias_per_sequence", [params["bias"]]), dtype=float)
             params["bias"] = per_seq.mean(0).tolist()
-            jitter = float(per_seq.std(0, ddof=1).mean()) if len(per_seq) > 1 else 0.0
+            jitter = float(per_seq.std(0, ddof=1).mean()) if len(per_seq) > 1 else None
         entries.append(_entry(name, params))
     for e in report.get("named_effects") or []:
         entries.append(_entry(e["name"], e["params"]))
