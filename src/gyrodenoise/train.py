@@ -337,7 +337,6 @@ def check_resumed_settings(ckpt_path: str, hparams: dict) -> None:
     """ConfigError when the command's model, optimiser, schedule or loss differ from those the checkpoint was trained
     with: the resumed fit goes on with the checkpoint's weights, optimiser and schedule, so the new values would be
     recorded in summary.json but not used (a changed network ends in a size-mismatch traceback)."""
-
     saved = torch.load(ckpt_path, map_location="cpu", weights_only=False).get("hyper_parameters") or {}
     was = _flat(OmegaConf.to_container(OmegaConf.create(dict(saved)), resolve=True))
     now = _flat(OmegaConf.to_container(OmegaConf.create(hparams), resolve=True))

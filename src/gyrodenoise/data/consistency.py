@@ -191,7 +191,7 @@ def check(seq: Sequence, stop: bool = False) -> Consistency:
                 "covers the recording)."
                 if cropped
                 else "."
-            )  # fmt: skip
+            )
         )
     m = measure(seq)
     same_axes = not m.axes_angle_deg > AXES_MAX_DEG and not m.mirrored  # nan (too little motion) counts as the same
