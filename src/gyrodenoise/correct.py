@@ -41,10 +41,10 @@ from gyrodenoise.data.imu_csv import (
     TIME_UNITS,
     ImuRecording,
     asl_text,
+    beyond_int64_advice,
     check_units,
     read_imu_csv,
     resample,
-    time_units_for_period,
 )
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.models.build import check_stream_form
@@ -216,11 +216,8 @@ def correct_arrays(
     check_units(time_unit, gyro_unit, acc_unit)
     largest = float(np.abs(t_in).max()) if t_in.size else 0.0
     if largest * TIME_UNITS[time_unit] > INT64_MAX:  # would wrap around in int64 ns
-        fits = time_units_for_period(float(np.median(np.diff(t_in)))) if t_in.size > 1 else []
-        raise DataFormatError(
-            f"t: {largest:.4g} {time_unit} is beyond what int64 nanoseconds hold (the year 2262): the stamps are in "
-            f"a finer unit than {time_unit}" + (f"; pass time_unit={fits[0]!r}." if fits else ".")
-        )
+        advice = beyond_int64_advice(np.diff(t_in.astype(np.float64)), time_unit)
+        raise DataFormatError(python_advice(f"t: {largest:.4g} {time_unit} is {advice}."))
     if np.issubdtype(t_in.dtype, np.integer):  # int stamps stay exact (float64 ns of a 2014 epoch: 256-ns steps)
         t_ns = t_in.astype(np.int64) * TIME_UNITS[time_unit]
     else:
@@ -243,10 +240,14 @@ def correct_arrays(
     try:
         return correct_recording(rec, loaded, meta, **kwargs)
     except SanityCheckError as e:
-        message = str(e)
-        for option, argument in PYTHON_ADVICE:
-            message = re.sub(option, argument, message)
-        raise SanityCheckError(message) from None
+        raise SanityCheckError(python_advice(str(e))) from None
+
+
+def python_advice(message: str) -> str:
+    """A message of the command line's checks in `correct_arrays`' terms (its arguments for the options)."""
+    for option, argument in PYTHON_ADVICE:
+        message = re.sub(option, argument, message)
+    return message
 
 
 def build_parser() -> argparse.ArgumentParser:

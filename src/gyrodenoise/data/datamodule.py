@@ -242,8 +242,9 @@ class ImuDataModule(L.LightningDataModule):
         if missing:
             only_test = set(missing) <= set(self.test_names)
             here = sequences_in(self.root)
-            layout = "".join(not_asl_note(self.root, n) for n in missing)
-            absent = [n for n in missing if not not_asl_note(self.root, n)]  # not a folder of other files
+            notes = {n: not_asl_note(self.root, n) for n in missing}  # '' unless a folder of other files
+            layout = "".join(notes.values())
+            absent = [n for n in missing if not notes[n]]
             typo = "; ".join(f"{n}: did you mean {c}?" for n in absent if (c := misspelt(n, here)))
             raise FileNotFoundError(
                 f"{self.root}: sequence folder(s) not found: {', '.join(missing)} (ASL layout "

@@ -112,17 +112,23 @@ def time_units_for_period(period: float) -> list[str]:
     return [u for u, ns in TIME_UNITS.items() if lo <= 1e9 / (period * ns) <= hi]
 
 
+def beyond_int64_advice(steps: np.ndarray, unit: str) -> str:
+    """What to say of stamps that overflow int64 ns when read in `unit` (nanoseconds read as seconds); `steps`: the
+    differences of the stamps in the file's own numbers. Worded for the command line (`--time-unit`)."""
+    fits = time_units_for_period(float(np.median(steps))) if len(steps) else []
+    hint = f"pass --time-unit {fits[0]}" if fits else "check the time unit and the time column"
+    return f"beyond what int64 nanoseconds hold (the year 2262): the stamps are in a finer unit than {unit}; {hint}"
+
+
 def _refuse_stamps_beyond_int64(stamps: list[int], lines: np.ndarray, path: Path, unit: str) -> None:
     """Stamps that do not fit int64 ns were read in too coarse a unit (nanoseconds read as seconds)."""
     if max(stamps) <= INT64_MAX and min(stamps) >= -INT64_MAX:
         return
     k = next(i for i, s in enumerate(stamps) if abs(s) > INT64_MAX)
-    raw = np.diff(np.array(stamps, dtype=object)) / TIME_UNITS[unit]
-    fits = time_units_for_period(float(np.median(raw.astype(np.float64)))) if len(raw) else []
-    hint = f"pass --time-unit {fits[0]}" if fits else "check --time-unit and the time column (--columns)"
+    steps = (np.diff(np.array(stamps, dtype=object)) / TIME_UNITS[unit]).astype(np.float64)
     raise DataFormatError(
-        f"{path}:{lines[k]}: the time column read as {unit} is {stamps[k] / 1e9:.3g} s, beyond what int64 nanoseconds "
-        f"hold (the year 2262): the stamps are in a finer unit than {unit}; {hint}."
+        f"{path}:{lines[k]}: the time column read as {unit} is {stamps[k] / 1e9:.3g} s, "
+        f"{beyond_int64_advice(steps, unit)}."
     )
 
 
