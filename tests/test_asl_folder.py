@@ -85,6 +85,8 @@ def test_train_two_epochs(asl_root, tmp_path):
     log = (run_dir / "train.log").read_text()
     assert "test sequences (my_imu" in proc.stdout and "test sequences (my_imu" in log and "| walk_3 |" in log
     assert "calibrated AOE 3D" in log  # the baseline fitted on the same data, beside the model
+    for text in (log, proc.stdout + proc.stderr):  # each Lightning line once, in the log and on the console
+        assert text.count("Seed set to") == 1 and text.count("`Trainer.fit` stopped") == 1, text
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["command"].startswith("python -m gyrodenoise.train dataset=asl_folder ")
     model, meta = load_model(run_dir / "model.pt")

@@ -195,3 +195,31 @@ def test_a_refused_rerun_leaves_the_folders_hydra_record_as_it_was(tmp_path):
     )  # fmt: skip
     assert proc.returncode == 2
     assert "select=best" in (tmp_path / "new" / ".hydra" / "overrides.yaml").read_text()
+
+
+@pytest.mark.parametrize(("module", "work"), [("evaluate", "evaluate"), ("fit_calibrated", "fit")])
+def test_ctrl_c_in_a_hydra_command_is_one_line_and_status_130(module, work, tmp_path, monkeypatch, capsys):
+    import importlib
+
+    command = importlib.import_module(f"gyrodenoise.{module}")
+
+    def interrupted(cfg):
+        raise KeyboardInterrupt
+
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    monkeypatch.setattr(command, work, interrupted)
+    monkeypatch.setattr(sys, "argv", [module, f"hydra.run.dir={tmp_path}"])
+    with pytest.raises(SystemExit) as exit_info:
+        command.main()
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err.strip().endswith("interrupted: no output of this run was left half-written")
+
+
+def test_evaluate_keeps_its_console_log_with_its_outputs(tmp_path, monkeypatch):
+    from gyrodenoise import evaluate
+
+    monkeypatch.setattr(evaluate, "evaluate", lambda cfg: print("the table"))
+    out = tmp_path / "out"
+    monkeypatch.setattr(sys, "argv", ["evaluate", f"out_dir={out}", f"hydra.run.dir={tmp_path / 'hydra'}"])
+    evaluate.main()
+    assert "the table" in (out / "evaluate.log").read_text()

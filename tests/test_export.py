@@ -111,6 +111,16 @@ def test_cli_error_is_one_line(tmp_path, capsys):
     assert err.startswith("error: ") and "missing.pt" in err and not (tmp_path / "out.onnx").exists()
 
 
+def test_an_existing_file_of_another_kind_is_not_replaced(tmp_path, capsys):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    for flag in ("--onnx", "--pt2"):
+        assert main(["euroc-calibrated", flag, str(notes), "--no-check"]) == 2
+        err = capsys.readouterr().err
+        assert f"{flag} {notes}: this file exists and is not a {flag.replace('--', '.')} file" in err
+    assert notes.read_text() == "my notes"
+
+
 # ---------------------------------------------------------------- the stateful (streaming) step
 CHUNKS = (1, 1, 5, 130, 2, 260, 1)  # one-sample calls, shorter and longer than the receptive field (17)
 

@@ -23,7 +23,7 @@ from omegaconf.errors import MissingMandatoryValue
 
 from gyrodenoise.config import misspelt_key_message
 from gyrodenoise.data.readers import DataFormatError
-from gyrodenoise.notices import plain_project_warnings
+from gyrodenoise.notices import INTERRUPTED, plain_project_warnings
 from gyrodenoise.pretrained import ModelFileError
 
 
@@ -41,10 +41,17 @@ DISK_ERRNOS = (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT)
 
 @contextmanager
 def user_errors() -> Iterator[None]:
-    """Errors in what the user gave end the command with one line; the project's warnings print as one line too."""
+    """Errors in what the user gave end the command with one line; the project's warnings print as one line too.
+    So does Ctrl-C outside a fit (Hydra lets it through as a traceback), with the shell's status for SIGINT, 130;
+    inside a fit Lightning catches it and `train` says how to resume."""
     try:
         with plain_project_warnings():
             yield
+    except KeyboardInterrupt:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
+        print(INTERRUPTED, file=sys.stderr)
+        raise SystemExit(130) from None
     except USER_ERRORS as e:
         _one_line(str(e))
     except OSError as e:  # a full, read-only or forbidden disk: the path and what to do, not a traceback

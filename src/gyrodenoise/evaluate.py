@@ -54,7 +54,7 @@ from gyrodenoise.external_estimates import (
     load_external,
     nan_outside,
 )
-from gyrodenoise.job_log import console_to_job_log
+from gyrodenoise.job_log import console_to_job_log, job_log_path
 from gyrodenoise.metrics import AOE_DEFINITION, ROE_STRIDE, aoe, orientation_errors, roe, summarize
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
@@ -432,7 +432,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
 @hydra_key_hints("evaluate")
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
 def main(cfg: DictConfig) -> None:
-    with console_to_job_log(), user_errors(), warnings.catch_warnings():
+    # the console's copy goes with the outputs (out_dir=... moves them out of Hydra's run folder)
+    with console_to_job_log(job_log_path(cfg.out_dir)), user_errors(), warnings.catch_warnings():
         # the command prints these after its table (the `warned` lines); once is enough
         warnings.simplefilter("ignore", ModelQualityWarning)
         evaluate(cfg)

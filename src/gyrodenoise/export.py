@@ -260,6 +260,15 @@ def main(argv: list[str] | None = None) -> int:
                 problem += f", e.g. {target / ('model' + flag.replace('--', '.'))}"
             print(f"error: {flag} {target}: cannot write: {problem}", file=sys.stderr)  # as the export's own errors
             return 2
+        suffix = flag.replace("--", ".")
+        if not folder and target is not None and target.is_file() and target.suffix != suffix:
+            # a name without the suffix is allowed for a new file; an existing other file is probably a typo
+            print(
+                f"error: {flag} {target}: this file exists and is not a {suffix} file, so it was left as it was: "
+                f"give a {suffix} path, or remove the file first",
+                file=sys.stderr,
+            )
+            return 2
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
             model, meta = load_model(args.model)

@@ -61,22 +61,29 @@ def write_to_job_log(text: str) -> None:
         sys.stdout.log.write(text)
 
 
-def job_log_path() -> Path | None:
-    """Hydra's log file of the running job, or None outside a Hydra command."""
+def job_log_path(folder: str | Path | None = None) -> Path | None:
+    """Hydra's log file of the running job (in `folder` when the command writes its outputs elsewhere than Hydra's
+    run folder, e.g. evaluate's out_dir=...), or None outside a Hydra command."""
     if not HydraConfig.initialized():
         return None
     hc = HydraConfig.get()
-    return Path(hc.runtime.output_dir) / f"{hc.job.name}.log"
+    return Path(folder or hc.runtime.output_dir) / f"{hc.job.name}.log"
 
 
 @contextmanager
 def console_to_job_log(path: Path | None = None) -> Iterator[Path | None]:
     """Copy stdout and stderr into `path` (default: the Hydra job's log file) while the block runs."""
-    path = path or job_log_path()
+    default = job_log_path()
+    path = path or default
     if path is None:
         yield None
         return
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:  # a folder the command cannot write: its own error says so, in Hydra's run folder's log
+        if default is None or path == default:
+            raise
+        path = default
     with open(path, "a", encoding="utf-8", buffering=1) as log:
         out, err = sys.stdout, sys.stderr
         sys.stdout, sys.stderr = _Tee(out, log, "stdout"), _Tee(err, log, "stderr")

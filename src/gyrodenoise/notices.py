@@ -83,6 +83,20 @@ def device_lines_said() -> Iterator[None]:
         log.removeFilter(drop)
 
 
+def lightning_lines_once() -> None:
+    """Lightning's top package prints its records with a console handler of its own, while its subpackages also
+    pass them to the root logger when that has handlers (a Hydra command's console and log file): every Lightning
+    line came twice. Where the root logger handles records, Lightning's own console handler goes, so the job's
+    logging config (hydra/job_logging) alone decides how they look."""
+    if logging.getLogger().hasHandlers():
+        top = logging.getLogger("lightning")
+        for handler in [h for h in top.handlers if type(h) is logging.StreamHandler]:
+            top.removeHandler(handler)
+
+
+INTERRUPTED = "interrupted: no output of this run was left half-written"
+
+
 def interrupt_in_one_line(main: Callable[..., int]) -> Callable[..., int]:
     """A command's `main` that Ctrl-C ends with one line and status 130 (the shell's for SIGINT), not a traceback:
     its outputs are written whole or not at all (`atomic`), so there is nothing more to say."""
@@ -92,7 +106,7 @@ def interrupt_in_one_line(main: Callable[..., int]) -> Callable[..., int]:
         try:
             return main(*args, **kwargs)
         except KeyboardInterrupt:
-            print("interrupted: no output of this run was left half-written", file=sys.stderr)
+            print(INTERRUPTED, file=sys.stderr)
             return 130
 
     return wrapped

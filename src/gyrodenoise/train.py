@@ -39,7 +39,7 @@ from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import AOE_DEFINITION
 from gyrodenoise.models.build import causality_leak
-from gyrodenoise.notices import device_lines_said, quiet_library_notices
+from gyrodenoise.notices import device_lines_said, lightning_lines_once, quiet_library_notices
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import code_version as _code_version
@@ -384,6 +384,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     from gyrodenoise.lit import DenoiserModule
     from gyrodenoise.run_loggers import log_run_end
 
+    lightning_lines_once()
     if cfg.get("ckpt_path") is None and cfg.get("auto_resume") and (resume := _resume_point(out_dir)):
         # a requeued job (SLURM time limit, preemption: the launcher reruns it in the same folder) goes on from its
         # own checkpoint instead of starting again; a finished run (model.pt) is not resumed
