@@ -45,8 +45,9 @@ def test_a_run_logs_curves_figures_settings_and_files_to_mlflow_beside_tensorboa
     assert run.info.run_name == "denoiser-seed3" and run.info.status == "FINISHED"
     assert run.data.tags["output_dir"] == str(tmp_path / "run")
     params = run.data.params
-    assert params["seed"] == "3" and params["dataset"] == "asl_folder"
+    assert params["seed"] == "3" and params["dataset/name"] == "asl_folder"
     assert params["model/channels"] == "[4, 8]" and params["optim/lr"] == "0.01"  # the module's, by Lightning
+    assert params["trainer/max_epochs"] == "2" and not [k for k in params if "." in k]  # one separator: /
     metrics = run.data.metrics  # the last value of each curve, and the run's final figures
     assert metrics["test/aoe_deg"] == pytest.approx(summary["test"]["test/aoe_deg"])
     assert metrics["selected_val/aoe_deg"] == pytest.approx(summary["val"]["val/aoe_deg"])

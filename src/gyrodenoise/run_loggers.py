@@ -120,9 +120,15 @@ def log_run_end(loggers: Sequence[Logger], hparams: dict[str, Any], metrics: dic
             logger.experiment.flush()  # on disk now, not when the writer's thread next flushes (a reader could miss it)
         elif isinstance(logger, MLFlowLogger):
             # the model/optim/loss settings are already params (Lightning logged the module's at the start, as
-            # model/..., optim/...); MLflow refuses a param logged twice with another value, so only the others
+            # model/..., optim/...); MLflow refuses a param logged twice with another value, so only the others,
+            # named as Lightning names those (dataset/window, not dataset.window; the dataset's name as dataset/name:
+            # a file store keeps a param as a file, and dataset/... needs `dataset` to be a folder)
             logger.log_hyperparams(
-                {k: v for k, v in hparams.items() if k.split(".")[0] not in ("model", "optim", "loss")}
+                {
+                    ("dataset/name" if k == "dataset" else k.replace(".", "/")): v
+                    for k, v in hparams.items()
+                    if k.split(".")[0] not in ("model", "optim", "loss")
+                }
             )
             # the kept model's validation figures (select=best_val: not the curve's last point) beside test/...
             logger.log_metrics({f"selected_{k}": v for k, v in metrics.items() if k.startswith("val")})
