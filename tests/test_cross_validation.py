@@ -229,6 +229,14 @@ def test_a_reference_of_another_dataset_or_not_a_summary_is_refused(tmp_path, ca
         path.write_text(json.dumps(data))
     assert cv.main([*map(str, mine), "--reference", str(other), "--out", str(tmp_path / "x")]) == 2
     assert "the reference's runs are of tumvi, these of mine" in capsys.readouterr().err
+    # a recipe against its own runs (or some of them) would print a difference of 0 +- 0
+    assert cv.main([*map(str, mine), "--reference", str(mine[0]), "--out", str(tmp_path / "x")]) == 2
+    assert "1 run(s) are both the recipe's and the reference's" in capsys.readouterr().err
+    # a misspelt --where key is named with the setting it was probably meant to be, not "no run matches"
+    assert cv.main([*map(str, mine), "--where", "dataset.nme=mine"]) == 2
+    assert "--where dataset.nme=mine: none of the 3 runs has a setting dataset.nme: did you mean dataset.name?" in (
+        capsys.readouterr().err
+    )
     stray = tmp_path / "stray"
     stray.mkdir()
     (stray / "notes.json").write_text('{"a": 1}')

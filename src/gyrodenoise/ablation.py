@@ -41,9 +41,9 @@ from gyrodenoise.ablation_runs import (
     ablated_keys,
     find_runs,
     group,
+    matching,
     parse_where,
     plus_minus,
-    same_value,
     with_ext,
 )
 from gyrodenoise.atomic import write_bytes, write_text
@@ -176,7 +176,7 @@ def collect(
     title: str | None = None,
 ) -> list[Setting]:
     runs, unfinished = find_runs(dirs)
-    runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
+    runs = matching(runs, where)
     if not runs:
         raise ValueError(f"no finished run (summary.json) under {[str(d) for d in dirs]} matches {list(where)}")
     keys = list(keys) if keys else ablated_keys(runs)

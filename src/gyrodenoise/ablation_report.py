@@ -33,6 +33,7 @@ from gyrodenoise.ablation_runs import (
     ablated_keys,
     find_runs,
     group,
+    matching,
     mean_sd_n,
     mean_wall_s,
     parse_where,
@@ -692,7 +693,7 @@ def paired_cli(a: argparse.Namespace, keys: list[str] | None) -> int:
         raise ValueError("name the reference arm with --reference KEY=VALUE (or --claim NAME)")
     where = parse_where(a.where)
     dirs = list(a.dirs)
-    runs = [r for r in find_runs(dirs)[0] if all(same_value(r.value(k), v) for k, v in where)]
+    runs = matching(find_runs(dirs)[0], where)
     try:
         analysis = analyse(runs, reference, keys, claim, a.title)
     except ValueError as e:

@@ -6,6 +6,7 @@ mean +- std tables (gyrodenoise.ablation) and the paired report (gyrodenoise.abl
 from __future__ import annotations
 
 import csv
+import difflib
 import json
 import math
 import statistics
@@ -282,6 +283,25 @@ def parse_where(items: Sequence[str]) -> list[tuple[str, str]]:
         k, v = item.split("=", 1)
         out.append((k.lstrip("+"), v))
     return out
+
+
+def _config_keys(node: object, prefix: str = "") -> Iterable[str]:
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield f"{prefix}{k}"
+            yield from _config_keys(v, f"{prefix}{k}.")
+
+
+def matching(runs: Sequence[Run], where: Sequence[tuple[str, str]], flag: str = "--where") -> list[Run]:
+    """The runs whose value of every KEY of `where` is its VALUE. A key no run has (a misspelling, e.g.
+    model.dropuot) is an error naming the setting it was probably meant to be, not "no run matches"."""
+    for key, value in where:
+        if runs and all(r.value(key) == MISSING for r in runs):
+            known = {k for r in runs for k in (*_config_keys(r.config), *r.overrides)}
+            close = difflib.get_close_matches(key, sorted(known), n=1)
+            hint = f": did you mean {close[0]}?" if close else " (a config key, e.g. model.dropout, or an override)"
+            raise ValueError(f"{flag} {key}={value}: none of the {len(runs)} runs has a setting {key}{hint}")
+    return [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
 
 
 def group(runs: Sequence[Run], keys: Sequence[str], defaults: dict[str, str] | None = None) -> list[Setting]:

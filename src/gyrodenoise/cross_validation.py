@@ -40,10 +40,10 @@ from gyrodenoise.ablation_runs import (
     ablated_keys,
     find_runs,
     group,
+    matching,
     mean_sd_n,
     parse_where,
     read_overrides,
-    same_value,
     with_ext,
 )
 from gyrodenoise.ablation_stats import FoldSeedSpread, PairedDiff, fold_seed_spread
@@ -65,6 +65,7 @@ class Fold:
     network: list[float] = field(default_factory=list)
     calibrated: list[float] = field(default_factory=list)
     raw: list[float] = field(default_factory=list)
+    runs: list[Path] = field(default_factory=list)  # each run's summary, resolved (a reference must not share them)
 
     def mean(self, what: str) -> float:
         return mean_sd_n(getattr(self, what))[0]
@@ -145,6 +146,7 @@ def collect(runs: Sequence[Run]) -> CrossValidation:
         seen[key] = run.path
         f = folds.setdefault(fold, Fold(fold, flights[fold] if fold < len(flights) else f"flight {fold}"))
         f.seeds.append(str(run.seed))
+        f.runs.append(Path(run.path).resolve())
         f.network.append(_number(run.summary.get("val"), "val/aoe_deg"))
         f.raw.append(_number(run.summary.get("val"), "val/raw_imu_aoe_deg"))
         f.calibrated.append(_number(run.summary.get("calibrated_baseline"), "calibrated_val_aoe_deg"))
@@ -307,6 +309,12 @@ def reference_problem(cv: CrossValidation, reference: CrossValidation) -> str | 
         )
     if not {f.held_out for f in reference.folds.values()} & {f.held_out for f in cv.folds.values()}:
         return f"the reference holds out none of the flights these runs hold out ({', '.join(cv.flights)})"
+    shared = {p for f in cv.folds.values() for p in f.runs} & {p for f in reference.folds.values() for p in f.runs}
+    if shared:  # a recipe against its own runs: a difference of 0 +- 0 that says nothing
+        return (
+            f"{len(shared)} run(s) are both the recipe's and the reference's (e.g. {min(shared)}): give the "
+            "reference recipe's own runs, or pick them apart with --where and --reference-where"
+        )
     return None
 
 
@@ -351,7 +359,7 @@ def recipes(runs: Sequence[Run]) -> list[tuple[str, list[Run]]]:
 
 
 def load_recipes(
-    dirs: Sequence[Path], where: Sequence[tuple[str, str]] = ()
+    dirs: Sequence[Path], where: Sequence[tuple[str, str]] = (), flag: str = "--where"
 ) -> tuple[list[tuple[str, CrossValidation]], list[Path]]:
     """The cross-validations of the recipes found under `dirs` (runs matching every KEY=VALUE of `where`), and the
     unfinished run folders."""
@@ -359,10 +367,10 @@ def load_recipes(
     # a cv_fold=all run as its folds before filtering: a fold's own summary says what it trained (the run folder's
     # .hydra/overrides.yaml is rewritten by any later command in that folder that runs, e.g. a resume)
     runs = [fold for r in runs for fold in _folds_inside(r)]
-    runs = [r for r in runs if all(same_value(r.value(k), v) for k, v in where)]
+    runs = matching(runs, where, flag)
     if not runs:
-        matching = f" matches {list(where)}" if where else ""
-        raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matching}")
+        matches = f" matches {list(where)}" if where else ""
+        raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matches}")
     found = [(label, collect(rs)) for label, rs in recipes(runs)]
     for _, cv in found:
         cv.skipped += [f"{p}: unfinished or failed (no summary.json; its train.log says which)" for p in unfinished]
@@ -374,7 +382,7 @@ def load(
 ) -> tuple[CrossValidation, list[Path]]:
     """The cross-validation of the one recipe found under `dirs`; several recipes are an error naming them and the
     option (`flag`) that picks one."""
-    found, unfinished = load_recipes(dirs, where)
+    found, unfinished = load_recipes(dirs, where, flag)
     if len(found) > 1:
         labels = "; ".join(label for label, _ in found)
         raise ValueError(f"the runs hold {len(found)} recipes ({labels}): choose one with {flag} KEY=VALUE")
