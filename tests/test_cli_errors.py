@@ -114,6 +114,11 @@ def test_a_misspelt_config_key_is_named_with_the_key_it_was_meant_to_be(tmp_path
         assert said(*fine) is None, fine
     assert said("-m", "model=denoiser,calibrated", "loss.increments=[8,16],[16,32]") is None
     assert said("weights=x", config="evaluate") is None
+    # a list of a group's options: Hydra names only the option it could not load; the options are listed here
+    listed = said("logger=[tensorboard,mlflw]")
+    assert listed.startswith("logger=[tensorboard,mlflw]: 'logger' has no option mlflw: did you mean mlflow?")
+    assert "csv, mlflow, none, tensorboard" in listed and said("logger=[tensorboard,csv]") is None
+
     # end to end: one line and status 2, before Hydra's advice to add the key with '+'
     proc = subprocess.run(
         [sys.executable, "-m", "gyrodenoise.train", "trainer.max_epoch=3", f"hydra.run.dir={tmp_path / 'run'}"],
@@ -223,3 +228,12 @@ def test_evaluate_keeps_its_console_log_with_its_outputs(tmp_path, monkeypatch):
     monkeypatch.setattr(sys, "argv", ["evaluate", f"out_dir={out}", f"hydra.run.dir={tmp_path / 'hydra'}"])
     evaluate.main()
     assert "the table" in (out / "evaluate.log").read_text()
+
+
+def test_a_sweep_asked_for_its_config_says_how_to_see_one_jobs():
+    from gyrodenoise.cli_errors import flag_conflict_message
+
+    assert flag_conflict_message(["-m", "seed=0,1", "--cfg", "hydra"]).startswith("-m and --cfg cannot be combined")
+    assert (
+        flag_conflict_message(["seed=0", "--cfg", "job"]) is None and flag_conflict_message(["-m", "seed=0,1"]) is None
+    )

@@ -134,6 +134,21 @@ def missing_plugin_message(overrides: Sequence[str]) -> str | None:
     return None
 
 
+SHOW_FLAGS = ("--cfg", "-c", "--info", "-i")
+
+
+def flag_conflict_message(argv: Sequence[str]) -> str | None:
+    """-m with --cfg or --info: Hydra ends it with "Only one of --run, --multirun, --cfg ..." as a traceback."""
+    multirun = any(a in ("-m", "--multirun") for a in argv)
+    show = next((a for a in argv if a in SHOW_FLAGS), None)
+    if multirun and show:
+        return (
+            f"-m and {show} cannot be combined (Hydra does one of them): to see one job's config, drop -m and give "
+            f"each swept key one value (e.g. seed=0 for seed=0,1) with {show}; to run the sweep, drop {show}"
+        )
+    return None
+
+
 def hydra_key_hints(config_name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Wraps a `@hydra.main` entry point: a misspelt key on its command line ends it with one line that names
     the key it was probably meant to be (`misspelt_key_message`), before Hydra's own message."""
@@ -142,7 +157,12 @@ def hydra_key_hints(config_name: str) -> Callable[[Callable[..., Any]], Callable
         @functools.wraps(hydra_main)
         def main(*args: Any, **kwargs: Any) -> Any:
             if not args and not kwargs and os.environ.get("HYDRA_FULL_ERROR") != "1":
-                if message := missing_plugin_message(sys.argv[1:]) or misspelt_key_message(config_name, sys.argv[1:]):
+                argv = sys.argv[1:]
+                if message := (
+                    flag_conflict_message(argv)
+                    or missing_plugin_message(argv)
+                    or misspelt_key_message(config_name, argv)
+                ):
                     print(f"error: {message}", file=sys.stderr)
                     raise SystemExit(2)
             return hydra_main(*args, **kwargs)

@@ -56,6 +56,8 @@ def misspelt_key_message(config_name: str, overrides: Sequence[str]) -> str | No
     """
     if any(a.startswith("-") and a not in MULTIRUN_FLAGS for a in overrides):  # --config-name, ...: Hydra's business
         return None
+    if message := unknown_list_option_message(overrides):
+        return message
     plain = [
         one_sweep_value(a) for a in overrides if "=" in a and not a.startswith(("hydra.", "hydra/", "+", "~"))
     ]  # a sweep's keys are checked with its first value: a misspelt key fails every job
@@ -85,6 +87,26 @@ def misspelt_key_message(config_name: str, overrides: Sequence[str]) -> str | No
     siblings = [k.rpartition(".")[2] for k in keys if k.rpartition(".")[0] == parent and not k.endswith("_")]
     hint = f"{parent or 'The config'} has {', '.join(siblings)}. " if siblings else ""
     return f"{key} is not a key of the '{config_name}' config. {hint}To add a key the config lacks, write +key=value."
+
+
+def unknown_list_option_message(overrides: Sequence[str]) -> str | None:
+    """`logger=[tensorboard,mlflw]`: the group's option that does not exist, with the group's options (Hydra says
+    only "Could not load 'logger/mlflw'" for a list; for one option it lists them itself)."""
+    for override in overrides:
+        group, _, value = one_sweep_value(override).lstrip("+").partition("=")
+        folder = CONF_DIR / group
+        if group.startswith("hydra") or not folder.is_dir() or not (value.startswith("[") and value.endswith("]")):
+            continue
+        options = sorted(f.stem for f in folder.glob("*.yaml"))
+        for option in (o.strip() for o in value[1:-1].split(",") if o.strip()):
+            if option not in options:
+                close = difflib.get_close_matches(option, options, n=1)
+                hint = f": did you mean {close[0]}?" if close else ""
+                return (
+                    f"{override}: '{group}' has no option {option}{hint} Its options: {', '.join(options)} "
+                    "(or a config group of your own on the search path: hydra.searchpath)"
+                )
+    return None
 
 
 MULTIRUN_FLAGS = ("-m", "--multirun")
