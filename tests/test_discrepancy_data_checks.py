@@ -106,11 +106,16 @@ def test_a_slow_truth_and_a_short_recording_get_one_line_each(world, tmp_path, c
             (tmp_path / "short" / seq / "mav0" / sub).mkdir(parents=True)
             kept = lines[100:108] if sub == "imu0" else lines  # 8 IMU samples inside the truth's span
             (tmp_path / "short" / seq / "mav0" / sub / "data.csv").write_text("\n".join([header, *kept]) + "\n")
+            kept = lines[100:1300] if sub == "imu0" else lines  # 6 s: its 10-s drifts were NaN without a word
+            (tmp_path / "6s" / seq / "mav0" / sub).mkdir(parents=True)
+            (tmp_path / "6s" / seq / "mav0" / sub / "data.csv").write_text("\n".join([header, *kept]) + "\n")
     assert main(argv(tmp_path / "slow", tmp_path / "o")) == 2
     assert "sampled at 10 Hz, too slow for knots every 0.05 s" in capsys.readouterr().err
     assert main(argv(tmp_path / "short", tmp_path / "o")) == 2
     err = capsys.readouterr().err
     assert "too short" in err and "Traceback" not in err
+    assert main(argv(tmp_path / "6s", tmp_path / "o")) == 2
+    assert "overlap for 5.0 s (less 0.5 s at each end), shorter than the 10 s" in capsys.readouterr().err
 
 
 def test_a_rerun_into_the_same_folder_leaves_none_of_the_earlier_files(world, tmp_path, capsys):

@@ -7,10 +7,11 @@ import pytest
 
 from gyrodenoise.discrepancy.sim_model import simulator_model, write_simulator_model
 from gyrodenoise.sim.dataset import generate_sequence, with_error_model_file
-from gyrodenoise.sim.error_model_file import load_error_model
+from gyrodenoise.sim.error_model_file import ErrorModelRateWarning, load_error_model
 
 REPORT = {
     "command": "python -m gyrodenoise.discrepancy ...",
+    "rate_hz": 200.0,
     "verdict": "named: vibration, time_offset, quantization",
     "base_params": {
         "bias": {"bias": [0.01, 0.02, 0.03], "bias_per_sequence": [[0.01, 0.02, 0.03], [0.03, 0.04, 0.05]]},
@@ -39,6 +40,10 @@ def test_the_fitted_model_becomes_a_simulator_configuration(tmp_path):
     assert with_error_model_file({"error_model": [], "error_model_file": None}) == {"error_model": []}
     seq = generate_sequence(tmp_path / "sim", "hand_00", gen)  # the simulator accepts every entry
     assert (seq / "mav0" / "imu0" / "data.csv").is_file()
+    # the rate it was measured at goes with it: a simulation at another rate is told what was never measured
+    assert model["rate_hz"] == 200.0
+    with pytest.warns(ErrorModelRateWarning, match="fitted on recordings at 200 Hz, simulated at 400 Hz"):
+        with_error_model_file({"rate_hz": 400.0, "error_model": [], "error_model_file": str(path)})
 
 
 def test_a_bad_error_model_file_is_refused_with_its_path(tmp_path):

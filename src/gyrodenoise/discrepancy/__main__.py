@@ -285,6 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         report["truth_followed"] = rule.summary(withheld)
     report["command"] = "python -m gyrodenoise.discrepancy " + portable_command(sys.argv[1:] if argv is None else argv)
     report["settings"]["knot_spacing_s"] = args.knot_spacing
+    report["rate_hz"] = fit[0].rate_hz  # the simulator is told which rate the model was measured at
     report["truth_check"] = checks
     report["data_warnings"] = data_warnings
     report["ground_truth_gaps"] = {"max_gap_s": MAX_GT_GAP_S, "min_stretch_s": MIN_STRETCH_S, "left_out": left_out}

@@ -68,6 +68,13 @@ def load_fit_contexts(
         )
     stretches = gap_free_stretches(gt.t_ns, max_gap_s)
     if len(stretches) == 1:
+        span = (min(gt.t_ns[-1], imu.t_ns[-1]) - max(gt.t_ns[0], imu.t_ns[0])) * 1e-9 - 2 * margin_s
+        if span < min_stretch_s:  # its spectra and 10-s drifts would be NaN or one window's noise, without a word
+            raise DataFormatError(
+                f"{gt_path}: IMU and ground truth of {name} overlap for {max(span, 0):.1f} s (less {margin_s:g} s "
+                f"at each end), shorter than the {min_stretch_s:g} s the comparison needs (its spectra, its 10-s "
+                "drifts): the workflow needs tens of seconds of motion per sequence."
+            )
         return [_context(name, name, imu, gt, gt_path, knot_spacing, margin_s)], []
     out, left = [], []
     for s in stretches:

@@ -6,8 +6,10 @@ simulated dataset's `generation` settings, so the next simulation includes the e
 
     python -m gyrodenoise.train dataset=sim dataset.generation.error_model_file=REPORT_DIR/error_model.yaml
 
-The turn-on bias is the mean over the fit sequences, and its spread between them becomes `bias_jitter_rad_s` (null
-with one fitted sequence: a spread it cannot measure, so the simulated dataset keeps its own setting).
+`rate_hz` records the fitted recordings' rate: a simulation at another rate warns (effects above that rate's
+Nyquist frequency were never measured). The turn-on bias is the mean over the fit sequences, and its spread between
+them becomes `bias_jitter_rad_s` (null with one fitted sequence: a spread it cannot measure, so the simulated
+dataset keeps its own setting).
 Lines of the raw gyro above the compared band that are in every fitted recording are added as band-limited
 vibrations (`gyro_lines.simulator_vibration`): the truth cannot judge them, but a simulator of this gyro needs them.
 """
@@ -43,6 +45,8 @@ def simulator_model(report: dict) -> dict:
     return {
         "error_model": entries,
         "bias_jitter_rad_s": jitter,
+        # the rate of the fitted recordings: what lies above its Nyquist frequency was never measured
+        "rate_hz": report.get("rate_hz"),
         "source": f"{report.get('command', 'python -m gyrodenoise.discrepancy')}: {report.get('verdict', '')}",
     }
 

@@ -4,11 +4,31 @@ must not import the detector."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import yaml
 
 from gyrodenoise.sim.effects import effects_from_config
+
+
+class ErrorModelRateWarning(UserWarning):
+    """An error model fitted on recordings at one rate, simulated at another."""
+
+
+def rate_mismatch_warning(path: str | Path, rate_hz: float) -> None:
+    """Warn when the error-model file says it was fitted at another rate than `rate_hz` (files without `rate_hz`,
+    written before it was recorded or by hand, are taken as they are)."""
+    data = yaml.safe_load(Path(path).read_text())
+    fitted = data.get("rate_hz") if isinstance(data, dict) else None
+    if isinstance(fitted, int | float) and abs(fitted - rate_hz) > 0.01 * fitted:
+        warnings.warn(
+            f"{path}: fitted on recordings at {fitted:g} Hz, simulated at {rate_hz:g} Hz: what lies between "
+            f"{min(fitted, rate_hz) / 2:g} and {max(fitted, rate_hz) / 2:g} Hz was never measured (give "
+            f"dataset.generation.rate_hz={fitted:g} to simulate the measured IMU)",
+            ErrorModelRateWarning,
+            stacklevel=2,
+        )
 
 
 def load_error_model(path: str | Path) -> tuple[list[dict], float | None]:
