@@ -157,7 +157,7 @@ def test_missing_sequences_fail_before_training(asl_root):
     # no data folder at all: say so (and the environment variable), not "train without the test sequences"
     nowhere = ImuDataModule(name="my_imu", root=str(asl_root / "nowhere"), train_seqs=["walk_1"],
                             test_seqs=["room_2"], window=256)  # fmt: skip
-    with pytest.raises(FileNotFoundError, match=r"nowhere: data folder not found .*GYRODENOISE_DATA") as err:
+    with pytest.raises(FileNotFoundError, match=r"nowhere: data folder not found.*GYRODENOISE_DATA") as err:
         nowhere.check_sequences(train=False, test=True, test_hint="pass test=false")
     assert "test=false" not in str(err.value) and "gyrodenoise.data.fetch" not in str(err.value)
     # ... and for a dataset the project can download, the command that downloads it
@@ -165,6 +165,10 @@ def test_missing_sequences_fail_before_training(asl_root):
                           window=256)  # fmt: skip
     with pytest.raises(FileNotFoundError, match=r"python -m gyrodenoise.data.fetch euroc --dest \S*nowhere$"):
         euroc.check_sequences(test=False)
+    # the dataset's folder named twice (GYRODENOISE_DATA set to .../euroc, read as .../euroc/euroc): no download
+    twice = ImuDataModule(name="my_imu", root=str(asl_root / "my_imu"), train_seqs=["walk_1"], test_seqs=[], window=256)
+    with pytest.raises(FileNotFoundError, match=rf"but {asl_root} holds walk_1: set dataset.root={asl_root}, or"):
+        twice.check_sequences(test=False)
     # a root one level too high (the folder that holds the dataset's folder): the folder to give is named
     too_high = ImuDataModule(name="my_imu", root=str(asl_root.parent), train_seqs=["walk_1"], test_seqs=[], window=256)
     one_down = rf"walk_1 is one level further down: give {asl_root} as dataset.root\.$"

@@ -256,6 +256,14 @@ def test_a_launcher_sweeper_or_logger_without_its_package_says_what_to_install(m
     assert "logger=[tensorboard,mlflow] needs" in missing_plugin_message(["logger=[tensorboard,mlflow]"])
     assert "gyrodenoise[mlflow]" in missing_plugin_message(["logger=mlflow"])
     assert missing_plugin_message(["dataset=euroc"]) is None
+    # without any Hydra plugin the parent package hydra_plugins is missing too: find_spec raises instead of answering
+    monkeypatch.undo()
+
+    def no_parent(name):
+        raise ModuleNotFoundError(f"No module named '{name.split('.')[0]}'")
+
+    monkeypatch.setattr(importlib.util, "find_spec", no_parent)
+    assert "pip install 'gyrodenoise[sweep]'" in missing_plugin_message(["-m", "hydra/launcher=local"])
     assert missing_plugin_message(["logger=csv"]) is None
 
 

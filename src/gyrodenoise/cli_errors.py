@@ -121,12 +121,21 @@ PLUGINS = (
 )
 
 
+def _installed(module: str) -> bool:
+    """Whether `module` can be imported; find_spec raises, rather than answers no, when its parent package is
+    missing too (hydra_plugins.* without any Hydra plugin installed)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
 def missing_plugin_message(overrides: Sequence[str]) -> str | None:
     """What to install when a command line names a launcher, sweeper or logger whose package is not installed
     (Hydra says only "Could not load 'hydra/launcher/joblib'"; Lightning's logger a ModuleNotFoundError)."""
     for pattern, module, extra in PLUGINS:
         given = next((o for o in overrides if re.match(pattern, o)), None)
-        if given is not None and importlib.util.find_spec(module) is None:
+        if given is not None and not _installed(module):
             return (
                 f"{given} needs a package that is not installed: pip install 'gyrodenoise[{extra}]' (from a "
                 f"checkout: pip install -e '.[{extra}]')"

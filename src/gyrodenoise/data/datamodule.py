@@ -225,9 +225,18 @@ class ImuDataModule(L.LightningDataModule):
         names = [*self.train_names, *([self.cv_holdout] if self.cv_holdout else [])] if train else []
         names += [*(self.val_names if self.val_explicit and train else []), *(self.test_names if test else [])]
         missing = [n for n in dict.fromkeys(names) if not (Path(self.root) / n / "mav0").is_dir()]
-        if missing and not Path(self.root).is_dir():  # the whole folder: a test-only hint would mislead
+        root = Path(self.root)
+        if missing and not root.is_dir() and (root.parent / missing[0] / "mav0").is_dir():  # <dataset>/ given twice
             raise FileNotFoundError(
-                f"{self.root}: data folder not found (relative paths start at {Path.cwd()}); it should hold "
+                f"{root}: data folder not found, but {root.parent} holds {missing[0]}: set dataset.root="
+                f"{root.parent}, or GYRODENOISE_DATA to the folder that holds '{root.parent.name}/' "
+                f"({root.parent.parent}), not to '{root.parent.name}/' itself (the shipped dataset configs read "
+                "$GYRODENOISE_DATA/<dataset>)."
+            )
+        if missing and not root.is_dir():  # the whole folder: a test-only hint would mislead
+            relative = "" if root.is_absolute() else f" (relative paths start at {Path.cwd()})"
+            raise FileNotFoundError(
+                f"{self.root}: data folder not found{relative}; it should hold "
                 f"{', '.join(missing)} in the ASL layout (<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root "
                 f"to that folder, or GYRODENOISE_DATA to the folder that holds '{self.name}/' (the shipped dataset "
                 "configs read $GYRODENOISE_DATA/<dataset>)."
