@@ -272,3 +272,23 @@ def test_a_resumed_run_keeps_the_csv_curves_before_its_interruption(root, tmp_pa
         return {int(r["epoch"]) for r in csv.DictReader(path.open()) if r.get("epoch")}
 
     assert epochs(before) == {0, 1} and epochs(tmp_path / "run" / "csv" / "metrics.csv") == {2, 3}
+
+
+def test_a_sweeps_interrupted_job_is_told_to_rerun_alone(monkeypatch):
+    """hydra.run.dir does not apply with -m, and the sweep's command would run every job again."""
+    from types import SimpleNamespace
+
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from gyrodenoise import train as train_module
+
+    job = SimpleNamespace(mode=RunMode.MULTIRUN, overrides=SimpleNamespace(task=["dataset=euroc", "seed=1"]))
+    monkeypatch.setattr(train_module.HydraConfig, "initialized", staticmethod(lambda: True))
+    monkeypatch.setattr(train_module.HydraConfig, "get", staticmethod(lambda: job))
+    cfg = OmegaConf.create({"paths": {"output_dir": "multirun/x/1"}})
+    assert train_module._rerun_in_folder(cfg) == (
+        "rerun this job of the sweep alone: python -m gyrodenoise.train dataset=euroc seed=1 hydra.run.dir=multirun/x/1"
+    )
+    job.mode = RunMode.RUN
+    assert train_module._rerun_in_folder(cfg) == "rerun the same command with hydra.run.dir=multirun/x/1"

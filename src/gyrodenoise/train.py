@@ -16,6 +16,7 @@ validation and test metrics of the kept weights).
 from __future__ import annotations
 
 import math
+import shlex
 import signal
 import sys
 import time
@@ -131,7 +132,8 @@ def calibrated_baseline(cfg: DictConfig, dm: ImuDataModule, module: DenoiserModu
     }[out["beats_calibrated"]]
     if out.get("calibrated_val_aoe_deg") is not None and out.get("model_val_aoe_deg_whole") is not None:
         verdict += (
-            f" (val AOE {out['model_val_aoe_deg_whole']:.2f} vs calibrated {out['calibrated_val_aoe_deg']:.2f} deg)"
+            f" (AOE on the whole validation parts, model {out['model_val_aoe_deg_whole']:.2f} vs calibrated "
+            f"{out['calibrated_val_aoe_deg']:.2f} deg; the validation AOE below is on the parts cut for the loss)"
         )
     print(f"calibrated baseline (same data, same loss, {cal_path.name}): {verdict}")
     return out
@@ -284,10 +286,20 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
     print(
         f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where}"
         + (" (written at the interruption)" if saved and saved[0].name == "interrupted.ckpt" else "")
-        + f", or rerun the same command with hydra.run.dir={cfg.paths.output_dir}: a run folder holding an unfinished "
+        + f", or {_rerun_in_folder(cfg)}: a run folder holding an unfinished "
         f"run resumes from its newest checkpoint (auto_resume; last.ckpt is {_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
     )
+
+
+def _rerun_in_folder(cfg: DictConfig) -> str:
+    """How to rerun this run in its own folder. A sweep's job is rerun alone, with its own values: the sweep's command
+    with -m would run every job again, and hydra.run.dir does not apply to it."""
+    folder = f"hydra.run.dir={cfg.paths.output_dir}"
+    if HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN:
+        job = shlex.join([*HydraConfig.get().overrides.task, folder])
+        return f"rerun this job of the sweep alone: python -m gyrodenoise.train {job}"
+    return f"rerun the same command with {folder}"
 
 
 _LOADED_CODE: dict | None = None  # the code this process loaded, read once: a later commit or edit is not this run's
