@@ -12,6 +12,7 @@ A recipe's cross-validation figure is the mean of the new figure over its folds.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import statistics
@@ -263,6 +264,8 @@ def test_by_fold() -> tuple[str, dict]:
 
 
 def main() -> None:
+    # no options; --help shows what it does instead of running it (it writes committed files)
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     rc = rank_correlation()
     cv_md, cv = cv_table()

@@ -14,6 +14,7 @@ committed ones.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -87,6 +88,8 @@ def percent(x: float) -> float:
 
 
 def main() -> int:
+    # no options; --help shows what it does instead of running it (it writes committed files)
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     pairs = {f"{prefix}: {what}": trained_pairs(prefix, folder) for prefix, (folder, what) in TRAINED_ARMS.items()}
     pairs["tracker: gravity-aided bias tracker on the same models (round 8)"] = tracker_pairs()
     raw = {label: fold_seed_spread(a - r) for label, (a, r) in pairs.items()}

@@ -12,6 +12,7 @@ then per effect pooled.
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tempfile
 import time
@@ -78,6 +79,8 @@ def rms(z: np.ndarray) -> float:
 
 
 def main() -> int:
+    # no options; --help shows what it does instead of running it (it writes committed files)
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     t0 = time.time()
     pooled: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for effect in se_cal.CASES:

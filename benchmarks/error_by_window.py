@@ -114,7 +114,7 @@ def main() -> None:
         "machine": f"{platform.node()} ({platform.machine()}, CPU)",
         "sequences": {},
     }
-    fig, axs = plots.plt.subplots(len(args.seqs), 1, figsize=(9, 2.8 * len(args.seqs)), squeeze=False)
+    fig, axs = plots.subplots(len(args.seqs), 1, figsize=(9, 2.8 * len(args.seqs)), squeeze=False)
     lines = []
     for seq_name, ax in zip(args.seqs, axs[:, 0], strict=True):
         seq = dm.load(seq_name)

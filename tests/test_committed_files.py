@@ -74,3 +74,12 @@ def test_home_paths_use_tilde(tmp_path, monkeypatch):
     monkeypatch.setenv("HOME", str(tmp_path))
     assert portable_path(tmp_path / ".cache" / "sim-1") == "~/.cache/sim-1"
     assert portable_path("/opt/data") == "/opt/data"  # elsewhere: unchanged
+
+
+def test_every_benchmark_script_answers_help_instead_of_running():
+    """`python benchmarks/NAME.py --help` shows its options (benchmarks/README.md); a script without a parser ran
+    instead, and some write committed files (ship_tumvi.py the shipped tumvi model)."""
+    scripts = [p for p in (REPO / "benchmarks").glob("*.py") if '__name__ == "__main__"' in p.read_text()]
+    assert len(scripts) > 40
+    silent = [p.name for p in scripts if "argparse.ArgumentParser(" not in p.read_text()]
+    assert not silent, f"no argument parser: {silent}"
