@@ -41,7 +41,9 @@ def test_a_gap_is_refused_and_leaves_the_state():
     ref = StreamingCorrector(model).push_chunk(imu[:300])
     sc = StreamingCorrector(model, rate_hz=200.0)
     sc.push_chunk(imu[:250], t_ns=t[:250])
-    with pytest.raises(StreamTimeError, match=r"sample 50 of this call comes 205\.000 ms after.*reset\(\)"):
+    with pytest.raises(
+        StreamTimeError, match=r"sample 51 of this call \(counting from 1\) comes 205\.000 ms after.*reset\(\)"
+    ):
         sc.push_chunk(imu[250:310], t_ns=t[250:310])
     # nothing of the refused call went in: the stream goes on as if it had not been made
     assert np.abs(sc.push_chunk(imu[250:300], t_ns=t[250:300]) - ref[250:]).max() < ATOL
@@ -57,8 +59,9 @@ def test_stamps_out_of_order_or_repeated_are_refused():
     sc.push_chunk(imu[:5], t_ns=t[:5])
     with pytest.raises(StreamTimeError, match="this sample: timestamp .* is not after the previous"):
         sc.push(imu[5], t_ns=t[4])
-    with pytest.raises(StreamTimeError, match="sample 2 of this call"):
+    with pytest.raises(StreamTimeError, match=r"sample 3 of this call \(counting from 1\)") as refused:
         sc.push_chunk(imu[5:9], t_ns=t[[5, 6, 6, 7]])
+    assert (refused.value.kind, refused.value.index) == ("order", 2)
     with pytest.raises(StreamTimeError, match="integer nanosecond"):
         sc.push(imu[5], t_ns=float(t[5]) * 1e-9)  # seconds as a float: refused, not misread
     with pytest.raises(ValueError, match="give t_ns with every push"):
@@ -70,8 +73,8 @@ def test_stamps_out_of_order_or_repeated_are_refused():
 @pytest.mark.parametrize("one_by_one", [False, True])
 def test_a_stream_at_another_rate_warns_once(one_by_one):
     sc = StreamingCorrector(random_model(), rate_hz=200.0)
-    imu, t = random_imu(1000), stamps(1000, period=4_000_000)  # 250 Hz
-    with pytest.warns(SanityWarning, match="runs at 250 Hz but the model was trained at 200 Hz"):
+    imu, t = random_imu(1000), stamps(1000, period=5_500_000)  # 181.8 Hz: 10 % slow, within what the clock follows
+    with pytest.warns(SanityWarning, match="runs at 181.8 Hz but the model was trained at 200 Hz"):
         if one_by_one:
             for k in range(500):
                 sc.push(imu[k], t_ns=int(t[k]))
@@ -80,6 +83,37 @@ def test_a_stream_at_another_rate_warns_once(one_by_one):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sc.push_chunk(imu[500:], t_ns=t[500:])
+
+
+def test_a_stream_much_faster_than_the_model_is_refused_as_early():
+    """A stream 25 % fast drifts ahead of the time base by a fifth of a period per sample: refused once its samples
+    come more than 0.4 period before their expected time, with the rate its steps look like."""
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    with pytest.raises(StreamTimeError, match="look like a 250 Hz stream: the stream is faster") as refused:
+        sc.push_chunk(random_imu(50), t_ns=stamps(50, period=4_000_000))
+    assert refused.value.kind == "early" and 1 < refused.value.index < 10
+
+
+def test_a_drivers_jitter_passes_and_twice_the_rate_does_not():
+    """Stamps jittered by up to a quarter of a period (a late stamp, then an on-time one 'early' after it: steps of
+    half a period, refused before the time base) are all taken, with the outputs of the unstamped stream; at twice
+    the model's rate every other sample is refused."""
+    model, imu = random_model(), random_imu(2000)
+    rng = np.random.default_rng(0)
+    t = stamps(2000) + rng.integers(-1_250_000, 1_250_001, 2000)
+    sc = StreamingCorrector(model, rate_hz=200.0)
+    out = np.array([sc.push(imu[k], t_ns=int(t[k])) for k in range(2000)])
+    assert np.abs(out - StreamingCorrector(model).push_chunk(imu)).max() < ATOL
+    sc = StreamingCorrector(model, rate_hz=200.0)
+    t = stamps(40, period=PERIOD // 2)  # 400 Hz
+    kinds = []
+    for k in range(40):
+        try:
+            sc.push(imu[k], t_ns=int(t[k]))
+            kinds.append("taken")
+        except StreamTimeError as e:
+            kinds.append(e.kind)
+    assert kinds == ["taken", "early"] * 20
 
 
 def test_without_a_rate_gaps_are_found_from_the_stream_itself():
@@ -130,3 +164,28 @@ def test_a_model_without_memory_takes_a_gap():
     imu, t = random_imu(4), stamps(4)
     t[2:] += 100 * PERIOD
     assert np.array_equal(sc.push_chunk(imu, t_ns=t), StreamingCorrector(cal).push_chunk(imu))
+
+
+def test_a_clock_gone_back_or_one_stamp_far_ahead_is_not_a_dead_end():
+    """One stamp an hour ahead is taken as a new stream after a gap; every real sample after it is then 'before the
+    last one taken'. The CLOCK_JUMP_SAMPLES-th in a row says the clock is elsewhere (kind 'clock'): reset and go on."""
+    from gyrodenoise.stream_clock import CLOCK_JUMP_SAMPLES
+
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    imu, t = random_imu(100), stamps(100)
+    sc.push_chunk(imu[:10], t_ns=t[:10])
+    with pytest.raises(StreamTimeError) as refused:
+        sc.push(imu[10], t_ns=int(t[10]) + 3600 * 10**9)
+    assert refused.value.kind == "gap"
+    sc.reset()
+    sc.push(imu[10], t_ns=int(t[10]) + 3600 * 10**9)
+    kinds = []
+    for k in range(11, 11 + CLOCK_JUMP_SAMPLES):
+        with pytest.raises(StreamTimeError) as refused:
+            sc.push(imu[k], t_ns=int(t[k]))
+        kinds.append(refused.value.kind)
+    assert kinds == ["order"] * (CLOCK_JUMP_SAMPLES - 1) + ["clock"]
+    assert "the stream's clock went back" in str(refused.value)
+    sc.reset()
+    sc.push(imu[k], t_ns=int(t[k]))
+    sc.push(imu[k + 1], t_ns=int(t[k + 1]))  # the stream goes on at the real time

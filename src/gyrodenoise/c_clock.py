@@ -20,12 +20,23 @@ from __future__ import annotations
 import math
 
 from gyrodenoise.data.checks import RATE_TOL
-from gyrodenoise.stream_clock import RATE_WINDOW, STREAM_FAST_FACTOR, STREAM_GAP_FACTOR
+from gyrodenoise.stream_clock import (
+    CLOCK_JUMP_SAMPLES,
+    RATE_WINDOW,
+    STREAM_FAST_FACTOR,
+    STREAM_GAP_FACTOR,
+    TIME_BASE_GAIN,
+)
 
 # name, value, meaning (the header's #defines)
 CODES = (
     ("GD_OK", 0, "taken"),
-    ("GD_RESTARTED", 1, "gd_step_t: taken after a gap (a step over GD_MAX_STEP_NS): a new stream"),
+    (
+        "GD_RESTARTED",
+        1,
+        "gd_step_t: taken after a gap, or after GD_CLOCK_JUMP_SAMPLES stamps in a row before the last "
+        "one taken (the clock went back): a new stream",
+    ),
     ("GD_RATE_OFF", 2, "gd_step_t: taken; the stream's rate is over GD_RATE_TOL off GD_RATE_HZ"),
     ("GD_REFUSED_SAMPLE", -1, "a NaN/inf, or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX"),
     ("GD_REFUSED_ORDER", -2, "gd_step_t: the stamp is not after the previous one"),
@@ -39,7 +50,7 @@ def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
     """The stamped step's thresholds in ns, as StreamClock decides: min_step (shorter: refused), max_step (longer:
     a gap; 0: GAP_FACTOR x the stream's mean step; -1: none), and the sum of the first RATE_WINDOW steps that does
     not warn, [rate_sum_min, rate_sum_max]."""
-    free = {"min_step": 1, "rate_sum_min": 0, "rate_sum_max": INT64_MAX}
+    free = {"min_step": 1, "rate_sum_min": 0, "rate_sum_max": INT64_MAX, "period": 0}
     if not memory:  # StreamClock(None, gaps=False): the order only
         return {**free, "max_step": -1}
     if not rate_hz:  # StreamClock(None): the period learnt from the stream (gaps only)
@@ -58,6 +69,7 @@ def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
         "max_step": math.floor(gap),
         "rate_sum_min": _first(lambda s: not warns_fast(s)),  # the measured rate falls as the sum grows
         "rate_sum_max": _first(warns_slow) - 1,
+        "period": round(period),  # the time base's step (StreamClock._base)
     }
 
 
@@ -82,12 +94,16 @@ def header_defines(rate_hz: float, memory: bool) -> str:
     elif not rate_hz:
         min_doc, max_doc = "1: any increasing stamp (no rate)", "0: GAP_FACTOR x the stream's mean step (no rate)"
     else:
-        min_doc, max_doc = "ceil(FAST_FACTOR x period): shorter, refused", "floor(GAP_FACTOR x period): longer, a gap"
+        min_doc = "ceil(FAST_FACTOR x period): earlier after the time base's last sample, refused"
+        max_doc = "floor(GAP_FACTOR x period): later after the time base's last sample, a gap"
     rows = [
         ("GD_STAMP_FAST_FACTOR", f"{STREAM_FAST_FACTOR!r}f", "a step under this many periods is refused"),
         ("GD_STAMP_GAP_FACTOR", f"{STREAM_GAP_FACTOR!r}f", "a step over this many periods is a gap"),
         ("GD_MIN_STEP_NS", f"INT64_C({lim['min_step']})", min_doc),
         ("GD_MAX_STEP_NS", f"INT64_C({lim['max_step']})", max_doc),
+        ("GD_PERIOD_NS", f"INT64_C({lim['period']})", "the time base's step (0: none, the steps alone decide)"),
+        ("GD_TIME_BASE_GAIN", str(TIME_BASE_GAIN), "the time base moves by 1/this of a sample's deviation"),
+        ("GD_CLOCK_JUMP_SAMPLES", str(CLOCK_JUMP_SAMPLES), "this many stamps in a row before the last: restart"),
         ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps averaged, once per stream, to compare the rate"),
         ("GD_RATE_TOL", f"{RATE_TOL!r}f", "relative rate difference that gives GD_RATE_OFF"),
     ]
@@ -103,13 +119,18 @@ def header_defines(rate_hz: float, memory: bool) -> str:
 STATE_FIELDS = """\
     int stamped;                                          /* gd_step_t has stamped this stream */
     int64_t last_ns;                                      /* the stamp of its last sample */
+    int64_t base_ns;                                      /* where the time base puts its last sample */
+    int late_in_a_row;                                    /* samples refused in a row as GD_REFUSED_ORDER */
     uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */"""
 
 DECLARATION = """\
 /* gd_step with the sample's timestamp t_ns [integer nanoseconds, any epoch]: the checks of gyrodenoise's
    StreamingCorrector.push(imu, t_ns) (stream_clock), as return codes (the GD_* above):
-   - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, the state is unchanged, nothing is written
-     (drop the sample; the next one is compared with the last sample taken);
+   - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, the state is unchanged (but for a count of
+     GD_REFUSED_ORDER in a row), nothing is written (drop the sample; the next one is compared with the last taken);
+   With the model's rate (GD_PERIOD_NS > 0) a sample is judged against its expected time: the stream's time base
+   advances GD_PERIOD_NS per sample taken and follows the stamps by 1/GD_TIME_BASE_GAIN of their deviation, so a
+   driver's jitter passes;
    - GD_RESTARTED: after a gap, the sample started a new stream (Python raises there; its caller resets and pushes);
    - GD_RATE_OFF: taken, and the stream's rate is off the model's (Python warns).
    Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). */
@@ -130,7 +151,8 @@ void gd_reset(gd_state *s)
     s->started = 0;
     memset(s->newest, 0, sizeof s->newest); /* a state never zeroed (on the stack) holds any index here */
     s->stamped = 0;
-    s->last_ns = 0;
+    s->last_ns = s->base_ns = 0;
+    s->late_in_a_row = 0;
     s->steps_ns = s->n_steps = 0;
 }}
 
@@ -150,26 +172,50 @@ static int is_gap(const gd_state *s, uint64_t step_ns)
     return step_ns > (UINT64_C({num}) * s->steps_ns) / (UINT64_C({den}) * s->n_steps);
 }}
 
+/* C99's division truncates toward zero, as StreamClock's _toward_zero */
+static int64_t base_after(const gd_state *s, int64_t t_ns)
+{{
+    return s->base_ns + GD_PERIOD_NS + (t_ns - (s->base_ns + GD_PERIOD_NS)) / GD_TIME_BASE_GAIN;
+}}
+
 int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out)
 {{
     int code = GD_OK;
     uint64_t step_ns = 0;
     if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
     if (s->stamped) {{
-        if (t_ns <= s->last_ns) return GD_REFUSED_ORDER;
-        step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
-        if (step_ns < (uint64_t)GD_MIN_STEP_NS) return GD_REFUSED_EARLY;
-        if (is_gap(s, step_ns)) {{
+        if (t_ns <= s->last_ns && ++s->late_in_a_row < GD_CLOCK_JUMP_SAMPLES) return GD_REFUSED_ORDER;
+        if (t_ns <= s->last_ns) {{ /* the clock went back, or the last stamp taken was wrong: a new stream */
             gd_reset(s);
             code = GD_RESTARTED;
         }}
     }}
+    if (s->stamped) {{
+        step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
+        if (GD_PERIOD_NS > 0) {{ /* against the sample's expected time on the time base */
+            const int64_t dev = t_ns - (s->base_ns + GD_PERIOD_NS);
+            if (dev < GD_MIN_STEP_NS - GD_PERIOD_NS) return GD_REFUSED_EARLY;
+            if (dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
+                gd_reset(s);
+                code = GD_RESTARTED;
+            }}
+        }} else {{
+            if (step_ns < (uint64_t)GD_MIN_STEP_NS) return GD_REFUSED_EARLY;
+            if (is_gap(s, step_ns)) {{
+                gd_reset(s);
+                code = GD_RESTARTED;
+            }}
+        }}
+    }}
     step(s, imu, gyro_out, std_out);
-    if (s->stamped) {{ /* a step of this stream (not its first sample) */
+    /* a step of this stream (not its first sample); one over 1.5 periods (a missing sample) is not a rate */
+    if (s->stamped && (GD_PERIOD_NS <= 0 || 2 * step_ns <= 3 * (uint64_t)GD_PERIOD_NS)) {{
         s->steps_ns += step_ns;
         if (++s->n_steps == GD_RATE_WINDOW && (s->steps_ns < rate_sum_min || s->steps_ns > rate_sum_max))
             code = GD_RATE_OFF;
     }}
+    s->base_ns = s->stamped ? base_after(s, t_ns) : t_ns;
+    s->late_in_a_row = 0;
     s->stamped = 1;
     s->last_ns = t_ns;
     return code;

@@ -12,9 +12,10 @@ from gyrodenoise.c_clock import CODES
 UNSTAMPED = "--unstamped"
 REFUSALS = {  # what stderr says of a refused sample
     "GD_REFUSED_SAMPLE": "a NaN/inf or a value beyond any IMU's range",
-    "GD_REFUSED_ORDER": "its stamp is not after the previous sample's (repeated or late)",
-    "GD_REFUSED_EARLY": "it comes less than GD_MIN_STEP_NS after the previous sample (a stream faster than the "
-    "model's rate, or stamps not in nanoseconds)",
+    "GD_REFUSED_ORDER": "its stamp is not after the previous sample's (repeated or late; stamps in whole seconds "
+    "repeat like this: write them in nanoseconds)",
+    "GD_REFUSED_EARLY": "it comes too long before its expected time (a stream faster than the model's rate, or stamps "
+    "not in nanoseconds)",
     "GD_REFUSED_UNSTAMPED": "no stamp on a stamped stream",
 }
 
@@ -111,8 +112,8 @@ int main(int argc, char **argv)
             continue;
         }}
         if (code == GD_RESTARTED)
-            fprintf(stderr, "sample %ld (t=%s): a gap before it: the stream restarted (the next %d outputs are "
-                            "less accurate)\\n", n, t, GD_RECEPTIVE_FIELD);
+            fprintf(stderr, "sample %ld (t=%s): a gap before it, or the clock went back: the stream restarted (the "
+                            "next %d outputs are less accurate)\\n", n, t, GD_RECEPTIVE_FIELD);
         if (code == GD_RATE_OFF)
             fprintf(stderr, "sample %ld (t=%s): the stream's rate is more than %g %% off the model's %g Hz: "
                             "resample it, or use a model trained at its rate\\n", n, t, 100.0 * (double)GD_RATE_TOL,

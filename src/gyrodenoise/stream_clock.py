@@ -4,10 +4,17 @@ The network's dilated convolutions count samples, not seconds: samples out of or
 either side taken as consecutive) or a stream at another rate than the model's training rate all give a
 wrong correction without any error. `correct` checks a whole file for these (`gyrodenoise.data.checks`);
 `StreamClock` checks the same things incrementally, before the corrector's state changes.
+
+With the model's rate known, a sample is judged against the time it is expected at, not against the previous
+stamp alone: the stream's time base advances one period per sample taken and follows the stamps with a gain of
+1/TIME_BASE_GAIN (integer ns, as the C export's `gd_step_t` computes it). A driver's jitter (a late stamp, then an
+on-time one that came "early" after it) then passes, while a stream at twice the model's rate is still refused
+every other sample and two missing samples are still a gap. Refusals say which kind they are (`StreamTimeError.kind`).
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 
@@ -24,10 +31,32 @@ STREAM_GAP_FACTOR = 2.5
 # (0.5 let it through on the boundary), while a jittery driver's early sample (up to 40 % early) still passes
 STREAM_FAST_FACTOR = 0.6
 UNITS_HINT = "t_ns must be integer nanoseconds (seconds: int(round(t_s * 1e9)))"
+# this many single samples in a row stamped before the last one taken: the clock went back (a restarted sensor) or the
+# last stamp taken was wrong, far in the future (taken after a "gap"): without a way out the stream would refuse
+# every sample from then on. A reordered or repeated sample or two, or a short burst re-sent by a driver, stay refusals
+CLOCK_JUMP_SAMPLES = 20
+# the time base moves by 1/8 of each sample's deviation from its expected time (a power of two: the C export's integer
+# division is exact, and Python's truncation toward zero below matches C99's)
+TIME_BASE_GAIN = 8
 
 
 class StreamTimeError(ValueError):
-    """A timestamp the stream cannot take (out of order, or after a gap); the corrector's state is unchanged."""
+    """A timestamp the stream cannot take; the corrector's state is unchanged. `kind`: "order" (not after the last
+    sample taken: drop it), "early" (before its expected time by more than the tolerance: drop it, or the stream is
+    faster than the model's rate), "gap" (samples are missing: reset() and push it as the first of a new stream, or
+    fill the gap first), "clock" (CLOCK_JUMP_SAMPLES samples in a row before the last one taken: the clock went back;
+    reset() and push it as the first of a new stream), "stamps" (not integer ns, or not one per sample). `index`: the
+    sample of the call, counting from 0."""
+
+    def __init__(self, message: str, kind: str = "stamps", index: int = 0) -> None:
+        super().__init__(message)
+        self.kind, self.index = kind, index
+
+
+def _toward_zero(dev: int, div: int) -> int:
+    """dev / div truncated toward zero, as C99's integer division (Python's // floors)."""
+    q = abs(dev) // div
+    return q if dev >= 0 else -q
 
 
 class StreamClock:
@@ -45,10 +74,29 @@ class StreamClock:
         self.gap_factor = gap_factor if gaps else np.inf
         self.reset()
 
+        # the time base (rate known, gaps checked): integer period and the deviations a sample may have from its
+        # expected time, the same thresholds as a step from a sample taken on time (`c_clock.step_limits`)
+        self._base: tuple[int, int, int] | None = None
+        if rate_hz is not None and gaps:
+            period = 1e9 / rate_hz
+            whole = round(period)
+            self._base = (
+                whole,
+                math.ceil(STREAM_FAST_FACTOR * period) - whole,
+                math.floor(gap_factor * period) - whole,
+            )
+
     def reset(self) -> None:
+        self.late_in_a_row = 0  # single samples refused in a row as not after the last one taken
         self.last_ns: int | None = None
+        self.base_ns: int | None = None  # where the time base puts the last sample taken
         self._steps_sum, self._steps_n = 0, 0
         self._rate_checked = False
+
+    def _advance(self, base: int, t: int) -> int:
+        """The time base after taking a sample stamped `t` (checked: its deviation is within the tolerance)."""
+        whole = self._base[0]
+        return base + whole + _toward_zero(t - (base + whole), TIME_BASE_GAIN)
 
     @property
     def period_ns(self) -> float | None:
@@ -60,10 +108,16 @@ class StreamClock:
         """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
         period = self.period_ns
         if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
-            step = int(t_ns) - self.last_ns  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
-            lo, hi = (1, np.inf) if period is None else (STREAM_FAST_FACTOR * period, self.gap_factor * period)
-            if lo <= step <= hi:
-                return int(t_ns)
+            t1 = int(t_ns)  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
+            if self._base is not None:
+                whole, lo, hi = self._base
+                if t1 > self.last_ns and lo <= t1 - (self.base_ns + whole) <= hi:
+                    return t1
+            else:
+                step = t1 - self.last_ns
+                lo, hi = (1, np.inf) if period is None else (STREAM_FAST_FACTOR * period, self.gap_factor * period)
+                if lo <= step <= hi:
+                    return t1
         t = np.atleast_1d(np.asarray(t_ns))
         if t.shape != (n,) or not np.issubdtype(t.dtype, np.integer):
             raise StreamTimeError(
@@ -76,47 +130,81 @@ class StreamClock:
         offset = 0 if self.last_ns is None else 1  # steps[k] ends at sample k + 1 - offset of this call
 
         def where(k: int) -> str:
-            return "this sample" if n == 1 else f"sample {k + 1 - offset} of this call"
+            return "this sample" if n == 1 else f"sample {k + 2 - offset} of this call (counting from 1)"
 
         if (steps <= 0).any():
             k = int(np.argmax(steps <= 0))
+            self.late_in_a_row += 1 if n == 1 else 0
+            if n == 1 and self.late_in_a_row >= CLOCK_JUMP_SAMPLES:
+                raise StreamTimeError(
+                    f"{self.late_in_a_row} samples in a row are stamped before the last one taken ({int(full[0])}): "
+                    "the stream's clock went back (a restarted sensor or driver), or that stamp was wrong (far in the "
+                    "future). Call reset() and push this sample as the first of a new stream (the state is unchanged)",
+                    "clock",
+                )
             raise StreamTimeError(
                 f"{where(k)}: timestamp {int(full[k + 1])} is not after the previous one ({int(full[k])}); drop "
-                f"repeated or late samples before pushing (the state is unchanged); {UNITS_HINT}"
+                f"repeated or late samples before pushing (the state is unchanged); {UNITS_HINT}",
+                "order",
+                k + 1 - offset,
             )
         at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
+        if self._base is not None:
+            self._check_against_time_base(t, steps, where, at)
+            return t
         if self.rate_hz and (steps < STREAM_FAST_FACTOR * period).any():
             k = int(np.argmax(steps < STREAM_FAST_FACTOR * period))
             plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
             looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
-            raise StreamTimeError(
-                f"{where(k)} comes {steps[k] * 1e-6:.4g} ms after the previous one, under {STREAM_FAST_FACTOR:g} of "
-                f"the model's period ({period * 1e-6:.3f} ms{at}){looks}: the stream is faster than the model's rate "
-                f"(resample it), or its stamps are not ns ({UNITS_HINT}; micro- or milliseconds look like this). The "
-                "state is unchanged"
-            )
+            raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks), "early", k + 1 - offset)
         period = period or (float(np.median(steps)) if steps.size else None)
         if period is not None and (steps > self.gap_factor * period).any():
             k = int(np.argmax(steps > self.gap_factor * period))
-            raise StreamTimeError(
-                f"{where(k)} comes {steps[k] * 1e-6:.3f} ms after the previous one, more than {self.gap_factor:g} "
-                f"periods ({period * 1e-6:.3f} ms{at}): the model would take the samples either side as consecutive. "
-                "After a gap, call reset() and push it as the first sample of a new stream (the start-up of one "
-                "receptive field follows), or fill the gap first; a stream slower than the model's rate looks the "
-                "same: resample it (the state is unchanged)"
-            )
+            raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", k + 1 - offset)
         return t
+
+    def _add_steps(self, steps: np.ndarray) -> None:
+        """Steps into the rate's average. With the rate known, a step over 1.5 periods (one missing sample, or a
+        dropped one) is left out: it would read as a slower stream."""
+        if self._base is not None:
+            steps = steps[2 * steps <= 3 * self._base[0]]
+        self._steps_sum += int(steps.sum())
+        self._steps_n += int(steps.size)
+
+    def _check_against_time_base(self, t: np.ndarray, steps: np.ndarray, where, at: str) -> None:
+        """Each sample against its expected time on the stream's time base, in order (the base moves with each)."""
+        whole, lo, hi = self._base
+        period = self.period_ns
+        base = self.base_ns
+        offset = 0 if self.last_ns is None else 1
+        for i, ti in enumerate(t.tolist()):
+            if base is None:  # the stream's first sample
+                base = ti
+                continue
+            dev = ti - (base + whole)
+            k = i - 1 + offset  # the step that ends at this sample
+            if dev < lo:
+                plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
+                looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
+                raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks, dev), "early", i)
+            if dev > hi:
+                raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", i)
+            base = self._advance(base, ti)
 
     def commit(self, t: np.ndarray | int) -> None:
         """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
-        if isinstance(t, int):  # check's one-sample path
-            self._steps_sum += t - self.last_ns
-            self._steps_n += 1
+        self.late_in_a_row = 0
+        if self._base is not None:
+            for ti in [t] if isinstance(t, int) else t.tolist():
+                self.base_ns = ti if self.base_ns is None else self._advance(self.base_ns, ti)
+        if isinstance(t, int):  # check's one-sample path: plain ints
+            step = t - self.last_ns
+            if self._base is None or 2 * step <= 3 * self._base[0]:  # as _add_steps
+                self._steps_sum += step
+                self._steps_n += 1
             self.last_ns = t
         elif t.size:
-            steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
-            self._steps_sum += int(steps.sum())
-            self._steps_n += steps.size
+            self._add_steps(np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t])))
             self.last_ns = int(t[-1])
         if self.rate_hz and not self._rate_checked and self._steps_n >= RATE_WINDOW:
             self._rate_checked = True
@@ -129,3 +217,22 @@ class StreamClock:
                     SanityWarning,
                     stacklevel=4,
                 )
+
+
+def _early_message(where: str, step: int, period: float, at: str, looks: str, dev: int | None = None) -> str:
+    expected = "" if dev is None else f", {-dev * 1e-6:.4g} ms before its expected time"
+    return (
+        f"{where} comes {step * 1e-6:.4g} ms after the previous one{expected}, under {STREAM_FAST_FACTOR:g} of the "
+        f"model's period ({period * 1e-6:.3f} ms{at}){looks}: the stream is faster than the model's rate (resample "
+        f"it), or its stamps are not ns ({UNITS_HINT}; micro- or milliseconds look like this). The state is unchanged"
+    )
+
+
+def _gap_message(where: str, step: int, gap_factor: float, period: float, at: str) -> str:
+    return (
+        f"{where} comes {step * 1e-6:.3f} ms after the previous one, more than {gap_factor:g} periods "
+        f"({period * 1e-6:.3f} ms{at}): samples are missing, and the model would take the samples either side as "
+        "consecutive. After a gap, call reset() and push it as the first sample of a new "
+        "stream (the start-up of one receptive field follows), or fill the gap first; a stream slower than the "
+        "model's rate looks the same: resample it (the state is unchanged)"
+    )
