@@ -189,3 +189,21 @@ def test_a_clock_gone_back_or_one_stamp_far_ahead_is_not_a_dead_end():
     sc.reset()
     sc.push(imu[k], t_ns=int(t[k]))
     sc.push(imu[k + 1], t_ns=int(t[k + 1]))  # the stream goes on at the real time
+
+
+def test_an_accelerometer_in_g_is_said_once_after_the_first_samples():
+    """`correct` refuses a file in g; a stream has no file: it warns once, after UNIT_PROBE samples, and goes on."""
+    from gyrodenoise.streaming import UNIT_PROBE
+
+    n = UNIT_PROBE + 50
+    rng = np.random.default_rng(0)
+    at_rest = np.hstack([rng.normal(0, 1e-3, (n, 3)), [0.0, 0.0, 1.0] + rng.normal(0, 1e-4, (n, 3))])  # acc in g
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    with pytest.warns(SanityWarning, match="norm is 1 at rest .* it looks like g; .* multiply it by 9.81"):
+        sc.push_chunk(at_rest[:UNIT_PROBE], t_ns=stamps(UNIT_PROBE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per stream
+        for k in range(UNIT_PROBE, n):
+            sc.push(at_rest[k], t_ns=int(stamps(n)[k]))
+        in_ms2 = at_rest * np.r_[1, 1, 1, 9.81, 9.81, 9.81]
+        StreamingCorrector(random_model(), rate_hz=200.0).push_chunk(in_ms2, t_ns=stamps(len(in_ms2)))

@@ -24,6 +24,7 @@ standard deviation (K - 1 denominator) times its `spread_scale`, as `EnsembleCor
 from __future__ import annotations
 
 import copy
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -33,11 +34,13 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import special
 from torch import nn
 
-from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX
+from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX, SanityWarning, gravity_norm
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.stream_clock import StreamClock
+
+UNIT_PROBE = 400  # samples (2 s at 200 Hz) before the accelerometer's unit is judged, once per stream
 
 ArrayLike = np.ndarray | torch.Tensor | Sequence[float]  # one sample (6,) or a chunk (N, 6)
 StampLike = int | np.ndarray | Sequence[int] | None  # int64 ns: one stamp, or one per sample of a chunk
@@ -226,6 +229,7 @@ class StreamingCorrector:
         for m in self.members or []:
             m.reset()
         self.clock.reset()
+        self._unit_probe: list[np.ndarray] | None = []  # the stream's first samples, for the accelerometer's unit
         self._buf: list = []
         self._pos = 0
         self.n_pushed = 0
@@ -272,7 +276,32 @@ class StreamingCorrector:
             out, std = self._mean_std(outs)
         if t is not None:
             self.clock.commit(t)
+        if self._unit_probe is not None:
+            self._probe_units(x)
         return out, std
+
+    def _probe_units(self, x: np.ndarray) -> None:
+        """Once per stream, after UNIT_PROBE samples: warn when the accelerometer reads about 1 (g) or 1000 (milli-g)
+        at rest, or about 0, where the model needs m/s^2 with gravity (`correct` refuses such a file; a stream has no
+        file to refuse). Until then, and after it, nothing is checked."""
+        self._unit_probe.append(np.atleast_2d(x).astype(np.float64))
+        seen = np.concatenate(self._unit_probe)
+        if len(seen) < UNIT_PROBE:
+            return
+        self._unit_probe = None
+        norm = gravity_norm(seen[:, 3:], seen[:, :3], self.clock.rate_hz or 200.0)
+        guess = norm.unit_guess()
+        if guess is not None:
+            hint = {"g": "multiply it by 9.81", "mg": "multiply it by 0.00981"}.get(
+                guess, "push the raw specific force, gravity included"
+            )
+            warnings.warn(
+                f"the accelerometer's norm is {norm.g:.4g} {norm.where} over the stream's first {len(seen)} samples, "
+                f"expected g = 9.81 m/s^2: it looks {'like ' + guess if guess != 'near zero' else 'near zero'}; "
+                f"the model needs m/s^2 with gravity: {hint} before pushing",
+                SanityWarning,
+                stacklevel=4,
+            )
 
     def push_with_spread(self, sample: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:
         """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
