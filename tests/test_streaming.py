@@ -77,7 +77,7 @@ def test_non_finite_sample_is_refused_and_leaves_the_state(backend):
     bad[4] = np.nan
     with pytest.raises(ValueError, match="NaN/inf"):
         sc.push(bad)
-    with pytest.raises(ValueError, match="NaN/inf"):
+    with pytest.raises(ValueError, match=r"NaN/inf IMU value in sample 2 of this call \(counting from 1\)"):
         sc.push_chunk(np.stack([imu[100], bad]))
     rest = np.stack([sc.push(s) for s in imu[100:]])  # as if the bad sample had never come
     assert np.abs(np.concatenate([first, rest]) - ref).max() < ATOL

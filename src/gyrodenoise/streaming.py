@@ -69,21 +69,20 @@ def _checked(x, dtype, what: str) -> np.ndarray:
     float32) or beyond what any IMU measures: it would enter every layer's buffer and spoil the outputs of a whole
     receptive field (~2.5 s) after it, without an error."""
     x = np.asarray(x, dtype=dtype)
-    if not np.isfinite(x).all():  # (a wrong shape is left to the caller's message)
+    bad = ~np.isfinite(x)
+    if bad.any():  # (a wrong shape is left to the caller's message)
         problem = "a NaN/inf IMU value"
-    elif (
-        x.size
-        and x.shape[-1] == 6
-        and (np.abs(x[..., :3]).max() > GYRO_ABS_MAX or np.abs(x[..., 3:]).max() > ACC_ABS_MAX)
-    ):
+    elif x.size and x.shape[-1] == 6:
+        bad = np.concatenate([np.abs(x[..., :3]) > GYRO_ABS_MAX, np.abs(x[..., 3:]) > ACC_ABS_MAX], axis=-1)
         problem = (
             f"an IMU value beyond any sensor's range (|gyro| > {GYRO_ABS_MAX:g} rad/s or |acc| > {ACC_ABS_MAX:g} m/s^2)"
         )
-    else:
+    if not bad.any():
         return x
+    where = f" in sample {int(np.argmax(bad.reshape(len(x), -1).any(axis=1))) + 1} of this call (counting from 1)"
     raise ValueError(
-        f"{what}: {problem} would corrupt the outputs of the next receptive field (~2.5 s at 200 Hz) without an "
-        "error; repair or drop the sample first (the state is unchanged)"
+        f"{what}: {problem}{where if x.ndim == 2 else ''} would corrupt the outputs of the next receptive field "
+        "(~2.5 s at 200 Hz) without an error; repair or drop the sample first (the state is unchanged)"
     )
 
 
