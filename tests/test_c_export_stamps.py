@@ -124,7 +124,8 @@ def python_decisions(model, rate_hz: float | None, stamps, imu) -> tuple[list[in
                     code = "GD_RESTARTED"
             except ValueError as e:
                 code = "GD_REFUSED_UNSTAMPED" if "given timestamps" in str(e) else "GD_REFUSED_SAMPLE"
-        if any(issubclass(w.category, SanityWarning) for w in said):
+        # the rate's warning is GD_RATE_OFF; the warning about restarts every few samples has no C code
+        if any(issubclass(w.category, SanityWarning) and "the stream runs at" in str(w.message) for w in said):
             code = "GD_RATE_OFF"
         codes.append(CODE[code])
     return codes, out

@@ -207,3 +207,49 @@ def test_an_accelerometer_in_g_is_said_once_after_the_first_samples():
             sc.push(at_rest[k], t_ns=int(stamps(n)[k]))
         in_ms2 = at_rest * np.r_[1, 1, 1, 9.81, 9.81, 9.81]
         StreamingCorrector(random_model(), rate_hz=200.0).push_chunk(in_ms2, t_ns=stamps(len(in_ms2)))
+
+
+def _robot_loop(sc, imu, t) -> list[str]:
+    """docs/deployment.md's loop: a gap or a clock gone back restarts the stream, any other refusal drops the sample."""
+    kinds = []
+    for x, ti in zip(imu, t.tolist(), strict=True):
+        try:
+            sc.push(x, t_ns=ti)
+            kinds.append("taken")
+        except StreamTimeError as e:
+            kinds.append(e.kind)
+            if e.kind in ("gap", "clock"):
+                sc.reset()
+                sc.push(x, t_ns=ti)
+    return kinds
+
+
+def test_the_rate_is_the_samples_that_came_over_their_span():
+    """Every other stamp 2.6 ms late at 200 Hz: all taken and no rate warning (steps of 7.6 ms left out of the average
+    read as 400 Hz). At twice the model's rate the refused samples count too: the warning names 400 Hz."""
+    model, imu = random_model(), random_imu(900)
+    late = stamps(900) + np.where(np.arange(900) % 2, 2_600_000, 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert set(_robot_loop(StreamingCorrector(model, rate_hz=200.0), imu, late)) == {"taken"}
+    with pytest.warns(SanityWarning, match="runs at 400 Hz"):
+        _robot_loop(StreamingCorrector(model, rate_hz=200.0), imu, stamps(900, period=PERIOD // 2))
+
+
+def test_restarts_every_few_samples_warn_once():
+    """A 100 Hz stream into a 200 Hz model: every other sample is a 'gap' the loop restarts at, no stream lasts the
+    rate's 400 steps, and the outputs stay at start-up quality: said once."""
+    model, imu = random_model(), random_imu(300)
+    with pytest.warns(SanityWarning, match="the stream restarted 5 times within") as said:
+        kinds = _robot_loop(StreamingCorrector(model, rate_hz=200.0), imu, stamps(300, period=3 * PERIOD))
+    assert kinds.count("gap") > 100 and sum("restarted" in str(w.message) for w in said) == 1
+
+
+def test_a_refused_chunk_names_its_first_refused_sample():
+    """A sample after a gap, then one out of order: the gap is the first refusal, whatever is checked first."""
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    imu, t = random_imu(10), stamps(10)
+    sc.push_chunk(imu[:3], t_ns=t[:3])
+    with pytest.raises(StreamTimeError) as refused:
+        sc.push_chunk(imu[3:6], t_ns=np.array([t[3] + 10**9, t[4], t[5]]))
+    assert (refused.value.kind, refused.value.index) == ("gap", 0)

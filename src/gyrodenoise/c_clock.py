@@ -26,6 +26,7 @@ from gyrodenoise.stream_clock import (
     STREAM_FAST_FACTOR,
     STREAM_GAP_FACTOR,
     TIME_BASE_GAIN,
+    rate_sum_bounds,
 )
 
 # name, value, meaning (the header's #defines)
@@ -56,29 +57,14 @@ def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
     if not rate_hz:  # StreamClock(None): the period learnt from the stream (gaps only)
         return {**free, "max_step": 0}
     period = 1e9 / rate_hz  # StreamClock.period_ns
-    fast, gap = STREAM_FAST_FACTOR * period, STREAM_GAP_FACTOR * period  # refused: step < fast; a gap: step > gap
-
-    def warns_fast(s: int) -> bool:  # StreamClock.commit's test, measured rate above the model's
-        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 > RATE_TOL
-
-    def warns_slow(s: int) -> bool:
-        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 < -RATE_TOL
-
+    lo, hi = rate_sum_bounds(rate_hz)
     return {
-        "min_step": math.ceil(fast),
-        "max_step": math.floor(gap),
-        "rate_sum_min": _first(lambda s: not warns_fast(s)),  # the measured rate falls as the sum grows
-        "rate_sum_max": _first(warns_slow) - 1,
+        "min_step": math.ceil(STREAM_FAST_FACTOR * period),  # refused: a step < FAST x period
+        "max_step": math.floor(STREAM_GAP_FACTOR * period),  # a gap: a step > GAP x period
+        "rate_sum_min": lo,
+        "rate_sum_max": hi,
         "period": round(period),  # the time base's step (StreamClock._base)
     }
-
-
-def _first(pred, lo: int = 1, hi: int = INT64_MAX) -> int:
-    """The smallest integer in [lo, hi] where the monotone `pred` holds (bisection)."""
-    while lo < hi:
-        mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if pred(mid) else (mid + 1, hi)
-    return lo
 
 
 def _gap_fraction() -> tuple[int, int]:
@@ -104,7 +90,7 @@ def header_defines(rate_hz: float, memory: bool) -> str:
         ("GD_PERIOD_NS", f"INT64_C({lim['period']})", "the time base's step (0: none, the steps alone decide)"),
         ("GD_TIME_BASE_GAIN", str(TIME_BASE_GAIN), "the time base moves by 1/this of a sample's deviation"),
         ("GD_CLOCK_JUMP_SAMPLES", str(CLOCK_JUMP_SAMPLES), "this many stamps in a row before the last: restart"),
-        ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps averaged, once per stream, to compare the rate"),
+        ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps (and early refusals) averaged, once per stream, for the rate"),
         ("GD_RATE_TOL", f"{RATE_TOL!r}f", "relative rate difference that gives GD_RATE_OFF"),
     ]
     stamps = "\n".join(f"#define {n:<20} {v:<18} /* {doc} */" for n, v, doc in rows)
@@ -121,7 +107,9 @@ STATE_FIELDS = """\
     int64_t last_ns;                                      /* the stamp of its last sample */
     int64_t base_ns;                                      /* where the time base puts its last sample */
     int late_in_a_row;                                    /* samples refused in a row as GD_REFUSED_ORDER */
-    uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */"""
+    uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */
+    uint64_t n_early;                                     /* its samples refused as GD_REFUSED_EARLY */
+    int rate_checked;                                     /* its rate was compared */"""
 
 DECLARATION = """\
 /* gd_step with the sample's timestamp t_ns [integer nanoseconds, any epoch]: the checks of gyrodenoise's
@@ -153,7 +141,8 @@ void gd_reset(gd_state *s)
     s->stamped = 0;
     s->last_ns = s->base_ns = 0;
     s->late_in_a_row = 0;
-    s->steps_ns = s->n_steps = 0;
+    s->steps_ns = s->n_steps = s->n_early = 0;
+    s->rate_checked = 0;
 }}
 
 int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
@@ -194,7 +183,10 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
         step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
         if (GD_PERIOD_NS > 0) {{ /* against the sample's expected time on the time base */
             const int64_t dev = t_ns - (s->base_ns + GD_PERIOD_NS);
-            if (dev < GD_MIN_STEP_NS - GD_PERIOD_NS) return GD_REFUSED_EARLY;
+            if (dev < GD_MIN_STEP_NS - GD_PERIOD_NS) {{
+                s->n_early++; /* a sample that came: the rate's average counts it */
+                return GD_REFUSED_EARLY;
+            }}
             if (dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
                 gd_reset(s);
                 code = GD_RESTARTED;
@@ -208,11 +200,15 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
         }}
     }}
     step(s, imu, gyro_out, std_out);
-    /* a step of this stream (not its first sample); one over 1.5 periods (a missing sample) is not a rate */
-    if (s->stamped && (GD_PERIOD_NS <= 0 || 2 * step_ns <= 3 * (uint64_t)GD_PERIOD_NS)) {{
+    if (s->stamped) {{ /* a step of this stream (not its first sample) */
         s->steps_ns += step_ns;
-        if (++s->n_steps == GD_RATE_WINDOW && (s->steps_ns < rate_sum_min || s->steps_ns > rate_sum_max))
-            code = GD_RATE_OFF;
+        s->n_steps++;
+        /* once, when the steps taken and the samples refused as early reach GD_RATE_WINDOW: the mean interval */
+        if (GD_PERIOD_NS > 0 && !s->rate_checked && s->n_steps + s->n_early >= GD_RATE_WINDOW) {{
+            const uint64_t n = s->n_steps + s->n_early, scaled = s->steps_ns * GD_RATE_WINDOW;
+            s->rate_checked = 1;
+            if (scaled < rate_sum_min * n || scaled > rate_sum_max * n) code = GD_RATE_OFF;
+        }}
     }}
     s->base_ns = s->stamped ? base_after(s, t_ns) : t_ns;
     s->late_in_a_row = 0;

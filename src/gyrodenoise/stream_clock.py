@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,6 +39,30 @@ CLOCK_JUMP_SAMPLES = 20
 # the time base moves by 1/8 of each sample's deviation from its expected time (a power of two: the C export's integer
 # division is exact, and Python's truncation toward zero below matches C99's)
 TIME_BASE_GAIN = 8
+
+
+RESTARTS_IN_A_ROW = 5  # this many restarts (gaps, clock jumps) within RATE_WINDOW samples taken: a warning, once
+
+
+def rate_sum_bounds(rate_hz: float) -> tuple[int, int]:
+    """The sums of RATE_WINDOW steps (ns) whose mean rate is within RATE_TOL of `rate_hz`: [lo, hi]. A stream's n
+    intervals summing to S pass when lo n <= S RATE_WINDOW <= hi n (integers: the C export makes the same test)."""
+
+    def warns_fast(s: int) -> bool:
+        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 > RATE_TOL
+
+    def warns_slow(s: int) -> bool:
+        return 1e9 * RATE_WINDOW / s / rate_hz - 1.0 < -RATE_TOL
+
+    return _first(lambda s: not warns_fast(s)), _first(warns_slow) - 1
+
+
+def _first(pred, lo: int = 1, hi: int = 2**63 - 1) -> int:
+    """The smallest integer in [lo, hi] where the monotone `pred` holds (bisection)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if pred(mid) else (mid + 1, hi)
+    return lo
 
 
 class StreamTimeError(ValueError):
@@ -72,6 +97,9 @@ class StreamClock:
             raise ValueError(f"rate_hz={rate_hz}: give the model's training rate in Hz, or None")
         self.rate_hz = rate_hz
         self.gap_factor = gap_factor if gaps else np.inf
+        self._taken_total = 0  # samples taken over the clock's life, across resets
+        self._restarts: deque[int] = deque(maxlen=RESTARTS_IN_A_ROW)  # _taken_total at the last restarts
+        self._restarts_warned = False
         self.reset()
 
         # the time base (rate known, gaps checked): integer period and the deviations a sample may have from its
@@ -85,12 +113,14 @@ class StreamClock:
                 math.ceil(STREAM_FAST_FACTOR * period) - whole,
                 math.floor(gap_factor * period) - whole,
             )
+            self._rate_bounds = rate_sum_bounds(rate_hz)
 
     def reset(self) -> None:
         self.late_in_a_row = 0  # single samples refused in a row as not after the last one taken
         self.last_ns: int | None = None
         self.base_ns: int | None = None  # where the time base puts the last sample taken
-        self._steps_sum, self._steps_n = 0, 0
+        self._steps_sum, self._steps_n = 0, 0  # the steps taken
+        self._early_n = 0  # samples refused as early: they came, between two taken ones (the rate's average)
         self._rate_checked = False
 
     def _advance(self, base: int, t: int) -> int:
@@ -132,10 +162,32 @@ class StreamClock:
         def where(k: int) -> str:
             return "this sample" if n == 1 else f"sample {k + 2 - offset} of this call (counting from 1)"
 
-        if (steps <= 0).any():
-            k = int(np.argmax(steps <= 0))
+        at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
+        if self._base is not None:  # sample by sample: the first refused one is named, whatever its kind
+            self._check_against_time_base(t, steps, n, where, at)
+            return t
+        bad = {"order": steps <= 0}
+        if self.rate_hz:
+            bad["early"] = steps < STREAM_FAST_FACTOR * period
+        period = period or (float(np.median(steps)) if steps.size else None)
+        if period is not None:
+            bad["gap"] = steps > self.gap_factor * period
+        firsts = {kind: int(np.argmax(b)) for kind, b in bad.items() if b.any()}
+        if firsts:
+            kind = min(firsts, key=firsts.get)
+            k = firsts[kind]
+            self._refuse(kind, k, full, steps, n, where, at, period)
+        return t
+
+    def _refuse(self, kind: str, k: int, full: np.ndarray, steps: np.ndarray, n: int, where, at, period, dev=None):
+        """Raise the StreamTimeError of the step k (ending at sample k + 1 of `full`, the last stamp taken and this
+        call's), counting what the stream's later decisions need: refusals as late in a row (the clock's jump),
+        early ones (the rate's average), gaps (restarts in a row)."""
+        index = k + 1 - (len(full) - n)
+        if kind == "order":
             self.late_in_a_row += 1 if n == 1 else 0
             if n == 1 and self.late_in_a_row >= CLOCK_JUMP_SAMPLES:
+                self._restarted()
                 raise StreamTimeError(
                     f"{self.late_in_a_row} samples in a row are stamped before the last one taken ({int(full[0])}): "
                     "the stream's clock went back (a restarted sensor or driver), or that stamp was wrong (far in the "
@@ -146,50 +198,52 @@ class StreamClock:
                 f"{where(k)}: timestamp {int(full[k + 1])} is not after the previous one ({int(full[k])}); drop "
                 f"repeated or late samples before pushing (the state is unchanged); {UNITS_HINT}",
                 "order",
-                k + 1 - offset,
+                index,
             )
-        at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
-        if self._base is not None:
-            self._check_against_time_base(t, steps, where, at)
-            return t
-        if self.rate_hz and (steps < STREAM_FAST_FACTOR * period).any():
-            k = int(np.argmax(steps < STREAM_FAST_FACTOR * period))
+        if kind == "early":
+            self._early_n += 1  # a sample that came: the rate's average counts it
             plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
             looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
-            raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks), "early", k + 1 - offset)
-        period = period or (float(np.median(steps)) if steps.size else None)
-        if period is not None and (steps > self.gap_factor * period).any():
-            k = int(np.argmax(steps > self.gap_factor * period))
-            raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", k + 1 - offset)
-        return t
+            raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks, dev), "early", index)
+        self._restarted()
+        raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", index)
 
-    def _add_steps(self, steps: np.ndarray) -> None:
-        """Steps into the rate's average. With the rate known, a step over 1.5 periods (one missing sample, or a
-        dropped one) is left out: it would read as a slower stream."""
-        if self._base is not None:
-            steps = steps[2 * steps <= 3 * self._base[0]]
-        self._steps_sum += int(steps.sum())
-        self._steps_n += int(steps.size)
+    def _restarted(self) -> None:
+        """A refusal that makes the caller restart the stream: warn once when they come every few samples (a stream
+        much slower than the model's, or stamps that are not the samples' times): its outputs stay at start-up quality
+        and its rate is never compared, since no stream lasts RATE_WINDOW steps."""
+        self._restarts.append(self._taken_total)
+        if len(self._restarts) == RESTARTS_IN_A_ROW and not self._restarts_warned:
+            if self._taken_total - self._restarts[0] < RATE_WINDOW:
+                self._restarts_warned = True
+                warnings.warn(
+                    f"the stream restarted {RESTARTS_IN_A_ROW} times within {self._taken_total - self._restarts[0] + 1}"
+                    " samples: its stamps leave gaps every few samples, so the model keeps starting up (its outputs "
+                    "stay less accurate). A stream much slower than the model's rate, or stamps taken when a buffer "
+                    "was read rather than when each sample was measured, look like this: resample, or stamp each "
+                    "sample",
+                    SanityWarning,
+                    stacklevel=5,
+                )
 
-    def _check_against_time_base(self, t: np.ndarray, steps: np.ndarray, where, at: str) -> None:
+    def _check_against_time_base(self, t: np.ndarray, steps: np.ndarray, n: int, where, at: str) -> None:
         """Each sample against its expected time on the stream's time base, in order (the base moves with each)."""
         whole, lo, hi = self._base
-        period = self.period_ns
-        base = self.base_ns
-        offset = 0 if self.last_ns is None else 1
+        full = np.concatenate([[self.last_ns], t]) if self.last_ns is not None else t
+        base, last = self.base_ns, self.last_ns
         for i, ti in enumerate(t.tolist()):
+            k = i - 1 + (len(full) - n)  # the step that ends at this sample
+            if last is not None and ti <= last:
+                self._refuse("order", k, full, steps, n, where, at, self.period_ns)
             if base is None:  # the stream's first sample
-                base = ti
+                base = last = ti
                 continue
             dev = ti - (base + whole)
-            k = i - 1 + offset  # the step that ends at this sample
             if dev < lo:
-                plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
-                looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
-                raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks, dev), "early", i)
+                self._refuse("early", k, full, steps, n, where, at, self.period_ns, dev)
             if dev > hi:
-                raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", i)
-            base = self._advance(base, ti)
+                self._refuse("gap", k, full, steps, n, where, at, self.period_ns)
+            base, last = self._advance(base, ti), ti
 
     def commit(self, t: np.ndarray | int) -> None:
         """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
@@ -198,25 +252,37 @@ class StreamClock:
             for ti in [t] if isinstance(t, int) else t.tolist():
                 self.base_ns = ti if self.base_ns is None else self._advance(self.base_ns, ti)
         if isinstance(t, int):  # check's one-sample path: plain ints
-            step = t - self.last_ns
-            if self._base is None or 2 * step <= 3 * self._base[0]:  # as _add_steps
-                self._steps_sum += step
-                self._steps_n += 1
+            self._steps_sum += t - self.last_ns
+            self._steps_n += 1
+            self._taken_total += 1
             self.last_ns = t
         elif t.size:
-            self._add_steps(np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t])))
+            steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
+            self._steps_sum += int(steps.sum())
+            self._steps_n += int(steps.size)
+            self._taken_total += int(t.size)
             self.last_ns = int(t[-1])
-        if self.rate_hz and not self._rate_checked and self._steps_n >= RATE_WINDOW:
-            self._rate_checked = True
-            measured = 1e9 * self._steps_n / self._steps_sum
-            if abs(measured / self.rate_hz - 1.0) > RATE_TOL:
-                warnings.warn(
-                    f"the stream runs at {measured:.4g} Hz but the model was trained at {self.rate_hz:.4g} Hz: its "
-                    "convolutions span a fixed number of samples, so it sees another time window; resample the "
-                    "stream to the model's rate, or train a model at this rate",
-                    SanityWarning,
-                    stacklevel=4,
-                )
+        self._compare_rate()
+
+    def _compare_rate(self) -> None:
+        """Once per stream, when its steps taken and its samples refused as early (they came, between two taken
+        ones) reach RATE_WINDOW: the mean interval against the model's period, as integers (`rate_sum_bounds`: the
+        C export's test, boundaries included)."""
+        if self._base is None or self._rate_checked or self._steps_n + self._early_n < RATE_WINDOW:
+            return
+        self._rate_checked = True
+        intervals = self._steps_n + self._early_n
+        lo, hi = self._rate_bounds
+        if lo * intervals <= self._steps_sum * RATE_WINDOW <= hi * intervals:
+            return
+        measured = 1e9 * intervals / self._steps_sum
+        warnings.warn(
+            f"the stream runs at {measured:.4g} Hz but the model was trained at {self.rate_hz:.4g} Hz: its "
+            "convolutions span a fixed number of samples, so it sees another time window; resample the "
+            "stream to the model's rate, or train a model at this rate",
+            SanityWarning,
+            stacklevel=4,
+        )
 
 
 def _early_message(where: str, step: int, period: float, at: str, looks: str, dev: int | None = None) -> str:
