@@ -2,12 +2,14 @@
 
     int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out);
 
-StreamingCorrector.push(x, t_ns) refuses a stamp that is not after the previous one, one that comes sooner than
-STREAM_FAST_FACTOR periods of the model's rate, and one after a gap (more than STREAM_GAP_FACTOR periods), all with the
-state unchanged; it warns once when the first RATE_WINDOW steps of a stream average a rate more than RATE_TOL off the
-model's. `gd_step_t` makes the same decisions, as return codes (`CODES`): refused (< 0, state unchanged, nothing
-written), or taken (>= 0, outputs written). After a gap it does what the Python caller does next (reset(), then push
-the sample as the first of a new stream) and says so (GD_RESTARTED): an onboard loop cannot stop at a gap.
+StreamingCorrector.push(x, t_ns) refuses a stamp that is not after the previous one, one that comes more than
+1 - STREAM_FAST_FACTOR periods before its expected time on the stream's time base, and one after a gap (more than
+STREAM_GAP_FACTOR - 1 periods after it), all with the state unchanged; it warns once when the first RATE_WINDOW
+intervals of a stream (steps taken, samples refused as early) average a rate more than RATE_TOL off the model's.
+`gd_step_t` makes the same decisions, as return codes (`CODES`): refused (< 0, state unchanged, nothing written), or
+taken (>= 0, outputs written). After a gap, or CLOCK_JUMP_SAMPLES stamps in a row before the last one taken, it does
+what the Python caller does next (reset(), then push the sample as the first of a new stream) and says so
+(GD_RESTARTED): an onboard loop cannot stop there.
 
 The thresholds are computed here in float64 as StreamClock computes them, and written as integer nanoseconds, so that
 the C decisions (integer arithmetic, no float and no double on the target) are Python's, boundaries included. A model
