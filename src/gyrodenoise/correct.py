@@ -51,7 +51,7 @@ from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_rate, not_better_warning, sensor_model
+from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_quality_warning, model_rate, sensor_model
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.streaming import StreamingCorrector
@@ -235,7 +235,7 @@ def correct_arrays(
         units={"time": time_unit, "gyro": gyro_unit, "acc": acc_unit},
     )
     loaded, meta = (model, {}) if isinstance(model, torch.nn.Module) else load_model(model, warn=False)
-    if msg := not_better_warning(meta):
+    if msg := model_quality_warning(meta):
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     try:
         return correct_recording(rec, loaded, meta, **kwargs)
@@ -352,7 +352,7 @@ def _main(argv: list[str] | None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     ratio = spread_ratio(res.std, meta)
-    model_warnings = [w for w in (not_better_warning(meta), spread_warning(ratio, str(path), meta)) if w]
+    model_warnings = [w for w in (model_quality_warning(meta), spread_warning(ratio, str(path), meta)) if w]
     for w in [*model_warnings, *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
     if rec.units_from_header:  # read in the units its header declares: say so, the flags would override them

@@ -74,6 +74,7 @@ def member_record(path: str | Path, meta: dict) -> dict:
         "train_seqs": meta.get("train_seqs"),
         "train_duration_s": meta.get("train_duration_s"),
         "train_t0_ns": meta.get("train_t0_ns"),
+        "causal": meta.get("causal"),  # measured for a user's own network (None: built in, causal by construction)
         "val_aoe_deg": meta.get("val_aoe_deg"),
         "test_aoe_deg": test.get("test/aoe_deg"),
         "test": test,
@@ -149,6 +150,8 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     if any(b is False for b in beats):
         bad = [r["path"] for r in records if r.get("beats_calibrated") is False]
         warnings.warn(f"ensemble members that did not beat the calibrated baseline: {bad}", stacklevel=2)
+    if leaky := [r["path"] for r in records if r.get("causal") is False]:
+        warnings.warn(f"ensemble members that are not causal (they read later samples): {leaky}", stacklevel=2)
     cal_vals = [r["calibrated_val_aoe_deg"] for r in records if r.get("calibrated_val_aoe_deg") is not None]
     finite = [r["val_aoe_deg"] for r in records if r.get("val_aoe_deg") is not None]
     rates = [r["rate_hz"] for r in records if r.get("rate_hz")]
@@ -166,6 +169,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
         # the ensemble itself was not compared with the calibrated baseline: unknown until evaluated
         "beats_calibrated": None,
         "members_beat_calibrated": beats,
+        "members_causal": [r.get("causal") for r in records],
         "calibrated_val_aoe_deg": (sum(cal_vals) / len(cal_vals)) if cal_vals else None,
     }
     return EnsembleCorrection(members), {"name": "ensemble", "members": cfgs}, meta

@@ -62,7 +62,7 @@ from gyrodenoise.pretrained import (
     ModelQualityWarning,
     is_shipped,
     load_model,
-    not_better_warning,
+    model_quality_warning,
     other_imu_warning,
     other_rate_warning,
     training_overlap_warning,
@@ -93,7 +93,7 @@ def gyro_method(model: CorrectionModel | None) -> Callable[[Sequence], np.ndarra
 def load_checked(name_or_path: str) -> tuple[CorrectionModel, dict, str | None]:
     """load_model, and warn when the model's metadata says it did not beat the calibrated baseline."""
     model, meta = load_model(name_or_path, warn=False)
-    msg = not_better_warning(meta)
+    msg = model_quality_warning(meta)
     if msg:
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     return model, meta, msg

@@ -150,7 +150,7 @@ def load_model(
     # the name reports use: the shipped name, else the name the file records (ensembles), else its path
     name = Path(path).stem if is_shipped(path) else meta.get("name") or portable_path(path)
     meta = {"model": cfg, **meta, "path": str(path), "name": name}
-    if warn and (msg := not_better_warning(meta)):
+    if warn and (msg := model_quality_warning(meta)):
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     return model, meta
 
@@ -173,6 +173,28 @@ def model_rate(meta: dict) -> float | None:
     """Training rate of a model, from its metadata (None when unknown)."""
     rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
     return float(rate) if rate else None
+
+
+def model_quality_warning(meta: dict) -> str | None:
+    """The warnings a model's metadata calls for, as one message: it did not beat the calibrated baseline, or it reads
+    future samples (`causal: false`, measured when a user's own network was trained). None when neither."""
+    said = [w for w in (not_causal_warning(meta), not_better_warning(meta)) if w]
+    return "; ".join(said) or None
+
+
+def not_causal_warning(meta: dict) -> str | None:
+    """The warning for a model whose training measured that it reads future samples (`causal: false`), else None."""
+    causal = meta.get("causal")
+    members = meta.get("members_causal") or []
+    if causal is not False and False not in members:
+        return None
+    name = meta.get("name", meta.get("path", "this model"))
+    which = "" if causal is False else f" ({members.count(False)} of its {len(members)} members)"
+    return (
+        f"model {name}{which} is not causal: its training found its corrections moved by later samples "
+        "(models.build.causality_leak), so its figures are optimistic and it cannot run onboard, where later samples "
+        "do not exist yet"
+    )
 
 
 def not_better_warning(meta: dict) -> str | None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import math
 import numbers
 
 import torch
@@ -93,29 +94,65 @@ def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
         )
     if type(rf) is not int:  # a numpy integer: the exporters' metadata and slices want a plain int
         model.receptive_field = int(rf)
+    _check_correction_shape(model, str(_target_))
     return model
 
 
 @torch.no_grad()
+def _check_correction_shape(model: GyroCorrection, target: str) -> None:
+    """One dry call before any training: a correction of another shape failed deep inside the first training step
+    (a traceback from Lightning's model summary), and a (B, N, 1) or (B, 1, 3) one was broadcast silently."""
+    # its own generator, eval mode: the global random stream (seeded runs) and batch-norm statistics stay as they are
+    x = model.mean + model.std * torch.randn(2, 37, 6, generator=torch.Generator().manual_seed(0))
+    was_training = model.training
+    model.eval()
+    try:
+        out = model.correction(x)
+    except Exception as e:  # noqa: BLE001 - the user's code: its message, in one line, with the contract
+        raise ValueError(
+            f"model._target_={target}: correction() on raw IMU of shape (2, 37, 6) failed ({type(e).__name__}: {e}): "
+            f"{CUSTOM_CONTRACT}"
+        ) from None
+    finally:
+        model.train(was_training)
+    if not isinstance(out, torch.Tensor) or tuple(out.shape) != (2, 37, 3):
+        got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
+        raise ValueError(
+            f"model._target_={target}: correction() of raw IMU (2, 37, 6) returned {got}, not (2, 37, 3) (batch, "
+            f"samples, axes): {CUSTOM_CONTRACT}"
+        )
+
+
+@torch.no_grad()
 def causality_leak(model: nn.Module, n: int | None = None, seed: int = 0) -> float:
-    """How much the outputs up to the middle of a random input change when only the samples after the middle change,
-    relative to the outputs' size: max |change| / max(1 rad/s, max |output|). 0, to float rounding (~1e-7 in
-    float32), for a causal model; NaN when the model outputs NaN. A model that reads the future (a centred
-    convolution, a norm over time) scores its test optimistically and cannot run onboard; built-in models are causal
-    by construction."""
+    """How much the corrections before the middle of a random input move when only the samples after it change,
+    relative to how much the corrections after the middle move when only the samples before it change (the model's
+    own sensitivity to its input). 0, to float rounding, for a causal model; about 1 for one that reads the future
+    as much as the past; NaN when the model outputs NaN. The changed samples are redrawn, tripled and shifted by two
+    standard deviations, so that statistics over a window (a mean, a normalisation over time, a pooling) move too: a
+    redraw from the same distribution left them almost where they were. A model that reads the future scores its
+    test optimistically and cannot run onboard; built-in models are causal by construction."""
     rf = int(getattr(model, "receptive_field", 1))
     n = n or max(4 * rf, 1000)
+    h = n // 2
     gen = torch.Generator().manual_seed(seed)
     mean, std = model.mean.detach().cpu(), model.std.detach().cpu()
     x = mean + std * torch.randn(1, n, 6, generator=gen)
-    y = x.clone()
-    y[:, n // 2 :] = mean + std * torch.randn(1, n - n // 2, 6, generator=gen)
+
+    def changed(part: slice) -> torch.Tensor:
+        y = x.clone()
+        y[:, part] = mean + 2 * std + 3 * std * torch.randn(y[:, part].shape, generator=gen)
+        return y
+
     was_training = model.training
     model.eval()
     device = next(model.buffers()).device
-    a, b = model(x.to(device))[:, : n // 2], model(y.to(device))[:, : n // 2]
+    correction = getattr(model, "correction", None) or (lambda z: model(z) - z[..., :3])
+    base = correction(x.to(device)).cpu()
+    future = float((correction(changed(slice(h, None)).to(device)).cpu()[:, :h] - base[:, :h]).abs().max())
+    past = float((correction(changed(slice(None, h)).to(device)).cpu()[:, h:] - base[:, h:]).abs().max())
     model.train(was_training)
-    return float((a - b).abs().max() / max(1.0, float(a.abs().max())))
+    return future / max(past, 1e-9) if math.isfinite(past) else math.nan
 
 
 def not_built_in(model: nn.Module) -> str | None:
