@@ -3,6 +3,8 @@ clearly where a tool cannot reproduce it (streaming, stateful export) or where i
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -206,3 +208,46 @@ def test_a_correction_of_another_shape_is_refused_before_training(cls, said):
     """(B, 3, N) and a tuple failed in the first training step with a traceback; (B, N, 1) was broadcast silently."""
     with pytest.raises(ValueError, match=rf"correction\(\) of raw IMU \(2, 37, 6\) returned {said}, not \(2, 37, 3\)"):
         build_model("custom", _target_=f"{__name__}.{cls.__name__}", k=4)
+
+
+def test_a_model_whose_module_changed_since_training_is_said_so(tmp_path):
+    """model.pt records the import path and the arguments given, not the class's code: an edited module loaded
+    silently as another model. The module's sha256 goes with the file; a mismatch warns, and weights that no longer
+    fit the class name the class instead of blaming this version of gyrodenoise."""
+    from gyrodenoise.pretrained import save_model
+
+    cfg = {"name": "custom", "_target_": f"{__name__}.PastMean", "k": 5}
+    path = save_model(PastMean(k=5), cfg, tmp_path / "model.pt")
+    blob = torch.load(path, weights_only=True)
+    assert blob["meta"]["custom_source"]["module"] == __name__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_model(path)  # the module as trained: no warning
+    blob["meta"]["custom_source"]["sha256"] = "0" * 64  # as if the module had been edited since
+    torch.save(blob, path)
+    with pytest.warns(ModelQualityWarning, match="is not the one this model was trained with"):
+        load_model(path)
+    blob["state_dict"]["lin.weight"] = torch.zeros(3, 7)  # a layer of another shape: the class changed
+    torch.save(blob, path)
+    with pytest.raises(ModelFileError, match="the weights do not fit the class .*PastMean as it is now"):
+        load_model(path)
+
+
+class LengthLoop(PastMean):
+    """A Python loop over the samples: torch.export specialises the length."""
+
+    def correction(self, imu: torch.Tensor) -> torch.Tensor:
+        out = super().correction(imu)
+        return torch.stack([out[:, k] for k in range(imu.shape[1])], 1)
+
+
+def test_a_network_that_cannot_export_at_any_length_is_said_in_one_line(tmp_path, capsys):
+    from gyrodenoise.export import main
+    from gyrodenoise.pretrained import save_model
+
+    path = save_model(
+        LengthLoop(k=4), {"name": "custom", "_target_": f"{__name__}.LengthLoop", "k": 4}, tmp_path / "m.pt"
+    )
+    assert main([str(path), "--pt2", str(tmp_path / "m.pt2")]) == 2
+    err = capsys.readouterr().err
+    assert "LengthLoop) could not be exported with a dynamic length" in err and "Traceback" not in err

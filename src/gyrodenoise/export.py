@@ -34,6 +34,7 @@ from torch import nn
 
 from gyrodenoise import c_export
 from gyrodenoise.atomic import atomic_path, output_path_problem
+from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings, quiet_library_notices
 from gyrodenoise.pretrained import load_model, sensor_model
@@ -269,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
             return 2
+    model = None
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
             model, meta = load_model(args.model)
@@ -298,6 +300,18 @@ def main(argv: list[str] | None = None) -> int:
             print(write_c(model, args.c, meta, check=not args.no_check, prefix=args.c_prefix))
     except (ImportError, FileNotFoundError, ValueError) as e:  # a missing extra, a model that is not there
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    except RuntimeError as e:  # torch.export's own refusal: for a user's network, say it in one line
+        if model is None or not_built_in(model) is None:
+            raise
+        first = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        print(
+            f"error: {not_built_in(model)} could not be exported with a dynamic length ({type(e).__name__}: {first}). "
+            "A network whose graph depends on the sequence length while tracing (a Python loop over the samples, a "
+            "recurrent layer unrolled) exports only at the traced length; export the built-in network, or rewrite "
+            "the loop as tensor operations",
+            file=sys.stderr,
+        )
         return 2
     return 0
 

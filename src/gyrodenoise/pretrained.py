@@ -12,6 +12,8 @@ Safety metadata: `beats_calibrated` (True / False / None: unknown) says whether 
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import warnings
 from importlib import resources
 from pathlib import Path
@@ -38,15 +40,43 @@ def available_models() -> list[str]:
 def save_model(model: CorrectionModel, model_cfg: dict, path: str | Path, meta: dict | None = None) -> Path:
     """Write atomically: an interrupted save never leaves a file that looks whole."""
     path = Path(path)
+    meta = dict(meta or {})
+    if dict(model_cfg).get("name") == "custom" and (source := custom_source(model)):
+        meta["custom_source"] = source
     payload = {
         "format": FORMAT,
         "model": dict(model_cfg),
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-        "meta": dict(meta or {}),
+        "meta": meta,
     }
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
     return path
+
+
+def custom_source(model: torch.nn.Module) -> dict | None:
+    """The file and sha256 of the module that defines a user's own class: model.pt records the class's import path
+    and the arguments given, not its code or its defaults, so a later edit would load silently as another model."""
+    try:
+        file = Path(inspect.getfile(type(model)))
+        return {
+            "module": type(model).__module__,
+            "file": file.name,
+            "sha256": hashlib.sha256(file.read_bytes()).hexdigest(),
+        }
+    except (TypeError, OSError):  # a class defined in a notebook or a REPL has no file
+        return None
+
+
+def _source_changed_warning(model: torch.nn.Module, meta: dict, path: Path) -> str | None:
+    recorded, now = meta.get("custom_source"), custom_source(model)
+    if not recorded or not now or recorded.get("sha256") == now["sha256"]:
+        return None
+    return (
+        f"{path}: the module {recorded.get('module')} ({recorded.get('file')}) is not the one this model was trained "
+        "with (its sha256 differs): if its class's code or defaults changed, the weights load into another model and "
+        "it computes something else without an error. Load it with the module as it was trained"
+    )
 
 
 def resolve(name_or_path: str | Path) -> Path:
@@ -144,7 +174,18 @@ def load_model(
         model = build_model(**cfg)
     except ValueError as e:  # a custom class not importable here, or a kind this version does not know
         raise ModelFileError(f"{path}: this gyrodenoise cannot build the model it holds: {e}") from None
-    model.load_state_dict(state)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as e:  # a user's class whose code changed since training: its layers no longer fit
+        if cfg.get("name") != "custom":
+            raise
+        first = str(e).splitlines()[1].strip() if len(str(e).splitlines()) > 1 else str(e)
+        raise ModelFileError(
+            f"{path}: the weights do not fit the class {cfg.get('_target_')} as it is now ({first}): its module "
+            "changed since the model was trained; load it with the module as it was"
+        ) from None
+    if changed := _source_changed_warning(model, meta, path):
+        warnings.warn(changed, ModelQualityWarning, stacklevel=2)
     model.eval()
     model.training_rate_hz = model_rate(meta)  # the streaming corrector checks stamps against it (None: unknown)
     # the name reports use: the shipped name, else the name the file records (ensembles), else its path
