@@ -216,6 +216,11 @@ def model_rate(meta: dict) -> float | None:
     return float(rate) if rate else None
 
 
+def _label(meta: dict) -> str:
+    """How a warning names the model: its recorded name, else its path."""
+    return meta.get("name", meta.get("path", "this model"))
+
+
 def model_quality_warning(meta: dict) -> str | None:
     """The warnings a model's metadata calls for, as one message: it did not beat the calibrated baseline, or it reads
     future samples (`causal: false`, measured when a user's own network was trained). None when neither."""
@@ -229,10 +234,9 @@ def not_causal_warning(meta: dict) -> str | None:
     members = meta.get("members_causal") or []
     if causal is not False and False not in members:
         return None
-    name = meta.get("name", meta.get("path", "this model"))
     which = "" if causal is False else f" ({members.count(False)} of its {len(members)} members)"
     return (
-        f"model {name}{which} is not causal: its training found its corrections moved by later samples "
+        f"model {_label(meta)}{which} is not causal: its training found its corrections moved by later samples "
         "(models.build.causality_leak), so its figures are optimistic and it cannot run onboard, where later samples "
         "do not exist yet"
     )
@@ -245,7 +249,7 @@ def not_better_warning(meta: dict) -> str | None:
     all_members_failed = meta.get("beats_calibrated") is None and members and all(b is False for b in members)
     if meta.get("beats_calibrated") is not False and not all_members_failed:
         return None
-    name = meta.get("name", meta.get("path", "this model"))
+    name = _label(meta)
     model_val, cal_val = meta.get("val_aoe_deg"), meta.get("calibrated_val_aoe_deg")
     if all_members_failed:
         model_val, name = meta.get("member_val_aoe_deg_mean"), f"{name} (none of its {len(members)} members)"
@@ -303,7 +307,7 @@ def training_overlap_warning(
     ]
     if not seen:
         return None
-    name = meta.get("name", meta.get("path", "this model"))
+    name = _label(meta)
     span = "whole" if duration is None else f"first {float(duration):g} s"
     return (
         f"model {name} was trained on the {span} of {', '.join(dict.fromkeys(seen))}: its figures there are "
@@ -331,7 +335,7 @@ def other_imu_warning(
     if model_sensor and model_sensor == data_sensor:
         return None
     imu = f" ({model_sensor})" if model_sensor else ""
-    name = meta.get("name", meta.get("path", "this model"))
+    name = _label(meta)
     return (
         f"model {name} was trained on {trained}{imu}, not on {dataset}: it learned the errors of another IMU, so "
         f"its figures here say little about the method (train one on {dataset}, or pass {setting}=...)."
@@ -348,7 +352,7 @@ def other_rate_warning(model: CorrectionModel, meta: dict, rates: dict[str, floa
     off = {n: r for n, r in rates.items() if abs(r / trained - 1.0) > RATE_TOL}
     if not off:
         return None
-    name = meta.get("name", meta.get("path", "this model"))
+    name = _label(meta)
     listed = ", ".join(f"{n} {r:.4g} Hz" for n, r in off.items())
     return (
         f"model {name} was trained at {trained:.4g} Hz but {listed}: its convolutions span a fixed number of samples, "
