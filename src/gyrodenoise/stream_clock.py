@@ -100,8 +100,6 @@ class StreamClock:
         self._taken_total = 0  # samples taken over the clock's life, across resets
         self._restarts: deque[int] = deque(maxlen=RESTARTS_IN_A_ROW)  # _taken_total at the last restarts
         self._restarts_warned = False
-        self.reset()
-
         # the time base (rate known, gaps checked): integer period and the deviations a sample may have from its
         # expected time, the same thresholds as a step from a sample taken on time (`c_clock.step_limits`)
         self._base: tuple[int, int, int] | None = None
@@ -114,6 +112,7 @@ class StreamClock:
                 math.floor(gap_factor * period) - whole,
             )
             self._rate_bounds = rate_sum_bounds(rate_hz)
+        self.reset()
 
     def reset(self) -> None:
         self.late_in_a_row = 0  # single samples refused in a row as not after the last one taken
