@@ -251,3 +251,15 @@ def test_a_network_that_cannot_export_at_any_length_is_said_in_one_line(tmp_path
     assert main([str(path), "--pt2", str(tmp_path / "m.pt2")]) == 2
     err = capsys.readouterr().err
     assert "LengthLoop) could not be exported with a dynamic length" in err and "Traceback" not in err
+
+
+def test_a_dependency_missing_from_the_users_module_is_named_as_such(tmp_path, monkeypatch):
+    """The module was found; what it imports was not: 'put the module on PYTHONPATH' would send the user astray."""
+    (tmp_path / "net_with_dep.py").write_text("import a_package_that_is_not_installed\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(
+        ValueError, match="its module net_with_dep imports a_package_that_is_not_installed, which is not"
+    ):
+        build_model("custom", _target_="net_with_dep.Net")
+    with pytest.raises(ValueError, match="cannot import it .* on PYTHONPATH"):
+        build_model("custom", _target_="no_such_module_here.Net")

@@ -79,6 +79,12 @@ def _custom(_target_: str | None = None, **kwargs) -> GyroCorrection:
     try:
         cls = getattr(importlib.import_module(module_name), cls_name)
     except (ImportError, AttributeError) as e:
+        missing = e.name if isinstance(e, ModuleNotFoundError) else None
+        if missing and not module_name.startswith(missing) and not missing.startswith(module_name):
+            raise ValueError(  # the module was found; something it imports is not installed
+                f"model._target_={_target_}: its module {module_name} imports {missing}, which is not installed here: "
+                "install it where the command runs"
+            ) from None
         raise ValueError(
             f"model._target_={_target_}: cannot import it ({e}). The module must be importable where the command runs "
             "(installed, or its folder on PYTHONPATH), also later for evaluate, correct and export"
