@@ -263,3 +263,13 @@ def test_a_dependency_missing_from_the_users_module_is_named_as_such(tmp_path, m
         build_model("custom", _target_="net_with_dep.Net")
     with pytest.raises(ValueError, match="cannot import it .* on PYTHONPATH"):
         build_model("custom", _target_="no_such_module_here.Net")
+
+
+def test_a_users_network_exported_to_onnx_is_not_described_as_the_built_in_one():
+    from gyrodenoise.export import onnx_metadata
+
+    said = onnx_metadata(PastMean(k=4))["gyrodenoise.start_up"]
+    assert "PastMean) is a user's network" in said and "pads its start" not in said
+    assert (
+        "pads its start" in onnx_metadata(build_model("denoiser", channels=[4], dilations=[1]))["gyrodenoise.start_up"]
+    )

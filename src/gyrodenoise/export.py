@@ -137,6 +137,13 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
             "(StreamingCorrector refuses them). A state belongs to this file's graph: another model's state of the "
             "same size is accepted and spoils a receptive field of outputs"
         )
+    elif own := not_built_in(model):  # a user's network: its start-up and memory are its own
+        out["gyrodenoise.start_up"] = (
+            f"{own} is a user's network: how it starts a call is its own code's, and its receptive_field says its "
+            f"outputs depend on the {rf - 1} samples before them. Back-to-back short calls are not a stream: keep a "
+            f"window of >= {rf} samples (one call per sample); --stateful and StreamingCorrector take built-in models "
+            "only"
+        )
     else:
         out["gyrodenoise.start_up"] = (
             f"each call pads its start with {rf - 1} copies of its first sample: output n is exact once the call "
