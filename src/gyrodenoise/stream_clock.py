@@ -163,7 +163,7 @@ class StreamClock:
 
         at = f" at {self.rate_hz:.6g} Hz" if self.rate_hz else ""
         if self._base is not None:  # sample by sample: the first refused one is named, whatever its kind
-            self._check_against_time_base(t, steps, n, where, at)
+            self._check_against_time_base(t, full, steps, n, where, at)
             return t
         bad = {"order": steps <= 0}
         if self.rate_hz:
@@ -225,10 +225,9 @@ class StreamClock:
                     stacklevel=5,
                 )
 
-    def _check_against_time_base(self, t: np.ndarray, steps: np.ndarray, n: int, where, at: str) -> None:
+    def _check_against_time_base(self, t: np.ndarray, full: np.ndarray, steps: np.ndarray, n: int, where, at) -> None:
         """Each sample against its expected time on the stream's time base, in order (the base moves with each)."""
         whole, lo, hi = self._base
-        full = np.concatenate([[self.last_ns], t]) if self.last_ns is not None else t
         base, last = self.base_ns, self.last_ns
         for i, ti in enumerate(t.tolist()):
             k = i - 1 + (len(full) - n)  # the step that ends at this sample

@@ -229,6 +229,7 @@ class StreamingCorrector:
             m.reset()
         self.clock.reset()
         self._unit_probe: list[np.ndarray] | None = []  # the stream's first samples, for the accelerometer's unit
+        self._unit_probe_n = 0
         self._buf: list = []
         self._pos = 0
         self.n_pushed = 0
@@ -284,9 +285,10 @@ class StreamingCorrector:
         at rest, or about 0, where the model needs m/s^2 with gravity (`correct` refuses such a file; a stream has no
         file to refuse). Until then, and after it, nothing is checked."""
         self._unit_probe.append(np.atleast_2d(x).astype(np.float64))
-        seen = np.concatenate(self._unit_probe)
-        if len(seen) < UNIT_PROBE:
+        self._unit_probe_n += len(self._unit_probe[-1])
+        if self._unit_probe_n < UNIT_PROBE:  # joined once, when there are enough (not at every push)
             return
+        seen = np.concatenate(self._unit_probe)
         self._unit_probe = None
         norm = gravity_norm(seen[:, 3:], seen[:, :3], self.clock.rate_hz or 200.0)
         guess = norm.unit_guess()
