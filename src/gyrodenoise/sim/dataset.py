@@ -19,7 +19,7 @@ from gyrodenoise.atomic import write_text
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.sim.effects import Bias, Effect, effects_from_config
-from gyrodenoise.sim.error_model_file import load_error_model, rate_mismatch_warning
+from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import asl_written, simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
 
@@ -82,8 +82,7 @@ def with_error_model_file(gen: dict) -> dict:
     path = gen.pop("error_model_file", None)
     if path is None:
         return gen
-    gen["error_model"], jitter = load_error_model(path)
-    rate_mismatch_warning(path, float(gen.get("rate_hz", 200.0)))
+    gen["error_model"], jitter = load_error_model(path, float(gen.get("rate_hz", 200.0)))
     if jitter is not None:
         gen["bias_jitter_rad_s"] = float(jitter)
     return gen
