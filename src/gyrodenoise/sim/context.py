@@ -21,6 +21,9 @@ class SignalContext:
     f: np.ndarray  # (M, 3) true specific force
     rate_hz: float
     kinematics_at: Any = None  # callable t -> Kinematics, for the time offset
+    # the simulator's output sample is the mean of this many consecutive samples of the signal (1: the signal is
+    # at the output rate already); an effect stated as seen in the output (a vibration line) undoes that mean
+    output_mean_of: int = 1
 
 
 @dataclass

@@ -18,12 +18,14 @@ import numpy as np
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
-from gyrodenoise.sim.effects import Bias, Effect, effects_from_config
+from gyrodenoise.sim.effects import Bias, Effect, WhiteNoise, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import asl_written, simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
 
-GENERATOR_VERSION = 1
+# 2: sequences last duration_s (they ran 1 s longer), the accelerometer follows a time offset, vibration
+# amplitudes are the output's
+GENERATOR_VERSION = 2
 KINDS = {"drone": drone_trajectory, "hand": handheld_trajectory}
 
 
@@ -47,14 +49,18 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     entries = [dict(c) if hasattr(c, "keys") else c for c in generation.get("error_model", [])]  # DictConfig -> dict
     effects: list[Effect] = effects_from_config(entries, "dataset.generation.error_model")
     jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
+    if not jitter >= 0:  # NaN included
+        raise ValueError(f"dataset.generation.bias_jitter_rad_s={jitter!r}: the turn-on bias spread in rad/s, >= 0")
     if jitter > 0:
         effects.append(Bias(bias=rng.normal(0.0, jitter, 3)))
     sim = simulate_imu(
         traj,
         effects,
         rate_hz=float(generation.get("rate_hz", 200.0)),
+        duration_s=duration,
         seed=int(rng.integers(1 << 30)),
         acc_noise_density=float(generation.get("acc_noise_density", 2.0e-3)),
+        acc_bias=tuple(generation.get("acc_bias", (0.0, 0.0, 0.0))),
     )
     # several jobs may generate the same data set at once (a job array on a fresh cache): the first copy stays
     return write_asl(folder / name, sim, keep_existing=True)
@@ -88,6 +94,13 @@ def with_error_model_file(gen: dict) -> dict:
     return gen
 
 
+def white_noise_density(entries: list) -> float:
+    """The gyro white-noise density (rad/s/sqrt(Hz), mean over the axes) of an error-model list; 0 without one."""
+    effects = effects_from_config([dict(c) for c in entries], "dataset.generation.error_model")
+    found = [e for e in effects if isinstance(e, WhiteNoise)]
+    return float(np.mean([e.params["density"] for e in found])) if found else 0.0
+
+
 class SimDataModule(ImuDataModule):
     """ImuDataModule over simulated sequences generated on first use (see module docstring)."""
 
@@ -95,6 +108,10 @@ class SimDataModule(ImuDataModule):
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
         gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
+        sensor = dict(kwargs.get("sensor") or {})
+        if sensor.get("gyro_noise_density") is None:  # the simulated gyro's own, for the training's noise augmentation
+            sensor["gyro_noise_density"] = white_noise_density(gen.get("error_model", []))
+            kwargs["sensor"] = sensor
         if root:  # an explicit folder: generate the missing sequences there
             data_root = Path(root)
             for name in names:

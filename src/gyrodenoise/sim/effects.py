@@ -389,7 +389,12 @@ class Vibration(Effect):
     Detector: the sinusoid is a regression effect (sin/cos columns at the strongest spectral line,
     phase per sequence). The band-limited variant is stochastic: no regressor can predict it, so it
     is detected and fitted in the frequency domain (`gyrodenoise.discrepancy.spectral`), with the
-    power spectral density shape of `band_psd`. An instance with bandwidth_hz > 0 is `stochastic`."""
+    power spectral density shape of `band_psd`. An instance with bandwidth_hz > 0 is `stochastic`.
+
+    The amplitude is the line's as seen in the IMU output, which is what the detector fits and a spectrum of a
+    recording shows. The simulator averages each output period of its finer internal grid (an anti-alias mean that
+    attenuates a line at f by about sinc(f / rate)), so there the pick-up is applied larger by that mean's gain at
+    the frequency (`output_gain`), and the output carries the amplitude given."""
 
     name = "vibration"
     per_sequence = True
@@ -410,8 +415,27 @@ class Vibration(Effect):
     def band_edges(frequency_hz: float, bandwidth_hz: float, rate_hz: float) -> tuple[float, float]:
         return max(frequency_hz - bandwidth_hz / 2, 1e-3), min(frequency_hz + bandwidth_hz / 2, 0.49 * rate_hz)
 
+    @staticmethod
+    def output_gain(frequency_hz: float, rate_hz: float, mean_of: int) -> float:
+        """Gain at `frequency_hz` of the mean of `mean_of` consecutive samples at `rate_hz` (the simulator's
+        output sample): |sin(pi f m / rate) / (m sin(pi f / rate))|, about sinc(f / output rate)."""
+        if mean_of <= 1 or frequency_hz <= 0:
+            return 1.0
+        x = np.pi * frequency_hz / rate_hz
+        return float(abs(np.sin(mean_of * x) / (mean_of * np.sin(x))))
+
     def apply(self, sig, y, rng):
         f, a, bw = float(self.params["frequency_hz"]), self.params["amplitude"], float(self.params["bandwidth_hz"])
+        m = int(sig.output_mean_of)
+        if m > 1:  # the output is the mean of m internal samples: apply the pick-up that leaves `a` in the output
+            out_rate = sig.rate_hz / m
+            if f >= out_rate / 2:
+                raise ValueError(
+                    f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
+                    f"({out_rate / 2:g} Hz at {out_rate:g} Hz): its amplitude is the line's in the IMU output, and no "
+                    "line above that frequency can appear there; give the frequency the line has in the recording"
+                )
+            a = a / self.output_gain(f, sig.rate_hz, m)
         if bw <= 0:
             phase = rng.uniform(0, 2 * np.pi, 3)
             return y + a * np.sin(2 * np.pi * f * sig.t[:, None] + phase)
@@ -724,21 +748,36 @@ class Quantization(Effect):
 
 
 def build_effect(name: str, **params: Any) -> Effect:
+    """The effect `name` with parameters in SI (those not given keep their defaults), checked as a config entry's
+    are (`effect_from_config`)."""
     if name not in EFFECTS:
         raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(sorted(EFFECTS))}")
-    return EFFECTS[name](**params)
+    cls = EFFECTS[name]
+    unknown = set(params) - set(cls.DEFAULTS)
+    if unknown:
+        raise ValueError(f"effect {name!r}: unknown parameter(s) {sorted(unknown)}; expected {sorted(cls.DEFAULTS)}")
+    return cls(**{k: _param_value(name, k, v, np.shape(cls.DEFAULTS[k]), "si", cls) for k, v in params.items()})
 
 
-NON_NEGATIVE = frozenset({"density", "step", "limit", "corner_hz", "frequency_hz", "bandwidth_hz", "tau"})
+NON_NEGATIVE = frozenset({"density", "step", "frequency_hz", "bandwidth_hz"})
+POSITIVE = frozenset({"limit", "corner_hz", "tau"})  # 0 would be a division by zero or a sensor that reads 0
+ENTRY_KEYS = ("name", "units", "params")
 
 
 def effect_from_config(cfg: dict) -> Effect:
     """{'name': ..., 'units': 'si'|'datasheet', 'params': {...}} -> Effect.
 
     Every parameter must be given (a file that omits one has most likely misspelt it), as one number or as many as
-    the parameter has (a 3x3 matrix also as 9 numbers), finite, and not negative where a negative value means
-    nothing (densities, steps, limits, frequencies, time constants)."""
+    the parameter has (a 3x3 matrix also as 9 numbers), finite, not negative where a negative value means nothing
+    (densities, steps, frequencies) and above 0 where 0 does too (limits, corner frequencies, time constants). An
+    entry has no other keys than name, units and params."""
     name = cfg.get("name")
+    extra = [k for k in cfg if k not in ENTRY_KEYS]
+    if extra:  # a misspelt 'units' would otherwise read datasheet figures as SI
+        raise ValueError(
+            f"effect {name!r}: unknown key(s) {extra}; an entry has {', '.join(ENTRY_KEYS)}"
+            + (" (did you mean 'units'?)" if "unit" in extra else "")
+        )
     if name not in EFFECTS:
         raise ValueError(f"'name' {name!r} must be one of {', '.join(sorted(EFFECTS))}")
     units = cfg.get("units", "si")
@@ -786,9 +825,11 @@ def _param_value(effect: str, key: str, value: Any, shape: tuple, units: str, cl
         raise ValueError(f"{where} has {a.size} values; give one number or {size}")
     if not np.isfinite(a).all():
         raise ValueError(f"{where} is not finite")
+    unit = cls.DATASHEET.get(key, ("SI", 1.0))[0] if units == "datasheet" else "SI"
     if key in NON_NEGATIVE and (a < 0).any():
-        unit = cls.DATASHEET.get(key, ("SI", 1.0))[0] if units == "datasheet" else "SI"
         raise ValueError(f"{where} ({unit}) must not be negative")
+    if key in POSITIVE and (a <= 0).any():
+        raise ValueError(f"{where} ({unit}) must be above 0")
     return a
 
 

@@ -59,14 +59,22 @@ def simulate_imu(
     """Gyro from `effects`; accelerometer = specific force + constant bias + white noise.
 
     Stamps start `margin_s` after the trajectory start (the spline's ends are less reliable) and
-    are exact integer nanoseconds. The error model's time 0 is the first stamp (power-on).
+    are exact integer nanoseconds. The error model's time 0 is the first stamp (power-on). A time offset in
+    `effects` delays the accelerometer as it delays the gyro: it is the IMU's stamps that are late.
+    `duration_s`: the stamps span at most this long (N samples over N - 1 periods).
     """
+    _check_settings(rate_hz, duration_s, oversample, acc_noise_density, acc_bias)
     rng = np.random.default_rng(seed)
     period_ns = int(round(1e9 / rate_hz))
     span = traj.t_end - traj.t_start - 2 * margin_s
     if duration_s is not None:
         span = min(span, duration_s)
-    n = int(np.floor(span * 1e9 / period_ns)) + 1
+    if span < 0:
+        raise ValueError(
+            f"the trajectory ({traj.t_end - traj.t_start:.3f} s) is shorter than its two margins of {margin_s} s: "
+            "no IMU sample fits in it; give a longer trajectory"
+        )
+    n = int(np.floor(span * 1e9 / period_ns + 1e-9)) + 1
     k = np.arange(n, dtype=np.int64)
     t_ns = t0_ns + k * period_ns
     t_rel = k * (period_ns * 1e-9)  # since power-on
@@ -84,6 +92,7 @@ def simulate_imu(
         f=kin_hi.specific_force,
         rate_hz=rate_hz * m,
         kinematics_at=lambda t: traj.evaluate(t + shift),
+        output_mean_of=m,
     )
     y_hi = apply_error_model(effects, sig, rng)
     gyro = y_hi.reshape(n, m, 3).mean(1)
@@ -91,7 +100,7 @@ def simulate_imu(
     for e in effects:
         if e.stage == 4:
             gyro = e.apply(out_sig, gyro, rng)
-    f = kin_hi.specific_force.reshape(n, m, 3).mean(1)
+    f = sig.f.reshape(n, m, 3).mean(1)  # the time offset (stage 0) has moved the inputs both sensors see
     acc = (
         f
         + np.asarray(acc_bias)
@@ -115,6 +124,23 @@ def simulate_imu(
             "acc_noise_density": acc_noise_density,
         },
     )
+
+
+def _check_settings(
+    rate_hz: float, duration_s: float | None, oversample: int, acc_noise_density: float, acc_bias
+) -> None:
+    """One line per setting no IMU can have (they gave a ZeroDivisionError, empty arrays or NaN gyros)."""
+    if isinstance(rate_hz, bool) or not (isinstance(rate_hz, int | float | np.number) and 0 < rate_hz <= 1e6):
+        raise ValueError(f"rate_hz={rate_hz!r}: the IMU rate in Hz, a number above 0 and at most 1e6 (e.g. 200)")
+    if duration_s is not None and not (np.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s={duration_s!r}: seconds of IMU data, above 0 (or None: the whole trajectory)")
+    if isinstance(oversample, bool) or not isinstance(oversample, int | np.integer) or oversample < 1:
+        raise ValueError(f"oversample={oversample!r}: internal samples per IMU period, an integer >= 1 (e.g. 10)")
+    if not (np.isfinite(acc_noise_density) and acc_noise_density >= 0):
+        raise ValueError(f"acc_noise_density={acc_noise_density!r}: m/s^2/sqrt(Hz), a number >= 0")
+    bias = np.asarray(acc_bias, dtype=np.float64)
+    if bias.shape != (3,) or not np.isfinite(bias).all():
+        raise ValueError(f"acc_bias={acc_bias!r}: three finite numbers in m/s^2")
 
 
 def write_asl(folder: str | Path, sim: SimulatedImu, gt_stride: int = 1, keep_existing: bool = False) -> Path:

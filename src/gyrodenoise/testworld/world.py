@@ -24,6 +24,7 @@ from gyrodenoise.testworld.spec import NULL_EFFECTS, PRESETS, EffectSpecError, m
 from gyrodenoise.testworld.units import to_si
 
 FORMAT = "gyrodenoise.testworld/1"
+MAX_JITTER_PERIODS = 0.1  # IMU stamp jitter (std) at most this many periods: the 0.4-period clip is then 4 sigma
 PROCEDURAL_T0_NS = 1_500_000_000_000_000_000
 _STREAMS = ("noise", "walk", "vibration", "acc", "stamps", "mocap", "phase")
 
@@ -61,6 +62,21 @@ def make_motion(
     )
 
 
+def _check_imu_settings(rate_hz: float, oversample: int, jitter_s: float) -> None:
+    """One line for an IMU rate, oversampling or stamp jitter no sensor has (a ZeroDivisionError before, or a jitter
+    clipped to another size than `truth.json` records)."""
+    if not (np.isfinite(rate_hz) and 0 < rate_hz <= 1e5):
+        raise ValueError(f"--imu-rate {rate_hz:g}: the IMU rate in Hz, above 0 and at most 1e5 (e.g. 200)")
+    if oversample < 1:
+        raise ValueError(f"--oversample {oversample}: internal samples per IMU period, an integer >= 1 (e.g. 20)")
+    if not 0 <= jitter_s <= MAX_JITTER_PERIODS / rate_hz:
+        raise ValueError(
+            f"--imu-jitter {jitter_s * 1e6:g}us: the stamps' standard deviation, from 0 to {MAX_JITTER_PERIODS:g} of "
+            f"a period ({MAX_JITTER_PERIODS / rate_hz * 1e6:g}us at {rate_hz:g} Hz): the draws are clipped at 0.4 of a "
+            "period to keep the stamps in order, so a larger one would not be the jitter truth.json records"
+        )
+
+
 def make_sequence(
     out: str | Path,
     trajectory: str | MotionSource = "procedural",
@@ -89,8 +105,9 @@ def make_sequence(
     spec = merge(parse_effects(PRESETS[preset]), parse_effects(effects))
     eff = realise(spec, np.random.default_rng([seed, 1]))
     bw = Bandwidth.parse(bandwidth)
-    lead = bw.start_up_s(imu_rate_hz)
     jitter_s = float(to_si(imu_jitter, "time", "imu_jitter")[0])
+    _check_imu_settings(imu_rate_hz, oversample, jitter_s)
+    lead = bw.start_up_s(imu_rate_hz)
     mocap = mocap or MocapConfig()
 
     if isinstance(trajectory, str):

@@ -1,0 +1,131 @@
+"""Simulator settings a datasheet user gives: what the output carries, and one line for what no sensor has
+(from an independent audit that checked the statistics with its own numpy/scipy code)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import welch
+
+from gyrodenoise.sim import build_effect, drone_trajectory, simulate_imu
+from gyrodenoise.sim.dataset import SimDataModule, generate_sequence
+from gyrodenoise.sim.effects import effect_from_config
+from gyrodenoise.testworld import make_sequence
+
+
+@pytest.fixture(scope="module")
+def traj():
+    return drone_trajectory(24.0, 3)
+
+
+def _line_rms(x: np.ndarray, rate: float, f0: float) -> np.ndarray:
+    """RMS per axis of x's line at f0, from its Welch power within +-1 Hz (an estimate of our own, not the
+    detector's)."""
+    f, p = welch(x - x.mean(0), fs=rate, nperseg=int(4 * rate), axis=0)
+    return np.sqrt(p[np.abs(f - f0) <= 1.0].sum(0) * (f[1] - f[0]))
+
+
+@pytest.mark.parametrize("f0", [40.25, 80.0])
+def test_a_vibration_line_has_its_amplitude_in_the_output(traj, f0):
+    """The amplitude is the line's in the IMU output (what the workflow fits and writes); before, the output's
+    period mean took it down by ~sinc(f / rate): 0.94 at 40 Hz, 0.76 at 80 Hz."""
+    amp = np.array([0.01, 0.02, 0.0])
+    sim = simulate_imu(traj, [build_effect("vibration", frequency_hz=f0, amplitude=amp)], duration_s=20)
+    rms = _line_rms(sim.gyro - sim.true_gyro, 200.0, f0)
+    assert np.allclose(rms[:2], amp[:2] / np.sqrt(2), rtol=0.02)
+
+
+def test_a_vibration_above_the_output_nyquist_is_refused(traj):
+    with pytest.raises(ValueError, match="Nyquist"):
+        simulate_imu(traj, [build_effect("vibration", frequency_hz=120.0, amplitude=[0.01, 0, 0])], duration_s=5)
+
+
+def test_a_time_offset_delays_the_accelerometer_too(traj):
+    """It is the IMU's stamps that are late: both sensors hold the motion of t - delta."""
+    delta = 0.005
+    plain = simulate_imu(traj, [], duration_s=10, acc_noise_density=0.0, oversample=4)
+    late = simulate_imu(traj, [build_effect("time_offset", delta=delta)], duration_s=10, acc_noise_density=0.0,
+                        oversample=4)  # fmt: skip
+    # the delayed samples are the plain ones one sample-fraction earlier: compare with interpolation in time
+    t = plain.t_ns * 1e-9
+    for kind in ("gyro", "acc"):
+        want = np.stack([np.interp(t - delta, t, getattr(plain, kind)[:, i]) for i in range(3)], 1)
+        got = getattr(late, kind)
+        inner = slice(10, -10)
+        err = np.abs(got[inner] - want[inner]).max()
+        assert err < 0.05 * np.abs(getattr(plain, kind)[inner] - want[inner]).max(), kind
+
+
+def test_duration_is_the_span_of_the_stamps(tmp_path):
+    """duration_s: 10 gave 11 s of data (the trajectory's 2 s of margin, less the simulator's 1 s)."""
+    folder = generate_sequence(tmp_path, "drone_00", {"seed": 0, "duration_s": 10, "error_model": []})
+    t = np.loadtxt(folder / "mav0" / "imu0" / "data.csv", delimiter=",", usecols=0, dtype=np.int64)
+    assert (t[-1] - t[0]) == 10 * 10**9 and len(t) == 2001
+
+
+@pytest.mark.parametrize(
+    ("entry", "said"),
+    [
+        ({"name": "white_noise", "unit": "datasheet", "params": {"density": 0.5}}, "did you mean 'units'"),
+        ({"name": "warmup_bias", "params": {"amplitude": 0.01, "tau": 0}}, "tau = 0 .* must be above 0"),
+        ({"name": "sensor_bandwidth", "params": {"corner_hz": 0}}, "must be above 0"),
+        ({"name": "saturation", "params": {"limit": 0}}, "must be above 0"),
+    ],
+)
+def test_error_model_entries_no_sensor_has_are_named(entry, said):
+    """A misspelt 'units' read 0.5 deg/sqrt(h) as 0.5 rad/s/sqrt(Hz) (3500x the noise) without a word."""
+    with pytest.raises(ValueError, match=said):
+        effect_from_config(entry)
+
+
+def test_build_effect_checks_its_values_as_a_config_does():
+    with pytest.raises(ValueError, match="must not be negative"):
+        build_effect("white_noise", density=-1e-3)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        build_effect("white_noise", sigma=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "said"),
+    [
+        ({"rate_hz": 0}, "rate_hz=0"),
+        ({"rate_hz": -200.0}, "rate_hz=-200"),
+        ({"rate_hz": float("nan")}, "rate_hz=nan"),
+        ({"oversample": 0}, "oversample=0"),
+        ({"duration_s": -5.0}, "duration_s=-5"),
+        ({"acc_noise_density": -1.0}, "acc_noise_density=-1"),
+    ],
+)
+def test_simulator_settings_no_imu_has_are_one_line(traj, kwargs, said):
+    """They gave a ZeroDivisionError, empty arrays or an all-NaN gyro."""
+    with pytest.raises(ValueError, match=said):
+        simulate_imu(traj, [], **kwargs)
+
+
+def test_the_sim_datasets_noise_augmentation_follows_its_error_model(tmp_path):
+    """dataset.sensor.gyro_noise_density was fixed at the ADIS16448's whatever gyro the error model simulated."""
+    density = 5.0e-4
+    generation = {
+        "seed": 0,
+        "duration_s": 5,
+        "error_model": [{"name": "white_noise", "units": "si", "params": {"density": [density] * 3}}],
+    }
+    dm = SimDataModule(generation, root=str(tmp_path), name="sim", train_seqs=["drone_00"], test_seqs=[], sensor={})
+    assert dm.sensor["gyro_noise_density"] == pytest.approx(density)
+    kept = SimDataModule(generation, root=str(tmp_path), name="sim", train_seqs=["drone_00"], test_seqs=[],
+                         sensor={"gyro_noise_density": 1e-4})  # fmt: skip
+    assert kept.sensor["gyro_noise_density"] == 1e-4
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "said"),
+    [
+        ({"imu_rate_hz": 0.0}, "--imu-rate 0"),
+        ({"oversample": 0}, "--oversample 0"),
+        ({"imu_jitter": "-5us"}, "--imu-jitter -5us"),
+        ({"imu_jitter": "3ms"}, "clipped at 0.4 of a period"),
+    ],
+)
+def test_testworld_settings_no_imu_has_are_one_line(tmp_path, kwargs, said):
+    with pytest.raises(ValueError, match=said):
+        make_sequence(tmp_path, duration=2.0, **kwargs)
