@@ -35,12 +35,14 @@ from scipy import special
 from torch import nn
 
 from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX, SanityWarning, gravity_norm
+from gyrodenoise.data.gyro_scale import gyro_scale_verdict, gyro_unit_message
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
 from gyrodenoise.stream_clock import StreamClock
 
 UNIT_PROBE = 400  # samples (2 s at 200 Hz) before the accelerometer's unit is judged, once per stream
+GYRO_PROBE_S = 30.0  # seconds of a stream's start over which the gyro's unit is read off gravity, once per stream
 
 ArrayLike = np.ndarray | torch.Tensor | Sequence[float]  # one sample (6,) or a chunk (N, 6)
 StampLike = int | np.ndarray | Sequence[int] | None  # int64 ns: one stamp, or one per sample of a chunk
@@ -228,8 +230,9 @@ class StreamingCorrector:
         for m in self.members or []:
             m.reset()
         self.clock.reset()
-        self._unit_probe: list[np.ndarray] | None = []  # the stream's first samples, for the accelerometer's unit
+        self._unit_probe: list[np.ndarray] | None = []  # the stream's first samples, for the sensors' units
         self._unit_probe_n = 0
+        self._acc_judged = False
         self._buf: list = []
         self._pos = 0
         self.n_pushed = 0
@@ -281,16 +284,33 @@ class StreamingCorrector:
         return out, std
 
     def _probe_units(self, x: np.ndarray) -> None:
-        """Once per stream, after UNIT_PROBE samples: warn when the accelerometer reads about 1 (g) or 1000 (milli-g)
-        at rest, or about 0, where the model needs m/s^2 with gravity (`correct` refuses such a file; a stream has no
-        file to refuse). Until then, and after it, nothing is checked."""
+        """Once per stream each: after UNIT_PROBE samples, warn when the accelerometer reads about 1 (g) or 1000
+        (milli-g) at rest, or about 0, where the model needs m/s^2 with gravity; after GYRO_PROBE_S seconds, warn when
+        the gyro's rotations fit the accelerometer's gravity in deg/s, not rad/s (`data.gyro_scale`). `correct`
+        refuses such a file; a stream has no file to refuse. Outside these, nothing is checked."""
         self._unit_probe.append(np.atleast_2d(x).astype(np.float64))
         self._unit_probe_n += len(self._unit_probe[-1])
-        if self._unit_probe_n < UNIT_PROBE:  # joined once, when there are enough (not at every push)
-            return
+        rate = self.clock.rate_hz or 200.0
+        if self._unit_probe_n < (GYRO_PROBE_S * rate if self._acc_judged else UNIT_PROBE):
+            return  # joined only when there are enough (not at every push)
         seen = np.concatenate(self._unit_probe)
-        self._unit_probe = None
-        norm = gravity_norm(seen[:, 3:], seen[:, :3], self.clock.rate_hz or 200.0)
+        self._unit_probe = [seen]
+        if not self._acc_judged:
+            self._acc_judged = True
+            self._warn_acc_unit(seen, rate)
+        if len(seen) >= GYRO_PROBE_S * rate:
+            self._unit_probe = None
+            verdict = gyro_scale_verdict(seen[:, 3:], seen[:, :3], rate)
+            if verdict.wrong_unit:
+                warnings.warn(
+                    gyro_unit_message(f"over the stream's first {len(seen)} samples", verdict)
+                    + " The model needs rad/s: multiply the gyro by pi/180 (0.0174533) before pushing",
+                    SanityWarning,
+                    stacklevel=4,
+                )
+
+    def _warn_acc_unit(self, seen: np.ndarray, rate: float) -> None:
+        norm = gravity_norm(seen[:, 3:], seen[:, :3], rate)
         guess = norm.unit_guess()
         if guess is not None:
             hint = {"g": "multiply it by 9.81", "mg": "multiply it by 0.00981"}.get(
@@ -301,7 +321,7 @@ class StreamingCorrector:
                 f"expected g = 9.81 m/s^2: it looks {'like ' + guess if guess != 'near zero' else 'near zero'}; "
                 f"the model needs m/s^2 with gravity: {hint} before pushing",
                 SanityWarning,
-                stacklevel=4,
+                stacklevel=5,
             )
 
     def push_with_spread(self, sample: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:

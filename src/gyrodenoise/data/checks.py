@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gyrodenoise.data.gyro_scale import gyro_scale_verdict, gyro_unit_message
 from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording, time_units_for_period
 from gyrodenoise.data.readers import GAP_FACTOR, IMU_RATE_RANGE_HZ, DataFormatError, burst_advice, burst_rate_hz
 
@@ -155,6 +156,11 @@ def check_gyro_units(rec: ImuRecording, report: CheckReport, force: bool = False
                 else "Check the gyro unit and that --columns maps the gyro columns."
             ),
         )
+    elif rec.units["gyro"] == "rad/s":  # within the range of motion: what its rotations do to gravity says the unit
+        verdict = gyro_scale_verdict(rec.acc, rec.gyro, report.rate_hz)
+        if verdict.wrong_unit:
+            _fail_or_warn(report, force, gyro_unit_message(f"{rec.path}: gyro ({cols}, read as rad/s)", verdict)
+                          + " The file is probably in deg/s: pass --gyro-unit deg/s.")  # fmt: skip
     acc_std = float(np.linalg.norm(rec.acc, axis=1).std())
     if p99 < 0.03 and acc_std > 1.0:  # < 1.7 deg/s while the body clearly moves
         report.warn(
