@@ -4,6 +4,7 @@ interrupted rerun leaves no earlier run's summary beside its new outputs."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import warnings
@@ -84,14 +85,22 @@ def test_a_truncated_checkpoint_to_resume_from_is_refused(root, tmp_path):
 
 
 class InterruptAtEpoch(L.Callback):
-    """Ctrl-C during the fit, as Lightning sees it."""
+    """Ctrl-C during the fit: the signal itself, in the middle of epoch `epoch`'s end."""
+
+    signum = signal.SIGINT
 
     def __init__(self, epoch: int = 1) -> None:
         self.epoch = epoch
 
     def on_train_epoch_end(self, trainer, module) -> None:
         if trainer.current_epoch == self.epoch:
-            raise KeyboardInterrupt
+            os.kill(os.getpid(), self.signum)
+
+
+class TerminateAtEpoch(InterruptAtEpoch):
+    """SIGTERM (a SLURM time limit, scancel) during the fit."""
+
+    signum = signal.SIGTERM
 
 
 class InterruptAtStart(L.Callback):
@@ -115,13 +124,15 @@ def test_an_interrupted_training_says_how_to_resume(root, tmp_path, capsys):
     cb = "+callbacks.interrupt._target_=test_damaged_inputs.InterruptAtEpoch"
     every_2 = "callbacks.last_checkpoint.every_n_epochs=2"
     try:
-        with pytest.raises(SystemExit):
+        with pytest.raises(SystemExit) as stop:
             train(config(root, tmp_path / "run", cb, every_2, "trainer.max_epochs=4"))
     finally:
-        signal.signal(signal.SIGINT, handler)  # Lightning ignores further Ctrl-C while it shuts down
+        signal.signal(signal.SIGINT, handler)
+    assert stop.value.code == 130 and signal.getsignal(signal.SIGINT) is handler
     err = capsys.readouterr().err
-    assert "interrupted at epoch 1: no model.pt written; resume with ckpt_path=" in err
-    assert "interrupted.ckpt (written at the interruption)" in err and "last.ckpt is written every 2 epochs" in err
+    assert "SIGINT: stopping at the end of this epoch" in err
+    assert "interrupted at epoch 2: no model.pt written; resume with ckpt_path=" in err
+    assert "interrupted.ckpt (written at the end of that epoch)" in err and "last.ckpt is written every 2 epochs" in err
     assert not (tmp_path / "run" / "model.pt").exists()
     # auto_resume=false starts afresh in that folder: Lightning's OnExceptionCheckpoint made fit() restore the
     # newest last/interrupted checkpoint there by itself (gyrodenoise.interruption_checkpoint)

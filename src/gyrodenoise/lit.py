@@ -37,6 +37,9 @@ class DenoiserModule(L.LightningModule):
         self.model = build_model(**model)
         self.loss_fn = IncrementLoss(**loss)
         self.figure_every_n_val = figure_every_n_val
+        # the run's seed and data settings (train.resume_settings), written into checkpoints so that a resume with
+        # others is refused as one with another model is (they are not hyperparameters of the module)
+        self.run_settings: dict | None = None
         # validation figures are drawn in one background thread: ~1 s a set on a CPU core, and an 1800-epoch run
         # draws 8 sets, beside a fit of 22-26 s on an H200 (GPU call 8; the saving there not measured yet);
         # on_train_end waits for them
@@ -285,6 +288,8 @@ class DenoiserModule(L.LightningModule):
         dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
         if dm is not None and hasattr(dm, "model_meta"):  # the data facts travel with a checkpoint copied elsewhere
             checkpoint["data_facts"] = dm.model_meta()
+        if self.run_settings is not None:
+            checkpoint["run_settings"] = self.run_settings
 
     def on_load_checkpoint(self, checkpoint: dict) -> None:
         states = checkpoint.get("rng_states")  # absent in checkpoints written before it was saved: resume as before

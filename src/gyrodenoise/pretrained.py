@@ -49,8 +49,9 @@ def save_model(model: CorrectionModel, model_cfg: dict, path: str | Path, meta: 
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         "meta": meta,
     }
-    with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+    # to a file object: the archive's entries are then named archive/..., not after the random temporary file
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        torch.save(payload, f)
     return path
 
 

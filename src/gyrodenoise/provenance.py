@@ -18,6 +18,20 @@ def machine_description() -> str:
     return f"{platform.node()} ({cpu}, {os.cpu_count()} CPU threads, torch {torch.__version__}, {gpu})"
 
 
+def library_versions() -> dict[str, str]:
+    """Python's version and the libraries a run's figures depend on, for summaries (a rerun that differs may owe it
+    to one of them)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for name in ("torch", "lightning", "numpy", "scipy", "hydra-core", "omegaconf"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            continue
+    return out
+
+
 def git_revision(repo: Path, scope: str | None = None, untracked: bool = False) -> tuple[str, bool] | None:
     """(short commit of HEAD, whether the work tree differs from it under `scope`, untracked files counted only
     if `untracked`) of the checkout at `repo`; None without git or outside a checkout."""
@@ -42,7 +56,8 @@ def code_version() -> dict:
     out: dict = {"package": gyrodenoise.__version__}
     package = Path(gyrodenoise.__file__).resolve().parent
     repo = package.parents[1]
-    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src")) is not None:
+    # a new module under src/ changes the code as an edited one does: untracked files count
+    if (repo / "pyproject.toml").is_file() and (rev := git_revision(repo, scope="src", untracked=True)) is not None:
         out["commit"], out["dirty"] = rev
     elif (info := package / "_build_info.json").is_file():
         built = json.loads(info.read_text(encoding="utf-8"))

@@ -16,6 +16,7 @@ validation and test metrics of the kept weights).
 from __future__ import annotations
 
 import math
+import os
 import shlex
 import signal
 import sys
@@ -44,7 +45,7 @@ from gyrodenoise.notices import device_lines_said, lightning_lines_once, quiet_l
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.provenance import code_version as _code_version
-from gyrodenoise.provenance import machine_description
+from gyrodenoise.provenance import library_versions, machine_description
 from gyrodenoise.run_record import restored_on_refusal
 from gyrodenoise.tables import markdown_table
 
@@ -285,7 +286,7 @@ def _say_how_to_resume(trainer: L.Trainer, cfg: DictConfig) -> None:
     where = f"ckpt_path={saved[0]}" if saved else "ckpt_path=<a run's checkpoints/last.ckpt>"
     print(
         f"interrupted at epoch {trainer.current_epoch}: no model.pt written; resume with {where}"
-        + (" (written at the interruption)" if saved and saved[0].name == "interrupted.ckpt" else "")
+        + (" (written at the end of that epoch)" if saved and saved[0].name == "interrupted.ckpt" else "")
         + f", or {_rerun_in_folder(cfg)}: a run folder holding an unfinished "
         f"run resumes from its newest checkpoint (auto_resume; last.ckpt is {_last_ckpt_cadence(cfg)})",
         file=sys.stderr,
@@ -345,13 +346,32 @@ def _flat(tree: object, prefix: str = "") -> dict[str, object]:
     return {prefix[:-1]: list(tree) if isinstance(tree, tuple) else tree}
 
 
-def check_resumed_settings(ckpt_path: str, hparams: dict) -> None:
-    """ConfigError when the command's model, optimiser, schedule or loss differ from those the checkpoint was trained
-    with: the resumed fit goes on with the checkpoint's weights, optimiser and schedule, so the new values would be
-    recorded in summary.json but not used (a changed network ends in a size-mismatch traceback)."""
-    saved = torch.load(ckpt_path, map_location="cpu", weights_only=False).get("hyper_parameters") or {}
-    was = _flat(OmegaConf.to_container(OmegaConf.create(dict(saved)), resolve=True))
+# data settings that change nothing of what a run learns (where the files are, what is scored after the fit)
+DATA_RUNTIME_ONLY = ("root", "cache_dir", "test_seqs", "eval_gt_variants", "inconsistent_truth")
+
+
+def resume_settings(cfg: DictConfig) -> dict:
+    """The seed and the data settings a checkpoint records beside the module's hyperparameters
+    (`check_resumed_settings`): a resume with another seed or other data would record them in summary.json and go on
+    with the checkpoint's random stream, and mix two data settings in one run."""
+    data = {k: v for k, v in OmegaConf.to_container(cfg.dataset, resolve=True).items() if k not in DATA_RUNTIME_ONLY}
+    return {"seed": cfg.get("seed"), "dataset": portable_tree(data)}
+
+
+def check_resumed_settings(ckpt_path: str, hparams: dict, settings: dict | None = None) -> int:
+    """ConfigError when the command's model, optimiser, schedule or loss, or (`settings`, checkpoints written since
+    they record them) its seed and data settings, differ from those the checkpoint was trained with: the resumed fit
+    goes on with the checkpoint's weights, optimiser, schedule and random stream, so the new values would be recorded
+    in summary.json but not used (a changed network ends in a size-mismatch traceback). Returns the checkpoint's
+    epochs done."""
+    ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+    was = _flat(OmegaConf.to_container(OmegaConf.create(dict(ckpt.get("hyper_parameters") or {})), resolve=True))
     now = _flat(OmegaConf.to_container(OmegaConf.create(hparams), resolve=True))
+    if settings is not None and ckpt.get("run_settings") is not None:
+        if settings.get("seed") is None:  # seed=null resumed: the run goes on with the seed its first part drew
+            settings["seed"] = ckpt["run_settings"].get("seed")
+        was |= _flat(ckpt["run_settings"])
+        now |= _flat(settings)
     differ = [k for k in sorted(set(was) | set(now)) if k not in RUNTIME_ONLY and was.get(k) != now.get(k)]
     if differ:
         listed = "; ".join(f"{k}={was.get(k)!r} there, {now.get(k)!r} here" for k in differ[:6])
@@ -360,6 +380,7 @@ def check_resumed_settings(ckpt_path: str, hparams: dict) -> None:
             "with the checkpoint's weights, optimiser and schedule, so these would be recorded but not used. Give the "
             "run's settings to resume it, or start afresh (auto_resume=false, or another hydra.run.dir)."
         )
+    return int(ckpt.get("epoch", -1)) + 1  # written at an epoch's end: Lightning's 0-based epoch of that end
 
 
 def _keep_earlier_csv_curves(loggers: list) -> None:
@@ -393,6 +414,7 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     from lightning.pytorch.utilities.exceptions import SIGTERMException
 
     from gyrodenoise.data.datamodule import TAIL_NAME_NOTE
+    from gyrodenoise.interruption_checkpoint import stopped_by
     from gyrodenoise.lit import DenoiserModule
     from gyrodenoise.run_loggers import log_run_end
 
@@ -409,6 +431,10 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
             f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
             f"a run's checkpoints/last.ckpt ({_last_ckpt_cadence(cfg)}), or leave ckpt_path out to start afresh"
         )
+    if cfg.get("seed") is None and not cfg.get("ckpt_path"):  # drawn, and recorded, so that the run can be rerun
+        with open_dict(cfg):
+            cfg.seed = int.from_bytes(os.urandom(4), "little") >> 1
+        print(f"note: seed=null: drew seed={cfg.seed} (recorded in summary.json; seed={cfg.seed} reruns this run)")
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -420,8 +446,12 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
             "their test figures are not held out"
         )
     module = build_module(cfg)
+    module.run_settings = resume_settings(cfg)
+    resumed_at = None
     if cfg.get("ckpt_path"):
-        check_resumed_settings(cfg.ckpt_path, dict(module.hparams))
+        resumed_at = check_resumed_settings(cfg.ckpt_path, dict(module.hparams), module.run_settings)
+        with open_dict(cfg):
+            cfg.seed = module.run_settings["seed"]
     loggers = [hydra.utils.instantiate(lg) for lg in (cfg.get("logger") or {}).values()]
     callbacks = [hydra.utils.instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     if not loggers:  # Lightning refuses a learning-rate monitor without a logger
@@ -445,15 +475,20 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
     start = time.time()
     try:
         trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
-    except SystemExit as e:  # Ctrl-C, SIGTERM (SLURM time limit, scancel): say what was kept and how to go on
+    except SystemExit as e:  # a second Ctrl-C, or a SIGTERM without our callback: say what was kept, how to go on
         if trainer.interrupted:
             _say_how_to_resume(trainer, cfg)
         if isinstance(e, SIGTERMException):  # Lightning raises it with no code: the process would exit 0
             raise SystemExit(128 + signal.SIGTERM) from None
+        if trainer.interrupted and e.code == 1:  # Lightning's exit after a KeyboardInterrupt: the shell's code for it
+            raise SystemExit(128 + signal.SIGINT) from None
         raise
     except TrainingDiverged:  # its weights are NaN: nothing to resume from (auto_resume would pick it up)
         (out_dir / "checkpoints" / "interrupted.ckpt").unlink(missing_ok=True)
         raise
+    if (signum := stopped_by(trainer)) is not None:  # stopped at an epoch's end, interrupted.ckpt written
+        _say_how_to_resume(trainer, cfg)
+        raise SystemExit(128 + signum)
     wall_s = time.time() - start
     step_kind = module.step_kind  # before `module` may become the best checkpoint's
     # with weight averaging (callbacks=ema) the run also scores its final weights without it (paired)
@@ -519,10 +554,11 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "seed": cfg.get("seed"),
         "dataset": cfg.dataset.name,
         "model": OmegaConf.to_container(cfg.model, resolve=True),
-        "train_wall_time_s": wall_s,
+        "train_wall_time_s": wall_s,  # of this process's fit: a resumed run's, from the resume on
         "training_step": step_kind,
         "epochs": trainer.current_epoch,
         "machine": machine_description(),
+        "versions": library_versions(),
         "torch_threads": torch.get_num_threads(),  # the figures reproduce to the digit at the same count
         "code_version": loaded_code_version(),
         "selection": cfg.select,
@@ -534,6 +570,8 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         "val": val,
         "test": test,
     }
+    if resumed_at is not None:  # the checkpoint itself may be gone (interrupted.ckpt is removed at the end)
+        summary["resumed_from"] = {"checkpoint": portable_path(cfg.ckpt_path), "epochs_done": resumed_at}
     if leak is not None:
         summary["causality_leak"] = leak
     if safety:
