@@ -60,6 +60,12 @@ def test_evaluate_v1_01_both_ground_truths_matches_report(euroc_root, tmp_path):
     assert set(rows) == {"V1_01_easy (data_recomputed_openvins)", "V1_01_easy (original GT)"}
     # shipped models by their shipped name: the install folder is not a fact about the results
     assert summary["models"] == {"proposed": "euroc", "calibrated IMU": "euroc-calibrated"}
+    # which files were scored, and by which code (a reproducibility audit found neither recorded)
+    from gyrodenoise.pretrained import resolve
+    from gyrodenoise.provenance import file_sha256
+
+    assert summary["model_sha256"]["proposed"] == file_sha256(resolve("euroc"))
+    assert "package" in summary["code_version"] and "torch" in summary["versions"]
     committed = json.loads((REPO / "reports" / "euroc" / "results.json").read_text())["aoe_deg"]
     for row, methods in rows.items():
         for method, values in methods.items():

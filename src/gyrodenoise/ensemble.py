@@ -23,7 +23,6 @@ recordings, against which `correct` and `evaluate` check new recordings (`gyrode
 from __future__ import annotations
 
 import argparse
-import hashlib
 import math
 import re
 import sys
@@ -35,12 +34,9 @@ from gyrodenoise.models.ensemble import EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings
 from gyrodenoise.paths import portable_path
 from gyrodenoise.pretrained import ModelQualityWarning, load_model, save_model
+from gyrodenoise.provenance import file_sha256
 
 RATE_RTOL = 0.01  # members trained at rates further apart than this see different physics per sample
-
-
-def _sha256(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def _seed(path: Path, meta: dict) -> int | None:
@@ -64,7 +60,7 @@ def member_record(path: str | Path, meta: dict) -> dict:
     test = meta.get("test") or {}
     return {
         "path": str(path),
-        "sha256": _sha256(path),
+        "sha256": file_sha256(path),
         "model": meta.get("model"),
         "dataset": meta.get("dataset"),
         "sensor": meta.get("sensor"),

@@ -67,7 +67,7 @@ from gyrodenoise.pretrained import (
     other_rate_warning,
     training_overlap_warning,
 )
-from gyrodenoise.provenance import machine_description
+from gyrodenoise.provenance import code_version, file_sha256, library_versions, machine_description
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import spread_ratio, spread_warning
 from gyrodenoise.tables import csv_text, markdown_table
@@ -371,10 +371,18 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
         "command": recorded_command("evaluate"),
         "config": portable_tree(OmegaConf.to_container(cfg, resolve=True)),
         "machine": machine_description(),
+        "code_version": code_version(),
+        "versions": library_versions(),
         "dataset": dm.name,
         "data_root": portable_path(dm.root),
         "split": split,
         "models": names,  # no machine paths
+        # which files were scored, whatever their names: a retrained run folder keeps its model.pt's name
+        "model_sha256": {
+            m: file_sha256(meta["path"])
+            for m, meta in (("proposed", proposed_meta), ("calibrated IMU", calibrated_meta))
+            if meta.get("path") and Path(meta["path"]).is_file()
+        },
         "averaged_sequences": averaged,
         "aoe_definition": AOE_DEFINITION,
         "samples": {n: len(seq) for n, seq in sequences.items()},

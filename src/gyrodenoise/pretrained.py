@@ -12,7 +12,6 @@ Safety metadata: `beats_calibrated` (True / False / None: unknown) says whether 
 
 from __future__ import annotations
 
-import hashlib
 import inspect
 import warnings
 from importlib import resources
@@ -25,6 +24,7 @@ from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.models.build import build_model
 from gyrodenoise.models.ensemble import CorrectionModel
 from gyrodenoise.paths import portable_path
+from gyrodenoise.provenance import file_sha256
 
 FORMAT = "gyrodenoise-model/1"
 
@@ -63,7 +63,7 @@ def custom_source(model: torch.nn.Module) -> dict | None:
         return {
             "module": type(model).__module__,
             "file": file.name,
-            "sha256": hashlib.sha256(file.read_bytes()).hexdigest(),
+            "sha256": file_sha256(file),
         }
     except (TypeError, OSError):  # a class defined in a notebook or a REPL has no file
         return None
