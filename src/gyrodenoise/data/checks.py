@@ -16,7 +16,14 @@ import numpy as np
 
 from gyrodenoise.data.gyro_scale import gyro_scale_verdict, gyro_unit_message
 from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording, time_units_for_period
-from gyrodenoise.data.readers import GAP_FACTOR, IMU_RATE_RANGE_HZ, DataFormatError, burst_advice, burst_rate_hz
+from gyrodenoise.data.readers import (
+    GAP_FACTOR,
+    IMU_RATE_RANGE_HZ,
+    DataFormatError,
+    back_in_time_advice,
+    burst_advice,
+    burst_rate_hz,
+)
 
 GYRO_P99_MAX = 15.0  # rad/s (860 deg/s); hand-held and drone motion stays well below at the 99th percentile
 # beyond these no MEMS IMU measures (gyro full scales stop at ~4000 deg/s, accelerometers at a few hundred g):
@@ -65,8 +72,11 @@ def check_time_order(rec: ImuRecording, drop_duplicates: bool = False, report: C
         k = int(back[0]) + 1
         raise SanityCheckError(
             f"{_where(rec, k)}: timestamp ({rec.describe('t')}) goes back in time from line "
-            f"{rec.lines[k - 1]} ({back.size} such places). Sort the file by time "
-            "(e.g. `sort -t, -k1,1n`) or check that --columns maps the time column."
+            f"{rec.lines[k - 1]} ({back.size} such places). "
+            + (
+                back_in_time_advice(rec.t_ns, rec.lines)
+                or "Sort the file by time (e.g. `sort -t, -k1,1n`) or check that --columns maps the time column."
+            )
         )
     # a line repeating the one before exactly (a logger that wrote a sample twice) is one sample: kept once, said, as
     # the ASL reader of training does (it refused the recording before, while training read the same file)

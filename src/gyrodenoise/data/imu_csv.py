@@ -115,9 +115,16 @@ def time_units_for_period(period: float) -> list[str]:
 def beyond_int64_advice(steps: np.ndarray, unit: str) -> str:
     """What to say of stamps that overflow int64 ns when read in `unit` (nanoseconds read as seconds); `steps`: the
     differences of the stamps in the file's own numbers. Worded for the command line (`--time-unit`)."""
-    fits = time_units_for_period(float(np.median(steps))) if len(steps) else []
-    hint = f"pass --time-unit {fits[0]}" if fits else "check the time unit and the time column"
-    return f"beyond what int64 nanoseconds hold (the year 2262): the stamps are in a finer unit than {unit}; {hint}"
+    fits = [u for u in (time_units_for_period(float(np.median(steps))) if len(steps) else []) if u != unit]
+    if unit == "ns" or not fits:  # read as ns already: no finer unit to offer; the column is not a time in ns
+        return (
+            f"beyond what int64 nanoseconds hold (the year 2262) read as {unit}: check the time column (--columns) and "
+            "its unit (--time-unit)"
+        )
+    return (
+        f"beyond what int64 nanoseconds hold (the year 2262): the stamps are in a finer unit than {unit}; "
+        f"pass --time-unit {fits[0]}"
+    )
 
 
 def _refuse_stamps_beyond_int64(stamps: list[int], lines: np.ndarray, path: Path, unit: str) -> None:

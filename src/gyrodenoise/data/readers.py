@@ -243,6 +243,26 @@ def _drop_repeated_lines(
     return t_ns[keep], values[keep], lines[keep]
 
 
+def back_in_time_advice(t_ns: np.ndarray, lines: np.ndarray) -> str | None:
+    """For stamps that go back at exactly one place, by far more than a sample period, and run forward on either side
+    of it: a clock that restarted or a counter that wrapped, which sorting would make worse (the later part would be
+    put before the earlier one). None otherwise."""
+    d = np.diff(t_ns)
+    back = np.flatnonzero(d < 0)
+    if back.size != 1 or (d > 0).sum() < 2:
+        return None
+    k = int(back[0])
+    period = float(np.median(d[d > 0]))
+    if -d[k] < 100 * period:
+        return None
+    return (
+        f"The stamps go back once, by {-d[k] * 1e-9:.6g} s, at line {lines[k + 1]} and run forward on either side: the "
+        "clock restarted there, or a counter wrapped. Sorting would put the later part first; split the file at that "
+        "line into two recordings (each corrected on its own), or unwrap the counter (add its range to the stamps "
+        "after the line)."
+    )
+
+
 def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> None:
     d = np.diff(t_ns)
     if (d == 0).any():
@@ -257,7 +277,7 @@ def _check_time(path: Path, t_ns: np.ndarray, lines: np.ndarray, what: str) -> N
         k = int(np.argmax(d < 0))
         raise DataFormatError(
             f"{path}:{lines[k + 1]}: timestamp {t_ns[k + 1]} goes back in time (previous line {lines[k]} "
-            f"has {t_ns[k]}). The {what} must be sorted by time."
+            f"has {t_ns[k]}). " + (back_in_time_advice(t_ns, lines) or f"The {what} must be sorted by time.")
         )
 
 
