@@ -20,6 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -39,10 +40,10 @@ OUT = Path("reports/accuracy")
 ABLATION_SEEDS = (0, 2, 3, 5)
 
 
-def load(pattern: str) -> list[tuple[Path, dict]]:
+def load(pattern: str, seeds: tuple[int, ...] = ABLATION_SEEDS) -> list[tuple[Path, dict]]:
     found = [(p, json.loads(p.read_text())) for p in sorted(Path(".").glob(pattern))]
     if pattern.startswith("reports/ablation_runs/"):
-        found = [(p, s) for p, s in found if s["seed"] in ABLATION_SEEDS]
+        found = [(p, s) for p, s in found if s["seed"] in seeds]
     return found
 
 
@@ -59,15 +60,18 @@ def metric(s: dict, key: str) -> float:
     return float(v) if v is not None else math.nan
 
 
-def rank_correlation() -> dict:
-    """Old vs new validation figure against the test, over ablation arms (recipes) and over runs."""
+def _arms(seeds: tuple[int, ...]) -> dict[str, list[dict]]:
     arms: dict[str, list[dict]] = defaultdict(list)
-    for p, s in load("reports/ablation_runs/*/*.json"):
+    for p, s in load("reports/ablation_runs/*/*.json", seeds):
         arms[f"{p.parent.name}/{p.stem.rsplit('_s', 1)[0]}"].append(s)
+    return arms
+
+
+def _arm_rows(arms: dict[str, list[dict]], n_seeds: int) -> list[dict]:
     rows = []
     for name, rs in sorted(arms.items()):
         tail = [metric(s, "val_tail/aoe_deg") for s in rs]
-        if len(rs) < 4 or not all(math.isfinite(t) for t in tail):
+        if len(rs) < n_seeds or not all(math.isfinite(t) for t in tail):
             continue  # an arm trained on whole flights has no tail: left out of both correlations
         rows.append(
             {
@@ -78,6 +82,46 @@ def rank_correlation() -> dict:
                 "old": statistics.fmean(tail),
             }
         )
+    return rows
+
+
+def rank_uncertainty(rows: list[dict], n_boot: int = 20000) -> dict:
+    """How sure the recipe-level comparison is (added after an audit of the statistics, not a selection figure): a
+    bootstrap over the recipes (seeded) of new - old Spearman; the same correlations with all six seeds (seeds 1 and
+    4 came after the figure was fixed); Spearman within each fold (the run-level figure pools folds of different
+    difficulty)."""
+    rng = np.random.default_rng(0)
+    x = np.array([[r["new"], r["old"], r["test"]] for r in rows])
+    diffs = []
+    for _ in range(n_boot):
+        i = rng.integers(0, len(x), len(x))
+        diffs.append(spearmanr(x[i, 0], x[i, 2])[0] - spearmanr(x[i, 1], x[i, 2])[0])
+    diffs = np.array(diffs)[np.isfinite(diffs)]
+    six = _arm_rows(_arms(tuple(range(6))), 6)
+    within = {}
+    for seed in ABLATION_SEEDS:  # the held-out flight is the seed's fold
+        runs = [s for rs in _arms((seed,)).values() for s in rs if math.isfinite(metric(s, "val_tail/aoe_deg"))]
+        within[seed] = {
+            k: float(spearmanr([metric(s, key) for s in runs], [metric(s, "test/aoe_deg") for s in runs])[0])
+            for k, key in (("new", "val/aoe_deg"), ("old", "val_tail/aoe_deg"))
+        }
+    return {
+        "new_minus_old": float(spearmanr(x[:, 0], x[:, 2])[0] - spearmanr(x[:, 1], x[:, 2])[0]),
+        "bootstrap_95": [float(v) for v in np.percentile(diffs, [2.5, 97.5])],
+        "bootstrap_p_new_not_better": float(np.mean(diffs <= 0)),
+        "n_boot": n_boot,
+        "six_seeds": {
+            "n_arms": len(six),
+            **{k: float(spearmanr([r[k] for r in six], [r["test"] for r in six])[0]) for k in ("new", "old")},
+        },
+        "within_fold": within,
+    }
+
+
+def rank_correlation() -> dict:
+    """Old vs new validation figure against the test, over ablation arms (recipes) and over runs."""
+    arms = _arms(ABLATION_SEEDS)
+    rows = _arm_rows(arms, 4)
     runs = [s for rs in arms.values() for s in rs if math.isfinite(metric(s, "val_tail/aoe_deg"))]
     res = {
         "arms": rows,
@@ -88,6 +132,7 @@ def rank_correlation() -> dict:
         },
         "n_arms": len(rows),
         "n_runs": len(runs),
+        "uncertainty": rank_uncertainty(rows),
     }
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for ax, k, label in ((axes[0], "new", "held-out flight (new)"), (axes[1], "old", "end of training flights (old)")):
