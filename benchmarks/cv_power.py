@@ -59,7 +59,8 @@ def row(label: str, s: FoldSeedSpread, scale=lambda x: x) -> str:
     mde = " | ".join(f"{scale(s.detectable(n)):.2f}" for n in SEED_COUNTS)
     need = s.seeds_for(s.mean)
     return (
-        f"| {label} | {s.n_seeds} | {scale(s.mean):+.2f} | {scale(s.between_sd):.2f} | {scale(s.within_sd):.2f} | "
+        f"| {label} | {s.n_seeds} | {scale(s.mean):+.2f} | {scale(s.between_sd):.2f} "
+        f"({scale(s.between_sd_upper()):.2f}) | {scale(s.within_sd):.2f} | "
         f"{s.interaction_f:.1f} (p {s.interaction_p:.3f}) | {mde} | {'never' if math.isinf(need) else f'{need:.0f}'} |"
     )
 
@@ -98,7 +99,8 @@ def main() -> int:
     ref_seed_sd = ref.std(axis=1, ddof=1)
 
     head = (
-        "| arm - ref | seeds per fold | mean d | sd between folds | sd within a fold (seed) | F (p: no fold effect) | "
+        "| arm - ref | seeds per fold | mean d | sd between folds (upper end of its 95 % interval) | "
+        "sd within a fold (seed) | F (p: no fold effect) | "
         + " | ".join(f"detectable at {'inf' if math.isinf(n) else n} seeds" for n in SEED_COUNTS)
         + " | seeds per fold to detect the mean d |"
     )
@@ -142,6 +144,7 @@ def main() -> int:
                     "n_seeds": s.n_seeds,
                     "mean": s.mean,
                     "between_sd": s.between_sd,
+                    "between_sd_upper_95": s.between_sd_upper(),
                     "within_sd": s.within_sd,
                     "interaction_f": s.interaction_f,
                     "interaction_p": s.interaction_p,

@@ -436,3 +436,35 @@ def test_fold_seed_spread_splits_a_hand_example_and_recovers_a_simulated_one():
         fold_seed_spread(np.ones((6, 1)))
     with pytest.raises(ValueError, match="2 folds"):
         fold_seed_spread(np.ones(6))
+
+
+def test_the_detectable_difference_has_the_power_it_claims():
+    """A simulation of the paired t-test at the difference `detectable_difference` gives: 80 % of the tests resolve
+    it (the usual approximation, 0.7 % smaller at n = 6, had 79 %)."""
+    rng = np.random.default_rng(0)
+    n, sims = 6, 40000
+    delta = detectable_difference(1.0, n)
+    d = rng.normal(delta, 1.0, (sims, n))
+    p = stats.ttest_1samp(d, 0.0, axis=1).pvalue
+    assert abs(np.mean(p < 0.05) - 0.8) < 0.006
+    with pytest.raises(ValueError, match="negative"):
+        detectable_difference(-1.0, 6)
+    with pytest.raises(ValueError, match="power"):
+        detectable_difference(1.0, 6, power=0.01)
+
+
+def test_statistics_of_inputs_that_carry_none_are_refused_or_nan():
+    """From an audit: constant differences gave a certain fold effect (F inf, p 0), NaN pairs a wrong reason, p-values
+    outside [0, 1] were clipped without a word, zero seeds a ZeroDivisionError."""
+    s = fold_seed_spread(np.full((3, 2), 0.4))
+    assert math.isnan(s.interaction_f) and math.isnan(s.interaction_p)
+    with pytest.raises(ValueError, match="finite"):
+        PairedDiff(("0", "1", "2"), (0.1, math.nan, 0.2))
+    with pytest.raises(ValueError, match="2 seeds for 3"):
+        PairedDiff(("0", "1"), (0.1, 0.2, 0.3))
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        ablation_stats.holm([0.2, 1.3])
+    spread = fold_seed_spread(np.array([[1.0, 2.0], [3.0, 5.0], [0.0, 1.0]]))
+    with pytest.raises(ValueError, match="at least 1"):
+        spread.detectable(0)
+    assert spread.between_sd_upper() >= spread.between_sd

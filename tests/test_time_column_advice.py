@@ -21,7 +21,8 @@ def test_a_clock_that_restarts_once_is_told_to_be_split_not_sorted(tmp_path):
     period = 5_000_000
     stamps = [10**15 + k * period for k in range(3000)] + [k * period for k in range(3000)]
     rec = read_imu_csv(_write(tmp_path / "reset.csv", stamps))
-    with pytest.raises(SanityCheckError, match=r"reset.csv:3002.*restarted there, or a counter wrapped.*split the file"):
+    said = r"reset.csv:3002.*restarted there, or a counter wrapped.*split the file"
+    with pytest.raises(SanityCheckError, match=said):
         run_checks(rec, 200.0)
 
 
