@@ -51,6 +51,9 @@ def aoe(R_gt: np.ndarray, R_est: np.ndarray, mask: np.ndarray | None = None) -> 
     """(AOE 3D, AOE yaw) in radians over the samples where `mask` is True."""
     e3d, eyaw = orientation_errors(R_gt, R_est)
     if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype != bool or mask.shape != e3d.shape:  # integers would index samples, not select them
+            raise ValueError(f"mask: a boolean array of shape {e3d.shape}, got {mask.dtype} {mask.shape}")
         e3d, eyaw = e3d[mask], eyaw[mask]
     return float(np.sqrt(np.mean(e3d**2))), float(np.sqrt(np.mean(eyaw**2)))
 

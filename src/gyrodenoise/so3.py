@@ -91,7 +91,10 @@ def exp(phi: torch.Tensor) -> torch.Tensor:
     theta = theta2_safe.sqrt()
     # Taylor terms beyond theta^2 are below float64 resolution for theta < _SMALL
     a = torch.where(small, 1.0 - theta2 / 6.0, torch.sin(theta) / theta)
-    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / theta2_safe)
+    # (1 - cos t) / t^2 as 0.5 (sin(t/2) / (t/2))^2: the same value without the cancellation that cost its Jacobian
+    # ~1e-11 just above _SMALL
+    half = theta / 2
+    b = torch.where(small, 0.5 - theta2 / 24.0, 0.5 * (torch.sin(half) / half) ** 2)
     eye = torch.eye(3, dtype=phi.dtype, device=phi.device)
     return (1.0 - b * theta2) * eye + a * hat(phi) + b * (phi[..., :, None] * phi[..., None, :])
 
@@ -122,8 +125,10 @@ def log(R: torch.Tensor) -> torch.Tensor:
     s2 = (v * v).sum(-1)
     small = s2 < _SMALL**2
     s = torch.where(small, 1.0, s2).sqrt()
-    # angle / sin(angle/2) = 2 atan2(s, w) / s; Taylor for s -> 0 (w -> 1)
-    factor = torch.where(small, 2.0 / w - 2.0 * s2 / (3.0 * w**3), 2.0 * torch.atan2(s, w) / s)
+    # angle / sin(angle/2) = 2 atan2(s, w) / s; Taylor for s -> 0 (w -> 1). The branch not taken still gets a
+    # gradient: w = 1 there, or a rotation by exactly pi (w = 0) had NaN gradients through 2 / w
+    w_taylor = torch.where(small, w, 1.0)
+    factor = torch.where(small, 2.0 / w_taylor - 2.0 * s2 / (3.0 * w_taylor**3), 2.0 * torch.atan2(s, w) / s)
     return v * factor[..., None]
 
 
@@ -134,6 +139,11 @@ def tree_product(R: torch.Tensor, levels: int) -> torch.Tensor:
     block k is R[k*m] @ R[k*m+1] @ ... @ R[k*m+m-1] (m = 2**levels), the ordered product that
     right-multiplied integration needs.
     """
+    if R.shape[-3] % (1 << levels):
+        raise ValueError(
+            f"tree_product: {R.shape[-3]} matrices do not split into blocks of 2**{levels} = {1 << levels}; give a "
+            "multiple of the block (the loss's crops are multiples of its longest increment)"
+        )
     for _ in range(levels):
         # unbind, not R[..., 0::2] and R[..., 1::2]: its gradient is one stack, not two zero-filled copies
         even, odd = R.unflatten(-3, (-1, 2)).unbind(-3)
@@ -146,7 +156,13 @@ def integrate_gyro_torch(R0: torch.Tensor, gyro: torch.Tensor, dt: torch.Tensor)
 
     gyro: (N, 3) rad/s, dt: (N,) s (dt[0] unused), R0: (3, 3). Returns (N, 3, 3).
     """
-    gyro, dt = gyro.double(), dt.double()
+    if dt.dtype != torch.float64:  # DESIGN.md: time is float64; float32 steps drift 9e-6 rad in 1e5 steps
+        raise ValueError(f"dt is {dt.dtype}; give the steps in float64 seconds (time is never float32)")
+    if len(dt) > 1 and not 0 <= (med := float(dt[1:].median())) <= MAX_STEP_S:
+        raise ValueError(f"dt: median step {med:.4g}; expected sample periods in seconds (0.005 at 200 Hz)")
+    if len(gyro) == 0:
+        return torch.zeros((0, 3, 3), dtype=torch.float64, device=gyro.device)
+    gyro = gyro.double()
     prefix = torch.cat([torch.eye(3, dtype=gyro.dtype, device=gyro.device)[None], exp(gyro[1:] * dt[1:, None])])
     shift = 1
     while shift < len(prefix):  # Hillis-Steele inclusive scan, out of place
@@ -178,6 +194,17 @@ def integrate_gyro(R0: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> np.ndarr
         )
     if np.shape(R0) != (3, 3):
         raise ValueError(f"R0 has shape {np.shape(R0)}; expected a (3, 3) rotation matrix (body to world)")
+    r0 = np.asarray(R0, dtype=np.float64)
+    if not np.allclose(r0.T @ r0, np.eye(3), atol=1e-6) or not np.isclose(np.linalg.det(r0), 1.0, atol=1e-6):
+        raise ValueError("R0 is not a rotation matrix (R0^T R0 = I, det 1 within 1e-6)")
+    if not np.isfinite(gyro).all():
+        k = int(np.argmax(~np.isfinite(gyro).all(axis=1)))
+        raise ValueError(f"gyro row {k} is not finite: every orientation after it would be NaN")
+    if len(dt) > 1 and not (np.isfinite(dt[1:]).all() and (dt[1:] >= 0).all()):
+        k = 1 + int(np.argmax(~(np.isfinite(dt[1:]) & (dt[1:] >= 0))))
+        raise ValueError(f"dt[{k}] = {dt[k]}: steps must be finite and >= 0 (stamps in order)")
+    if len(gyro) == 0:
+        return np.zeros((0, 3, 3))
     steps = Rotation.from_rotvec(gyro[1:] * dt[1:, None]).as_matrix()
     prefix = np.concatenate([np.eye(3)[None], steps], axis=0)
     shift = 1
@@ -185,7 +212,7 @@ def integrate_gyro(R0: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> np.ndarr
     while shift < n:  # Hillis-Steele inclusive scan: prefix[k] = steps[1] ... steps[k]
         prefix[shift:] = prefix[:-shift] @ prefix[shift:]
         shift *= 2
-    return np.asarray(R0, dtype=np.float64) @ prefix
+    return r0 @ prefix
 
 
 def relative_rotvec(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
