@@ -221,7 +221,7 @@ def test_scale_cli_calibrates_the_spread_and_keeps_the_mean(tmp_path, capsys):
     )
     assert "no spread to scale" in capsys.readouterr().err
     assert ensemble_cli.main(["scale", str(raw), "--by", "0", "--fitted-by", "x", "--out", str(tmp_path / "s.pt")]) == 2
-    assert "must be a positive number" in capsys.readouterr().err and not (tmp_path / "s.pt").exists()
+    assert "a spread factor from 0.001 to 1000" in capsys.readouterr().err and not (tmp_path / "s.pt").exists()
 
 
 @pytest.mark.slow

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.arrays import as_rows
 from gyrodenoise.atomic import output_path_problem, write_json, write_text
-from gyrodenoise.data.checks import CheckReport, SanityCheckError, SanityWarning, run_checks
+from gyrodenoise.data.checks import GYRO_ABS_MAX, CheckReport, SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import (
     ACC_UNITS,
     GYRO_UNITS,
@@ -53,7 +53,7 @@ from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings
 from gyrodenoise.paths import portable_command, portable_path
 from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_quality_warning, model_rate, sensor_model
 from gyrodenoise.so3 import integrate_gyro
-from gyrodenoise.spread_check import spread_ratio, spread_warning
+from gyrodenoise.spread_check import no_reference_note, spread_ratio, spread_warning, worst_window
 from gyrodenoise.streaming import StreamingCorrector
 from gyrodenoise.trajectory_files import tum_text
 
@@ -174,6 +174,14 @@ def correct_recording(
     if need_resample:
         rec = resample(rec, rate)
     gyro, std = correct_gyro(model, rec.imu, engine)
+    if not np.isfinite(gyro).all() or np.abs(gyro).max(initial=0.0) > GYRO_ABS_MAX:
+        # the recording passed its checks: corrections no gyro measures come from the model (damaged weights)
+        k = int(np.argmax(~np.isfinite(gyro).all(1) | (np.abs(gyro) > GYRO_ABS_MAX).any(1)))
+        raise SanityCheckError(
+            f"{meta.get('name', 'the model')}: its corrected gyro at sample {k} is {gyro[k].tolist()} rad/s, beyond "
+            f"what any gyro measures ({GYRO_ABS_MAX:g} rad/s) while the recording's is within it: the model file is "
+            "damaged or not a gyro model; load it again from its source"
+        )
     t = (rec.t_ns - rec.t_ns[0]) * 1e-9
     dt = np.diff(t, prepend=t[0])
     R = integrate_gyro(initial_rotation(initial, rec, report), gyro, dt)
@@ -352,7 +360,10 @@ def _main(argv: list[str] | None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     ratio = spread_ratio(res.std, meta)
-    model_warnings = [w for w in (model_quality_warning(meta), spread_warning(ratio, str(path), meta)) if w]
+    window = worst_window(res.std, meta, res.report.rate_hz)
+    model_warnings = [w for w in (model_quality_warning(meta), spread_warning(ratio, str(path), meta, window)) if w]
+    if res.std is not None and ratio is None:
+        print(f"note: {no_reference_note(meta)}")
     for w in [*model_warnings, *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
     if rec.units_from_header:  # read in the units its header declares: say so, the flags would override them
@@ -390,6 +401,7 @@ def _main(argv: list[str] | None) -> int:
         "ensemble_members": len(model.members) if res.std is not None else None,
         "mean_std_deg_s": None if res.std is None else float(np.degrees(np.linalg.norm(res.std, axis=1).mean())),
         "spread_ratio_to_training": ratio,  # None: a single model, or an ensemble without a spread reference
+        "spread_ratio_worst_window": None if window is None else {"ratio": window[0], "start_s": window[1]},
         "beats_calibrated": meta.get("beats_calibrated"),
         "model_trained_on": trained_on(meta),
         "warnings": model_warnings + res.report.warnings,
@@ -401,8 +413,8 @@ def _main(argv: list[str] | None) -> int:
         f"{f', resampled to {res.resampled_to_hz:g} Hz' if res.resampled_to_hz else ''}) with {meta['name']}; "
         f"mean correction {summary['mean_correction_deg_s']:.3f} deg/s"
         + (
-            f"; ensemble of {summary['ensemble_members']}: mean spread {summary['mean_std_deg_s']:.3f} deg/s "
-            "(columns w_std_x,y,z)"
+            f"; ensemble of {summary['ensemble_members']}: mean spread {summary['mean_std_deg_s']:.3f} deg/s (norm "
+            f"over the axes; columns w_std_x,y,z, means {'/'.join(f'{v:.3f}' for v in np.degrees(res.std.mean(0)))})"
             if res.std is not None
             else ""
         )

@@ -36,6 +36,7 @@ from gyrodenoise.paths import portable_path
 from gyrodenoise.pretrained import ModelQualityWarning, load_model, save_model
 from gyrodenoise.provenance import file_sha256
 
+SCALE_RANGE = (1e-3, 1e3)  # spread factors `scale` accepts
 RATE_RTOL = 0.01  # members trained at rates further apart than this see different physics per sample
 
 
@@ -176,6 +177,13 @@ def scale_spread(
 ) -> Path:
     """Write a copy of the ensemble file `model_path` whose std output is the members' std times `scale`
     (replacing any earlier factor); `fitted_by` says where the factor comes from (kept in the metadata)."""
+    if not SCALE_RANGE[0] <= float(scale) <= SCALE_RANGE[1]:  # NaN included
+        raise ValueError(
+            f"--by {scale:g}: a spread factor from {SCALE_RANGE[0]:g} to {SCALE_RANGE[1]:g} (1: the members' raw std; "
+            "fitted factors are ~0.5-2); beyond, the float32 std under- or overflows and the spread check goes off"
+        )
+    if not fitted_by.strip():
+        raise ValueError("--fitted-by is empty: say where the factor comes from (a command, a result file)")
     model, meta = load_model(model_path, warn=False)
     if not isinstance(model, EnsembleCorrection):
         raise TypeError(f"{model_path}: a single model has no spread to scale; give an ensemble file")
@@ -187,7 +195,8 @@ def scale_spread(
     named = meta_name != portable_path(meta["path"])  # a shipped name or one the file records, not its path
     meta = {k: v for k, v in meta.items() if k not in ("model", "path", "name")}
     if named:  # not the original's name alone: "with euroc" would describe another model than the one that ran
-        meta["name"] = f"{meta_name} (spread x{float(scale):g})"
+        base = re.sub(r" \(spread x[^)]*\)$", "", meta_name)  # the factor replaces an earlier one: so does the name
+        meta["name"] = f"{base} (spread x{float(scale):g})"
     meta["spread_scale"] = {
         "value": float(scale),
         "previous": model.spread_scale,
@@ -209,7 +218,12 @@ def add_spread_reference(
     model, meta = load_model(model_path, warn=False)
     if not isinstance(model, EnsembleCorrection):
         raise TypeError(f"{model_path}: a single model has no spread; give an ensemble file")
-    overrides = list(overrides or [f"dataset={meta.get('dataset')}"])
+    if not overrides and not meta.get("dataset"):  # members of several datasets (--allow-mixed), or none recorded
+        raise ValueError(
+            f"{model_path}: its members record no one dataset to take the spread reference on; name it, e.g. "
+            "`python -m gyrodenoise.ensemble reference FILE --out OUT dataset=euroc`"
+        )
+    overrides = list(overrides or [f"dataset={meta['dataset']}"])
     return _save_with_reference(
         model, meta, hydra.utils.instantiate(compose_config("train", overrides).dataset), out, command
     )
@@ -376,6 +390,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(f"wrote {out} ({len(paths)} member files)")
+    if len(paths) > 1:  # without a reference, correct and evaluate cannot tell data unlike the training data
+        print(f"note: no spread reference yet: python -m gyrodenoise.ensemble reference {out} --out {out}")
     return 0
 
 

@@ -69,7 +69,7 @@ from gyrodenoise.pretrained import (
 )
 from gyrodenoise.provenance import code_version, file_sha256, library_versions, machine_description
 from gyrodenoise.so3 import integrate_gyro
-from gyrodenoise.spread_check import spread_ratio, spread_warning
+from gyrodenoise.spread_check import spread_ratio, spread_warning, worst_window
 from gyrodenoise.tables import csv_text, markdown_table
 from gyrodenoise.trajectory_files import tum_text
 
@@ -303,7 +303,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
             calib[label] = uncertainty.calibration(gyros["proposed"], spread, seq.dt, seq.rot, seq.gt_mask)
         if (ratio := spread_ratio(spread, proposed_meta)) is not None:
             spread_ratios[label] = ratio
-            if w := spread_warning(ratio, label, proposed_meta):
+            window = worst_window(spread, proposed_meta, 1.0 / float(np.median(seq.dt[1:])))
+            if w := spread_warning(ratio, label, proposed_meta, window):
                 warned.append(w)
                 warnings.warn(w, ModelQualityWarning, stacklevel=2)
         r = evaluate_sequence(seq, gyros, distances)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import inspect
 import warnings
+import zipfile
 from importlib import resources
 from pathlib import Path
 
@@ -161,6 +162,12 @@ def load_model(
         ) from None
     if not isinstance(blob, dict):
         raise ModelFileError(f"{path}: not a gyrodenoise model file nor a Lightning checkpoint of one.")
+    if damaged := _damaged_entry(path):
+        raise ModelFileError(
+            f"{path}: damaged: the bytes of its entry {damaged} no longer match their stored checksum (a copy or a "
+            "disk error changed them; torch reads such weights without a word, and the corrections are garbage). "
+            "Copy the file again from its source, or retrain."
+        )
     if blob.get("format") == FORMAT:
         cfg, state, meta = blob["model"], blob["state_dict"], blob.get("meta", {})
     elif "state_dict" in blob and "hyper_parameters" in blob:  # Lightning checkpoint
@@ -195,6 +202,15 @@ def load_model(
     if warn and (msg := model_quality_warning(meta)):
         warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     return model, meta
+
+
+def _damaged_entry(path: Path) -> str | None:
+    """The first entry of a model file (a zip archive) whose bytes fail their CRC, or None."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return z.testzip()
+    except (zipfile.BadZipFile, OSError):  # not a zip: torch.load has said what it could of it
+        return None
 
 
 class ModelQualityWarning(UserWarning):

@@ -1,0 +1,78 @@
+"""Ensemble edges from an audit of a user who relies on the spread: a damaged member file, spread factors no
+calibration gives, a mixed ensemble's reference, the worst stretch of a recording, the build's missing reference."""
+
+from __future__ import annotations
+
+import struct
+import zipfile
+
+import numpy as np
+import pytest
+from _models import random_model
+
+from gyrodenoise import ensemble as ensemble_cli
+from gyrodenoise.pretrained import ModelFileError, load_model, save_model
+from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT, spread_ratio, spread_warning, worst_window
+
+TINY = {"channels": (8, 16), "kernel_size": 5, "dilations": (1, 4)}
+
+
+def _member(tmp_path, seed: int):
+    return save_model(random_model(seed=seed, **TINY), {"name": "denoiser", **TINY}, tmp_path / f"m{seed}.pt",
+                      {"dataset": "euroc", "rate_hz": 200.0})  # fmt: skip
+
+
+def _flip_a_weight_byte(src, dst) -> None:
+    data = bytearray(src.read_bytes())
+    info = next(i for i in zipfile.ZipFile(src).infolist() if i.filename.endswith("/data/3"))
+    name_len, extra_len = struct.unpack("<HH", data[info.header_offset + 26 : info.header_offset + 30])
+    data[info.header_offset + 30 + name_len + extra_len + 1] ^= 0xFF
+    dst.write_bytes(bytes(data))
+
+
+def test_a_model_file_with_a_changed_weight_byte_is_refused(tmp_path):
+    """torch reads such weights without a word: the audit's member with one flipped byte made the ensemble's
+    corrections 131 deg/s."""
+    _flip_a_weight_byte(_member(tmp_path, 1), tmp_path / "flip.pt")
+    with pytest.raises(ModelFileError, match="damaged: the bytes of its entry .*data/3 no longer match"):
+        load_model(tmp_path / "flip.pt")
+
+
+@pytest.mark.parametrize(("by", "fitted_by", "said"), [(1e-300, "x", "--by 1e-300"), (1e40, "x", "--by 1e"),
+                                                       (2.0, " ", "--fitted-by is empty")])  # fmt: skip
+def test_spread_factors_no_calibration_gives_are_refused(tmp_path, by, fitted_by, said):
+    members = [_member(tmp_path, s) for s in (1, 2)]
+    ens = ensemble_cli.build_ensemble(members, tmp_path / "ens.pt")
+    with pytest.raises(ValueError, match=said):
+        ensemble_cli.scale_spread(ens, by, tmp_path / "x.pt", fitted_by)
+
+
+def test_a_second_factor_replaces_the_first_in_the_name_too(tmp_path):
+    members = [_member(tmp_path, s) for s in (1, 2)]
+    ens = ensemble_cli.build_ensemble(members, tmp_path / "ens.pt", name="mine")
+    twice = ensemble_cli.scale_spread(
+        ensemble_cli.scale_spread(ens, 2, tmp_path / "a.pt", "x"), 3, tmp_path / "b.pt", "y"
+    )
+    meta = load_model(twice, warn=False)[1]
+    assert meta["name"] == "mine (spread x3)" and meta["model"]["spread_scale"] == 3
+
+
+def test_a_mixed_ensembles_reference_asks_for_its_dataset(tmp_path, capsys):
+    members = [_member(tmp_path, 1), save_model(random_model(seed=2, **TINY), {"name": "denoiser", **TINY},
+                                                tmp_path / "t.pt", {"dataset": "tumvi", "rate_hz": 200.0})]  # fmt: skip
+    assert ensemble_cli.main(["build", *map(str, members), "--out", str(tmp_path / "mix.pt"), "--allow-mixed"]) == 0
+    assert "note: no spread reference yet" in capsys.readouterr().out
+    assert ensemble_cli.main(["reference", str(tmp_path / "mix.pt"), "--out", str(tmp_path / "r.pt")]) == 2
+    assert "dataset=euroc" in capsys.readouterr().err  # one line, not Hydra's MissingConfigException
+
+
+def test_a_bad_stretch_is_seen_though_the_whole_recording_is_quiet():
+    """The whole recording's median missed 20 s of a gyro in deg/s in a 2-min flight (0.69, its window 63.8)."""
+    meta = {"spread_reference": {"reference_rad_s": 0.002}, "model": {"spread_scale": 1.0}, "name": "ens"}
+    std = np.full((24000, 3), 0.001)  # 120 s at 200 Hz, ratio 0.87 everywhere
+    std[10000:14000] *= 60  # 20 s of far more disagreement
+    whole = spread_ratio(std, meta)
+    window = worst_window(std, meta, 200.0)
+    assert whole < SPREAD_RATIO_LIMIT < window[0] and 40.0 <= window[1] <= 60.0
+    said = spread_warning(whole, "rec.csv", meta, window)
+    assert said and "worst 10-s stretch" in said and spread_warning(whole, "rec.csv", meta) is None
