@@ -131,12 +131,15 @@ def python_decisions(model, rate_hz: float | None, stamps, imu) -> tuple[list[in
     return codes, out
 
 
-def c_decisions(model, meta: dict, stamps, imu, tmp_path, compiler) -> tuple[list[int], np.ndarray]:
+def c_decisions(
+    model, meta: dict, stamps, imu, tmp_path, compiler, flags: tuple[str, ...] = ()
+) -> tuple[list[int], np.ndarray]:
     out_dir = tmp_path / "c"
     c_export.export_c(model, out_dir, meta)
     (out_dir / "driver.c").write_text(DRIVER)
     exe = tmp_path / "driver"
     cmd = [*compiler.split(), "-O2", "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-Wdouble-promotion"]
+    cmd += list(flags)
     done = subprocess.run(
         [*cmd, "-o", str(exe), str(out_dir / "driver.c"), str(out_dir / c_export.SOURCE), "-lm"],
         capture_output=True,
@@ -272,3 +275,36 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
     done = run("1000000000," + "0" * 2000 + ",0,0,0,0,9.8\n")
     assert done.returncode == 1 and "line 1: longer than" in done.stderr
     assert run("1000000000,0,0,0,0,0,9.8\r\n").returncode == 0  # CRLF line ends
+
+
+INT64_MAX, INT64_MIN = 2**63 - 1, -(2**63)
+
+
+@pytest.mark.parametrize("build", [random_denoiser, calibrated], ids=["network", "calibrated"])
+def test_stamps_at_the_ends_of_int64_decide_alike_without_overflow(build, tmp_path, compiler):
+    """An audit under UBSan: the time base's sums overflowed int64 near its ends (undefined behaviour; a build
+    without the sanitizer refused as early what Python took as a gap). Built with -fsanitize=undefined, which stops
+    at the first overflow, the C decides as Python on stamps at and across the ends of int64."""
+    stamps = [INT64_MAX - 10, INT64_MAX, INT64_MIN, INT64_MIN + 5_000_000, INT64_MAX, 0, 5_000_000, 2**62, 2**62 + 5]
+    stamps += [-(2**62), 10_000_000, 15_000_000]
+    imu = random_imu(len(stamps), seed=3)
+    model = build()
+    codes, out = python_decisions(model, 200.0, stamps, imu)
+    ub = ("-fsanitize=undefined", "-fno-sanitize-recover=all")
+    c_codes, c_out = c_decisions(model, {"name": "t", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler, ub)
+    assert c_codes == codes
+    taken = np.array(codes) >= 0
+    assert np.abs(c_out[taken] - out[taken]).max() < ATOL
+
+
+def test_a_nan_is_refused_by_a_fast_math_build(tmp_path, compiler):
+    """-ffast-math lets the compiler fold isfinite() to 1: a NaN was taken (GD_OK) and spoilt every later output
+    until a reset. The check reads the float's bits."""
+    stamps = [k * 5_000_000 for k in range(6)]
+    imu = random_imu(len(stamps), seed=4)
+    imu[2, 0] = np.nan
+    imu[4, 5] = np.inf
+    model = random_denoiser()
+    codes, _ = python_decisions(model, 200.0, stamps, imu)
+    c_codes, _ = c_decisions(model, {"name": "t", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler, ("-ffast-math",))
+    assert c_codes == codes and codes[2] == codes[4] == CODE["GD_REFUSED_SAMPLE"]

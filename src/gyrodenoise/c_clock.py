@@ -43,7 +43,12 @@ CODES = (
     ("GD_RATE_OFF", 2, "gd_step_t: taken; the stream's rate is over GD_RATE_TOL off GD_RATE_HZ"),
     ("GD_REFUSED_SAMPLE", -1, "a NaN/inf, or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX"),
     ("GD_REFUSED_ORDER", -2, "gd_step_t: the stamp is not after the previous one"),
-    ("GD_REFUSED_EARLY", -3, "gd_step_t: under GD_MIN_STEP_NS after the previous one"),
+    (
+        "GD_REFUSED_EARLY",
+        -3,
+        "gd_step_t: under GD_MIN_STEP_NS after where the time base puts the last sample taken (without a rate: after "
+        "the last stamp)",
+    ),
     ("GD_REFUSED_UNSTAMPED", -4, "gd_step on a stream that gd_step_t stamped"),
 )
 INT64_MAX = 2**63 - 1
@@ -82,11 +87,11 @@ def header_defines(rate_hz: float, memory: bool) -> str:
     elif not rate_hz:
         min_doc, max_doc = "1: any increasing stamp (no rate)", "0: GAP_FACTOR x the stream's mean step (no rate)"
     else:
-        min_doc = "ceil(FAST_FACTOR x period): earlier after the time base's last sample, refused"
-        max_doc = "floor(GAP_FACTOR x period): later after the time base's last sample, a gap"
+        min_doc = "ceil(FAST_FACTOR x period): a sample earlier after the time base's last one is refused"
+        max_doc = "floor(GAP_FACTOR x period): a sample later after the time base's last one restarts"
     rows = [
-        ("GD_STAMP_FAST_FACTOR", f"{STREAM_FAST_FACTOR!r}f", "a step under this many periods is refused"),
-        ("GD_STAMP_GAP_FACTOR", f"{STREAM_GAP_FACTOR!r}f", "a step over this many periods is a gap"),
+        ("GD_STAMP_FAST_FACTOR", f"{STREAM_FAST_FACTOR!r}f", "GD_MIN_STEP_NS in periods"),
+        ("GD_STAMP_GAP_FACTOR", f"{STREAM_GAP_FACTOR!r}f", "GD_MAX_STEP_NS in periods"),
         ("GD_MIN_STEP_NS", f"INT64_C({lim['min_step']})", min_doc),
         ("GD_MAX_STEP_NS", f"INT64_C({lim['max_step']})", max_doc),
         ("GD_PERIOD_NS", f"INT64_C({lim['period']})", "the time base's step (0: none, the steps alone decide)"),
@@ -114,16 +119,20 @@ STATE_FIELDS = """\
     int rate_checked;                                     /* its rate was compared */"""
 
 DECLARATION = """\
-/* gd_step with the sample's timestamp t_ns [integer nanoseconds, any epoch]: the checks of gyrodenoise's
-   StreamingCorrector.push(imu, t_ns) (stream_clock), as return codes (the GD_* above):
-   - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, the state is unchanged (but for a count of
-     GD_REFUSED_ORDER in a row), nothing is written (drop the sample; the next one is compared with the last taken);
+/* gd_step with the sample's timestamp t_ns [integer nanoseconds, any epoch, the whole int64 range]: the checks of
+   gyrodenoise's StreamingCorrector.push(imu, t_ns) (stream_clock), as return codes (the GD_* above):
+   - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, nothing is written (drop the
+     sample; the next one is compared with the last taken), the state is unchanged but for two counts: of
+     GD_REFUSED_ORDER in a row (GD_CLOCK_JUMP_SAMPLES of them restart) and of GD_REFUSED_EARLY (the rate's average
+     counts them);
    With the model's rate (GD_PERIOD_NS > 0) a sample is judged against its expected time: the stream's time base
    advances GD_PERIOD_NS per sample taken and follows the stamps by 1/GD_TIME_BASE_GAIN of their deviation, so a
    driver's jitter passes;
    - GD_RESTARTED: after a gap, the sample started a new stream (Python raises there; its caller resets and pushes);
    - GD_RATE_OFF: taken, and the stream's rate is off the model's (Python warns).
-   Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). */
+   Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). Each gd_state is
+   one stream: the functions keep no other state (no globals), so streams on other threads need states of their own
+   and no lock. */
 int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out);"""
 
 
@@ -163,16 +172,27 @@ static int is_gap(const gd_state *s, uint64_t step_ns)
     return step_ns > (UINT64_C({num}) * s->steps_ns) / (UINT64_C({den}) * s->n_steps);
 }}
 
-/* C99's division truncates toward zero, as StreamClock's _toward_zero */
-static int64_t base_after(const gd_state *s, int64_t t_ns)
+/* where the time base puts a sample taken dev ns after its expected time (C99's division truncates toward zero, as
+   StreamClock's _toward_zero) */
+static int64_t base_after(const gd_state *s, int64_t dev)
 {{
-    return s->base_ns + GD_PERIOD_NS + (t_ns - (s->base_ns + GD_PERIOD_NS)) / GD_TIME_BASE_GAIN;
+    return s->base_ns + GD_PERIOD_NS + dev / GD_TIME_BASE_GAIN;
+}}
+
+/* the sample's deviation from its expected time, without overflow for any int64 stamps: from the step since the
+   last stamp (exact as unsigned: t_ns > last_ns) and the base's small lag behind that stamp; a step over 2^62 ns is
+   a gap whatever the lag (*gap set, no deviation) */
+static int64_t deviation(const gd_state *s, uint64_t step_ns, int *gap)
+{{
+    *gap = step_ns > (UINT64_C(1) << 62);
+    return *gap ? 0 : (int64_t)step_ns + (s->last_ns - s->base_ns) - GD_PERIOD_NS;
 }}
 
 int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out)
 {{
     int code = GD_OK;
     uint64_t step_ns = 0;
+    int64_t dev = 0;
     if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
     if (s->stamped) {{
         if (t_ns <= s->last_ns && ++s->late_in_a_row < GD_CLOCK_JUMP_SAMPLES) return GD_REFUSED_ORDER;
@@ -184,12 +204,13 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
     if (s->stamped) {{
         step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
         if (GD_PERIOD_NS > 0) {{ /* against the sample's expected time on the time base */
-            const int64_t dev = t_ns - (s->base_ns + GD_PERIOD_NS);
-            if (dev < GD_MIN_STEP_NS - GD_PERIOD_NS) {{
+            int gap;
+            dev = deviation(s, step_ns, &gap);
+            if (!gap && dev < GD_MIN_STEP_NS - GD_PERIOD_NS) {{
                 s->n_early++; /* a sample that came: the rate's average counts it */
                 return GD_REFUSED_EARLY;
             }}
-            if (dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
+            if (gap || dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
                 gd_reset(s);
                 code = GD_RESTARTED;
             }}
@@ -212,7 +233,7 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
             if (scaled < rate_sum_min * n || scaled > rate_sum_max * n) code = GD_RATE_OFF;
         }}
     }}
-    s->base_ns = s->stamped ? base_after(s, t_ns) : t_ns;
+    s->base_ns = s->stamped && GD_PERIOD_NS > 0 ? base_after(s, dev) : t_ns; /* without a rate: unused */
     s->late_in_a_row = 0;
     s->stamped = 1;
     s->last_ns = t_ns;

@@ -234,7 +234,9 @@ void gd_reset(gd_state *s);
    and, when std_out is not NULL, the members' spread per axis [rad/s] (zeros for a single network).
    Returns GD_OK (0), or GD_REFUSED_SAMPLE (-1) when the sample holds a NaN/inf or a value beyond GD_GYRO_ABS_MAX /
    GD_ACC_ABS_MAX: it would spoil a receptive field of outputs, so it is refused and the state is left unchanged
-   (nothing is written). Timestamps are not checked: feed consecutive samples at GD_RATE_HZ, gd_reset after a gap. */
+   (nothing is written); GD_REFUSED_UNSTAMPED (-4) on a stream gd_step_t stamped. Timestamps are not checked: feed
+   consecutive samples at GD_RATE_HZ, gd_reset after a gap. A state used before gd_reset (or zeroing) is undefined:
+   its ring indices may point anywhere. */
 int gd_step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out);
 
 {declaration}
@@ -336,11 +338,19 @@ static void member_step(const gd_member *m, gd_state *s, const float imu[6], int
     }}
 }}
 
+/* NaN and inf by their bits: -ffast-math (-ffinite-math-only) lets a compiler fold isfinite() to 1 */
+static int finite_bits(float x)
+{{
+    uint32_t u;
+    memcpy(&u, &x, sizeof u);
+    return (u & UINT32_C(0x7f800000)) != UINT32_C(0x7f800000);
+}}
+
 static int sample_ok(const float imu[6])
 {{
     for (int c = 0; c < 6; c++) {{
         const float limit = c < 3 ? GD_GYRO_ABS_MAX : GD_ACC_ABS_MAX;
-        if (!isfinite(imu[c]) || fabsf(imu[c]) > limit) return 0;
+        if (!finite_bits(imu[c]) || fabsf(imu[c]) > limit) return 0;
     }}
     return 1;
 }}

@@ -32,6 +32,8 @@ STREAM_GAP_FACTOR = 2.5
 # (0.5 let it through on the boundary), while a jittery driver's early sample (up to 40 % early) still passes
 STREAM_FAST_FACTOR = 0.6
 UNITS_HINT = "t_ns must be integer nanoseconds (seconds: int(round(t_s * 1e9)))"
+# stamps are int64 ns, as the C export's: a larger integer was wrapped by numpy into another stamp
+STAMP_MIN_NS, STAMP_MAX_NS = -(2**63), 2**63 - 1
 # this many single samples in a row stamped before the last one taken: the clock went back (a restarted sensor) or the
 # last stamp taken was wrong, far in the future (taken after a "gap"): without a way out the stream would refuse
 # every sample from then on. A reordered or repeated sample or two, or a short burst re-sent by a driver, stay refusals
@@ -63,6 +65,14 @@ def _first(pred, lo: int = 1, hi: int = 2**63 - 1) -> int:
         mid = (lo + hi) // 2
         lo, hi = (lo, mid) if pred(mid) else (mid + 1, hi)
     return lo
+
+
+def _exact_diff(stamps: np.ndarray) -> np.ndarray:
+    """np.diff of int64 stamps, as Python ints where a step could leave int64 (stamps beyond +-2**62: INT64_MIN after
+    INT64_MAX wrapped to a step of 1 and was taken)."""
+    if stamps.size and ((stamps > 2**62) | (stamps < -(2**62))).any():
+        return np.diff(stamps.astype(object))
+    return np.diff(stamps)
 
 
 class StreamTimeError(ValueError):
@@ -136,7 +146,8 @@ class StreamClock:
     def check(self, t_ns: int | np.ndarray | Sequence[int], n: int) -> np.ndarray | int:
         """The n stamps of the next call as int64 ns, or StreamTimeError naming the first bad one."""
         period = self.period_ns
-        if n == 1 and isinstance(t_ns, int | np.integer) and self.last_ns is not None:
+        one = n == 1 and isinstance(t_ns, int | np.integer) and STAMP_MIN_NS <= t_ns <= STAMP_MAX_NS
+        if one and self.last_ns is not None:
             t1 = int(t_ns)  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
             if self._base is not None:
                 whole, lo, hi = self._base
@@ -153,9 +164,17 @@ class StreamClock:
                 f"t_ns: expected {n} integer timestamp(s), one per sample, got {t.dtype} of shape {t.shape}; "
                 + UNITS_HINT
             )
+        if t.dtype == np.uint64 and (beyond := t > STAMP_MAX_NS).any():
+            k = int(np.argmax(beyond))
+            raise StreamTimeError(
+                f"{'this sample' if n == 1 else f'sample {k + 1} of this call'}: timestamp {int(t[k])} ns is beyond "
+                f"int64 nanoseconds (the year 2262); {UNITS_HINT}",
+                "stamps",
+                k,
+            )
         t = t.astype(np.int64)
-        full = t if self.last_ns is None else np.concatenate([[self.last_ns], t])
-        steps = np.diff(full)
+        full = t if self.last_ns is None else np.concatenate([[self.last_ns], t]).astype(np.int64)
+        steps = _exact_diff(full)
         offset = 0 if self.last_ns is None else 1  # steps[k] ends at sample k + 1 - offset of this call
 
         def where(k: int) -> str:
@@ -255,7 +274,7 @@ class StreamClock:
             self._taken_total += 1
             self.last_ns = t
         elif t.size:
-            steps = np.diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]))
+            steps = _exact_diff(t if self.last_ns is None else np.concatenate([[self.last_ns], t]).astype(np.int64))
             self._steps_sum += int(steps.sum())
             self._steps_n += int(steps.size)
             self._taken_total += int(t.size)
