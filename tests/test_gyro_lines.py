@@ -110,3 +110,22 @@ def test_a_line_missing_from_a_fitted_recording_stays_out_of_the_model():
     (line,) = report["gyro_lines_above_band"]
     assert "simulator_vibration" not in line and "held_out" not in line
     assert "none in every fitted recording" in sentence([line], 8.0)
+
+
+@pytest.mark.parametrize("width", [0.0, 1.0, 2.0])
+def test_the_written_width_is_a_fixed_point(width):
+    """A line simulated with the width the model writes is read back with that width (it grew by 0.5 Hz each round
+    of measure, write, simulate: the Hann window's own spread; a sinusoid came back as a 0.75 Hz band)."""
+    from gyrodenoise.discrepancy.gyro_lines import simulator_vibration
+    from gyrodenoise.sim.context import SignalContext
+    from gyrodenoise.sim.effects import Vibration, WhiteNoise
+
+    n = int(120 * RATE)
+    sig = SignalContext(t=np.arange(n) / RATE, omega=np.zeros((n, 3)), alpha=None, f=None, rate_hz=RATE)
+    rng = np.random.default_rng(5)
+    g = WhiteNoise(density=np.full(3, 2e-4)).apply(sig, np.zeros((n, 3)), rng)
+    g = Vibration(frequency_hz=60.0, amplitude=np.full(3, 0.005), bandwidth_hz=width).apply(sig, g, rng)
+    fc = SimpleNamespace(gyro=g, rate_hz=RATE, name="s", extra={"band_hz": 8.0, "sequence": "s"})
+    (line,) = gyro_lines([fc])
+    written = simulator_vibration(line, [fc])["bandwidth_hz"]
+    assert written == pytest.approx(width, abs=0.26)

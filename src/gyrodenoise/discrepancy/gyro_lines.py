@@ -25,6 +25,7 @@ from gyrodenoise.sim.effects import Vibration, WhiteNoise
 LINE_RATIO = 20.0  # a line: PSD at least this x the running median around it (white noise: ~1 +- 0.2 per bin)
 NEIGHBOURS_HZ = 5.0  # the running median spans this either side of a bin (a line of a few bins does not move it)
 SEGMENT_S = 4.0  # Welch segment: 0.25 Hz bins
+MAIN_LOBE_BINS = 2  # a sinusoid flags ~3 bins of the Hann window over LINE_RATIO, a band ~2 bins more than its width
 MIN_SEGMENTS = 8  # a stretch shorter than this many segments (half overlap) gives no spectrum worth reading
 MERGE_HZ = 2.0  # lines of different stretches this close are one line (a band-limited line wanders ~1 Hz)
 
@@ -106,7 +107,9 @@ def gyro_lines(fcs: list, ratio: float = LINE_RATIO) -> list[dict]:
 def simulator_vibration(line: dict, fit: list) -> dict | None:
     """The band-limited vibration (`sim.effects.Vibration`, SI) a simulator needs to reproduce `line` (from
     `gyro_lines`): None unless the line is in every fitted stretch. Amplitude A = sqrt(2) x the fitted stretches'
-    mean RMS per axis (the effect's band RMS is A / sqrt(2)); width: the line's flagged bins, at least two."""
+    mean RMS per axis (the effect's band RMS is A / sqrt(2)); width: the line's flagged bins less the Hann window's
+    own spread (MAIN_LOBE_BINS), so that simulating the model and reading it again gives the same width (it grew by
+    0.5 Hz a round); a line no wider than one bin after that is a sinusoid (width 0)."""
     names = [fc.name for fc in fit]
     if not names or any(n not in line["per_stretch"] for n in names):
         return None
@@ -115,7 +118,7 @@ def simulator_vibration(line: dict, fit: list) -> dict | None:
     return {
         "frequency_hz": line["frequency_hz"],
         "amplitude": (np.sqrt(2.0) * rms).tolist(),
-        "bandwidth_hz": max(line["width_hz"], 2 * df),
+        "bandwidth_hz": width if (width := line["width_hz"] - MAIN_LOBE_BINS * df) > df else 0.0,
     }
 
 

@@ -439,10 +439,14 @@ def select_effects(
             design, final, effects, selected, sigma, fcs, thresholds.get("sensor_bandwidth", bic_threshold)
         )
         if delay_lp is not None and delay_lp["kept"] in ("sensor_bandwidth", "both"):
-            design, final = _recheck_after_lowpass(design, final, selected, base, thresholds, bic_threshold, steps)
+            design, final = _recheck_named(design, final, selected, base, thresholds, bic_threshold, steps)
             if "vibration" in selected and effects["vibration"].stochastic:  # the low-pass shapes the floor now
                 lp = float(effects["sensor_bandwidth"].params["corner_hz"])
                 design, final = _recheck_band(design, final, view, effects, selected, sigma, fcs, lp, **band_check)
+    # every named regression effect once more, given all the others: one named early may have stood in for effects
+    # named after it (an audit's piecewise-linear bias, a 'bias random walk' of 0 +- 1.5 SE, took the slow part of
+    # a scale factor, a g-sensitivity and a time offset at step 1, and stayed)
+    design, final = _recheck_named(design, final, selected, base, thresholds, bic_threshold, steps)
     if trusted_band and nuisance_residuals is None and corner is None:
         # the reconstruction model again (band, sensor floor, error level), on the selected model's residual (a
         # low-pass the motion named included): the base residual holds the effects' own power
@@ -570,7 +574,7 @@ def _recheck_band(
     return design, design.fit(selected)
 
 
-def _recheck_after_lowpass(
+def _recheck_named(
     design: Design,
     final: FitResult,
     selected: list[str],
@@ -579,10 +583,10 @@ def _recheck_after_lowpass(
     bic_threshold: float,
     steps: list[dict],
 ) -> tuple[Design, FitResult]:
-    """Backward check once a low-pass replaced a named time offset: effects named beside the offset
-    may have stood in for the low-pass's magnitude droop, which a delay lacks (a scale factor below 1
-    does it at low frequencies). Each named regression effect is refitted out of the low-pass's design;
-    one whose delta BIC there no longer clears its threshold is removed (the weakest first, repeated)."""
+    """Backward check of the named regression effects, each given all the others: one whose delta BIC no longer
+    clears its threshold is removed (the weakest first, repeated). Run at the end of every selection, and first once
+    a low-pass replaced a named time offset: effects named beside the offset may have stood in for the low-pass's
+    magnitude droop, which a delay lacks (a scale factor below 1 does it at low frequencies)."""
     while True:
         named = [n for n in selected if n not in base and design.cols.get(n) is not None and design.cols[n].size]
         scored = []  # (delta BIC, name) of each named effect given the others
