@@ -160,6 +160,19 @@ def make_sequence(
     )
 
 
+def _vibration_at_output(eff, imu, bw) -> dict:
+    """A vibration's RMS as the samples carry it: `level` is at the sensor input, and the bandwidth (the integrating
+    sensor's period mean included) passes gain(center) of it; the discrepancy workflow measures, and its
+    error_model.yaml writes, the output's (amplitude = sqrt(2) x this RMS). Empty without a vibration."""
+    if "vibration" not in eff.si:
+        return {}
+    center = float(eff.get("vibration", "center"))
+    rate = 1.0 / float(np.median(np.diff(imu.t)))
+    gain = float(bw.response(np.array([center]), rate, imu.info["bandwidth"]["internal_rate_hz"])[0])
+    level = np.asarray(eff.get("vibration", "level"), dtype=float)
+    return {"vibration_at_output": {"center_hz": center, "gain": gain, "rms_rad_s": (gain * level).tolist()}}
+
+
 def _truth(name, seed, preset, motion, eff, imu, poses, bw) -> dict:
     delta = float(eff.get("time_offset"))
     delay = imu.info["bandwidth"]["group_delay_s"]
@@ -183,6 +196,7 @@ def _truth(name, seed, preset, motion, eff, imu, poses, bw) -> dict:
             "apparent_time_offset_s": delta + delay,  # what a delay estimator comparing with the truth sees
         },
         "imu": imu.info,
+        **_vibration_at_output(eff, imu, bw),
         "imu_span_ns": [int(imu.stamp_ns[0]), int(imu.stamp_ns[-1])],
         "mocap": poses.info,
         "trajectory": motion.describe(),
