@@ -360,7 +360,7 @@ def _main(argv: list[str] | None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     ratio = spread_ratio(res.std, meta)
-    window = worst_window(res.std, meta, res.report.rate_hz)
+    window = worst_window(res.std, meta, res.resampled_to_hz or res.report.rate_hz)  # the rate of res.std
     model_warnings = [w for w in (model_quality_warning(meta), spread_warning(ratio, str(path), meta, window)) if w]
     if res.std is not None and ratio is None:
         print(f"note: {no_reference_note(meta)}")
