@@ -287,6 +287,7 @@ def test_stamps_at_the_ends_of_int64_decide_alike_without_overflow(build, tmp_pa
     at the first overflow, the C decides as Python on stamps at and across the ends of int64."""
     stamps = [INT64_MAX - 10, INT64_MAX, INT64_MIN, INT64_MIN + 5_000_000, INT64_MAX, 0, 5_000_000, 2**62, 2**62 + 5]
     stamps += [-(2**62), 10_000_000, 15_000_000]
+    stamps += [INT64_MAX - 4_000_000, INT64_MAX]  # taken 0.8 of a period after the last: the base lies past INT64_MAX
     imu = random_imu(len(stamps), seed=3)
     model = build()
     codes, out = python_decisions(model, 200.0, stamps, imu)

@@ -76,3 +76,25 @@ def test_a_bad_stretch_is_seen_though_the_whole_recording_is_quiet():
     assert whole < SPREAD_RATIO_LIMIT < window[0] and 40.0 <= window[1] <= 60.0
     said = spread_warning(whole, "rec.csv", meta, window)
     assert said and "worst 10-s stretch" in said and spread_warning(whole, "rec.csv", meta) is None
+
+
+def test_a_model_file_saved_without_checksums_loads(tmp_path):
+    """torch.serialization.set_crc32_options(False) writes CRC 0 for every entry: such a file is whole."""
+    import torch
+
+    torch.serialization.set_crc32_options(False)
+    try:
+        path = _member(tmp_path, 1)
+    finally:
+        torch.serialization.set_crc32_options(True)
+    assert zipfile.ZipFile(path).infolist()[0].CRC == 0
+    load_model(path)
+
+
+def test_a_bad_stretch_at_the_very_end_is_judged():
+    """Windows stepped by half their length from the start left up to half a window at the end out of any."""
+    meta = {"spread_reference": {"reference_rad_s": 0.002}, "model": {"spread_scale": 1.0}, "name": "ens"}
+    std = np.full((2990, 3), 0.001)  # 29.9 s at 100 Hz
+    std[2090:] *= 60
+    ratio, start = worst_window(std, meta, 100.0)
+    assert ratio > SPREAD_RATIO_LIMIT and start == pytest.approx(19.9)

@@ -112,7 +112,7 @@ def header_defines(rate_hz: float, memory: bool) -> str:
 STATE_FIELDS = """\
     int stamped;                                          /* gd_step_t has stamped this stream */
     int64_t last_ns;                                      /* the stamp of its last sample */
-    int64_t base_ns;                                      /* where the time base puts its last sample */
+    int64_t lag_ns;                                       /* its last stamp less where the time base puts it */
     int late_in_a_row;                                    /* samples refused in a row as GD_REFUSED_ORDER */
     uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */
     uint64_t n_early;                                     /* its samples refused as GD_REFUSED_EARLY */
@@ -150,7 +150,7 @@ void gd_reset(gd_state *s)
     s->started = 0;
     memset(s->newest, 0, sizeof s->newest); /* a state never zeroed (on the stack) holds any index here */
     s->stamped = 0;
-    s->last_ns = s->base_ns = 0;
+    s->last_ns = s->lag_ns = 0;
     s->late_in_a_row = 0;
     s->steps_ns = s->n_steps = s->n_early = 0;
     s->rate_checked = 0;
@@ -172,11 +172,12 @@ static int is_gap(const gd_state *s, uint64_t step_ns)
     return step_ns > (UINT64_C({num}) * s->steps_ns) / (UINT64_C({den}) * s->n_steps);
 }}
 
-/* where the time base puts a sample taken dev ns after its expected time (C99's division truncates toward zero, as
-   StreamClock's _toward_zero) */
-static int64_t base_after(const gd_state *s, int64_t dev)
+/* a taken sample's stamp less where the time base puts it, dev ns after its expected time: the base moves by
+   dev / GD_TIME_BASE_GAIN (C99's division truncates toward zero, as StreamClock's _toward_zero). Kept as this small
+   lag, not as the base itself, which near the ends of int64 may lie beyond them */
+static int64_t lag_after(int64_t dev)
 {{
-    return s->base_ns + GD_PERIOD_NS + dev / GD_TIME_BASE_GAIN;
+    return dev - dev / GD_TIME_BASE_GAIN;
 }}
 
 /* the sample's deviation from its expected time, without overflow for any int64 stamps: from the step since the
@@ -185,7 +186,7 @@ static int64_t base_after(const gd_state *s, int64_t dev)
 static int64_t deviation(const gd_state *s, uint64_t step_ns, int *gap)
 {{
     *gap = step_ns > (UINT64_C(1) << 62);
-    return *gap ? 0 : (int64_t)step_ns + (s->last_ns - s->base_ns) - GD_PERIOD_NS;
+    return *gap ? 0 : (int64_t)step_ns + s->lag_ns - GD_PERIOD_NS;
 }}
 
 int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out)
@@ -233,7 +234,7 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
             if (scaled < rate_sum_min * n || scaled > rate_sum_max * n) code = GD_RATE_OFF;
         }}
     }}
-    s->base_ns = s->stamped && GD_PERIOD_NS > 0 ? base_after(s, dev) : t_ns; /* without a rate: unused */
+    s->lag_ns = s->stamped && GD_PERIOD_NS > 0 ? lag_after(dev) : 0; /* without a rate: unused */
     s->late_in_a_row = 0;
     s->stamped = 1;
     s->last_ns = t_ns;

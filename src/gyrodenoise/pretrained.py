@@ -205,12 +205,20 @@ def load_model(
 
 
 def _damaged_entry(path: Path) -> str | None:
-    """The first entry of a model file (a zip archive) whose bytes fail their CRC, or None."""
+    """The first entry of a model file (a zip archive) whose bytes fail their CRC, or None. An entry stored with CRC
+    0 carries none (torch.serialization.set_crc32_options(False) writes them so) and is not judged."""
     try:
         with zipfile.ZipFile(path) as z:
-            return z.testzip()
+            for info in z.infolist():
+                if info.CRC == 0 and info.file_size > 0:
+                    continue
+                try:
+                    z.read(info)  # checks the CRC
+                except zipfile.BadZipFile:
+                    return info.filename
     except (zipfile.BadZipFile, OSError):  # not a zip: torch.load has said what it could of it
         return None
+    return None
 
 
 class ModelQualityWarning(UserWarning):

@@ -65,7 +65,7 @@ def worst_window(std: np.ndarray | None, meta: dict, rate_hz: float) -> tuple[fl
     n = max(int(round(WINDOW_S * rate_hz)), 1)
     if len(norm) <= n:
         return float(np.median(norm)), 0.0
-    starts = range(0, len(norm) - n + 1, max(n // 2, 1))
+    starts = [*range(0, len(norm) - n + 1, max(n // 2, 1)), len(norm) - n]  # the last window ends at the end
     ratio, start = max((float(np.median(norm[i : i + n])), i) for i in starts)
     return ratio, start / rate_hz
 

@@ -47,7 +47,7 @@ def _tilt_errors(acc: np.ndarray, gyro: np.ndarray, rate_hz: float) -> np.ndarra
     if not np.isfinite(rate_hz) or rate_hz <= 0:
         return np.zeros((0, len(SCALES)))
     n, e = max(int(round(WINDOW_S * rate_hz)), 4), max(int(round(END_S * rate_hz)), 1)
-    starts = np.arange(0, len(acc) - n, n)
+    starts = np.arange(0, len(acc) - n + 1, n)
     if not len(starts):
         return np.zeros((0, len(SCALES)))
     a0 = np.stack([acc[s : s + e].mean(0) for s in starts])
