@@ -42,13 +42,18 @@ def spread_reference(model: CorrectionModel, recordings: Iterable[tuple[str, np.
     return {"per_recording_rad_s": per, "reference_rad_s": max(per.values()), "statistic": STATISTIC}
 
 
+def _reference(meta: dict) -> tuple[float, float] | None:
+    """(the file's spread reference in rad/s, its spread_scale), or None when it records no reference."""
+    ref = (meta.get("spread_reference") or {}).get("reference_rad_s")
+    return (ref, float((meta.get("model") or {}).get("spread_scale", 1.0))) if ref else None
+
+
 def spread_ratio(std: np.ndarray | None, meta: dict) -> float | None:
     """A recording's median spread over the ensemble's reference, or None (a single model, or a file without a
     reference: `python -m gyrodenoise.ensemble reference` adds one)."""
-    ref = (meta.get("spread_reference") or {}).get("reference_rad_s")
-    if std is None or not ref:
+    if std is None or (found := _reference(meta)) is None:
         return None
-    scale = float((meta.get("model") or {}).get("spread_scale", 1.0))
+    ref, scale = found
     return median_spread(std) / scale / ref
 
 
@@ -57,10 +62,9 @@ def worst_window(std: np.ndarray | None, meta: dict, rate_hz: float) -> tuple[fl
     the reference (windows overlapping by half), or None (no std or no reference). The whole recording's median
     misses a bad stretch shorter than about half of it (an audit's 20 s of deg/s in a 2-min flight: 0.69 whole,
     63.8 in its window); on EuRoC's 11 flights the largest window is 0.73-1.56."""
-    ref = (meta.get("spread_reference") or {}).get("reference_rad_s")
-    if std is None or not ref or not np.isfinite(rate_hz) or rate_hz <= 0:
+    if std is None or (found := _reference(meta)) is None or not np.isfinite(rate_hz) or rate_hz <= 0:
         return None
-    scale = float((meta.get("model") or {}).get("spread_scale", 1.0))
+    ref, scale = found
     norm = np.linalg.norm(std, axis=1) / scale / ref
     n = max(int(round(WINDOW_S * rate_hz)), 1)
     if len(norm) <= n:

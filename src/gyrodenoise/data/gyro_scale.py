@@ -69,29 +69,13 @@ def _tilt_errors(acc: np.ndarray, gyro: np.ndarray, rate_hz: float) -> np.ndarra
     w = gyro[starts[:, None] + np.arange(lo, hi)]  # (windows, steps, 3)
     out = np.empty((len(starts), len(SCALES)))
     for j, scale in enumerate(SCALES.values()):
-        steps = Rotation.from_rotvec((w * (scale / rate_hz)).reshape(-1, 3)).as_quat().reshape(w.shape[0], -1, 4)
-        q = steps[:, 0]
-        for k in range(1, steps.shape[1]):
-            q = _quat_mul(q, steps[:, k])
-        pred = Rotation.from_quat(q).inv().apply(a0)  # gravity in the later body frame: R^T g
+        r = Rotation.from_rotvec(w[:, 0] * (scale / rate_hz))
+        for k in range(1, w.shape[1]):  # scipy composes the windows' rotations elementwise
+            r = r * Rotation.from_rotvec(w[:, k] * (scale / rate_hz))
+        pred = r.inv().apply(a0)  # gravity in the later body frame: R^T g
         cos = np.einsum("ij,ij->i", pred, a1) / (np.linalg.norm(pred, axis=1) * np.linalg.norm(a1, axis=1))
         out[:, j] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return out
-
-
-def _quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton product of (n, 4) quaternions in (x, y, z, w) order (scipy's)."""
-    px, py, pz, pw = p.T
-    qx, qy, qz, qw = q.T
-    return np.stack(
-        [
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz,
-        ],
-        axis=1,
-    )
 
 
 def gyro_scale_verdict(acc: np.ndarray, gyro: np.ndarray, rate_hz: float) -> GyroScaleVerdict:
