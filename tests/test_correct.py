@@ -14,7 +14,7 @@ from gyrodenoise.correct import main
 from gyrodenoise.data.checks import SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import G0, read_imu_csv
 from gyrodenoise.data.readers import DataFormatError
-from gyrodenoise.pretrained import save_model
+from gyrodenoise.pretrained import resample_rate, save_model
 
 TINY = {"name": "denoiser", "channels": (8, 16), "kernel_size": 5, "dilations": (1, 4)}
 T0 = 1_600_000_000_000_000_000  # ns
@@ -604,3 +604,18 @@ def test_columns_from_python_may_be_a_list(tmp_path):
     f = write_asl(tmp_path / "x.csv", t, g, a)
     by_list = read_imu_csv(f, columns=["timestamp [ns]", "w_x", "w_y", "w_z", "a_x", "a_y", "a_z"])
     np.testing.assert_array_equal(by_list.gyro, read_imu_csv(f, columns=[1, 2, 3, 4, 5, 6, 7]).gyro)
+
+
+def test_resample_goes_to_the_nominal_rate_the_measured_one_is_close_to(tmp_path, capsys):
+    """EuRoC's training stamps measure 200.0026 Hz: --resample gave 5 ms grids of 4,999,987 ns; a user asks for 200."""
+    assert resample_rate({"rate_hz": 200.00256, "sensor": {"rate_hz": 200.0}}) == 200.0
+    assert resample_rate({"rate_hz": 199.362, "sensor": {"rate_hz": 199.4}}) == 199.4
+    assert resample_rate({"rate_hz": 100.0, "sensor": {"rate_hz": 200.0}}) == 100.0  # not what the data had
+    assert resample_rate({"rate_hz": 200.0}) == 200.0 and resample_rate({"sensor": {"rate_hz": 50}}) == 50.0
+    cfg = {k: v for k, v in TINY.items() if k != "name"}
+    meta = {"rate_hz": 200.00256, "sensor": {"rate_hz": 200.0}}
+    model = save_model(random_model(seed=4, **cfg), TINY, tmp_path / "m.pt", meta=meta)
+    f = write_asl(tmp_path / "r100.csv", *synth(n=1500, rate=100.0))
+    code, out, _ = run([f, "-m", model, "-o", tmp_path / "b", "--resample"], capsys)
+    t = np.loadtxt(tmp_path / "b" / "imu_corrected.csv", delimiter=",", dtype=np.int64, usecols=0)
+    assert code == 0 and "resampled to 200 Hz" in out and (np.diff(t) == 5_000_000).all()

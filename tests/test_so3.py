@@ -133,3 +133,21 @@ def test_an_integer_mask_is_refused_by_the_aoe():
     R = Rotation.from_rotvec(np.random.default_rng(0).normal(0, 0.01, (4, 3))).as_matrix()
     with pytest.raises(ValueError, match="boolean"):
         aoe(np.repeat(np.eye(3)[None], 4, 0), R, np.array([1, 0, 1, 1]))
+
+
+def test_log_refuses_a_matrix_that_is_not_a_rotation():
+    R = so3.exp(torch.tensor([[0.1, -0.2, 0.3], [1.0, 0.5, -2.0]], dtype=torch.float64))
+    assert torch.allclose(so3.log(R), so3.log(R, check=False))
+    for bad, why in ((R * 1.01, "not a rotation"), (-R, "det"), (R[..., :2], "shape")):
+        with pytest.raises(ValueError, match=why):
+            so3.log(bad)
+    nan = R.clone()
+    nan[1, 0, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"index \(1,\)"):
+        so3.log(nan)
+    # float32 rotations from a long product still pass at their own tolerance
+    steps = so3.exp(torch.full((2000, 3), 0.01, dtype=torch.float32))
+    prod = steps[0]
+    for s in steps[1:]:
+        prod = prod @ s
+    so3.log(prod)

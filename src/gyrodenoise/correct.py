@@ -51,7 +51,14 @@ from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings
 from gyrodenoise.paths import portable_command, portable_path
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, model_quality_warning, model_rate, sensor_model
+from gyrodenoise.pretrained import (
+    ModelQualityWarning,
+    load_model,
+    model_quality_warning,
+    model_rate,
+    resample_rate,
+    sensor_model,
+)
 from gyrodenoise.so3 import integrate_gyro
 from gyrodenoise.spread_check import no_reference_note, spread_ratio, spread_warning, worst_window
 from gyrodenoise.streaming import StreamingCorrector
@@ -171,8 +178,9 @@ def correct_recording(
     rate = model_rate(meta)
     memory = int(getattr(model, "receptive_field", 1)) > 1  # a calibrated model corrects each sample alone
     rec, report, need_resample = run_checks(rec, rate, resample_to_model, drop_duplicates, force, rate_matters=memory)
-    if need_resample:
-        rec = resample(rec, rate)
+    target = resample_rate(meta) if need_resample else None
+    if target is not None:
+        rec = resample(rec, target)
     gyro, std = correct_gyro(model, rec.imu, engine)
     if not np.isfinite(gyro).all() or np.abs(gyro).max(initial=0.0) > GYRO_ABS_MAX:
         # the recording passed its checks: corrections no gyro measures come from the model (damaged weights)
@@ -185,7 +193,7 @@ def correct_recording(
     t = (rec.t_ns - rec.t_ns[0]) * 1e-9
     dt = np.diff(t, prepend=t[0])
     R = integrate_gyro(initial_rotation(initial, rec, report), gyro, dt)
-    return Correction(rec, gyro, std, R, report, rate if need_resample else None)
+    return Correction(rec, gyro, std, R, report, target)
 
 
 # the command line's advice in correct_arrays' terms: its checks name the options of gyrodenoise-correct
@@ -288,8 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--resample",
         action="store_true",
-        help="resample to the model's training rate when it differs (down: averaged over each new period, "
-        "against aliasing; up: linear interpolation)",
+        help="resample to the model's training rate when it differs: its sensor's nominal rate (200 Hz for euroc, "
+        "not the 200.0026 Hz its clock measured); down: averaged over each new period, against aliasing; up: linear "
+        "interpolation",
     )
     ap.add_argument("--drop-duplicates", action="store_true", help="keep the first sample of duplicated stamps")
     ap.add_argument("--force", action="store_true", help="unit checks warn instead of stopping")

@@ -42,7 +42,7 @@ class IncrementLoss(torch.nn.Module):
                 est = so3.tree_product(est, 1)
                 gt = so3.tree_product(gt, 1)
                 m = m.unflatten(1, (-1, 2)).all(-1)
-            yield j, so3.log(gt @ est.transpose(-1, -2)), m
+            yield j, so3.log(gt @ est.transpose(-1, -2), check=False), m
 
     def forward(self, w_hat: torch.Tensor, dt: torch.Tensor, dR: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """Sum over increment lengths of weight x the Huber mean over the components of available increments.

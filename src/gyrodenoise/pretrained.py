@@ -108,6 +108,7 @@ def is_shipped(path: str | Path) -> bool:
     return p.suffix == ".pt" and p.resolve().parent == shipped_dir().resolve()
 
 
+NOMINAL_RATE_MATCH = 0.005  # resample_rate: a measured rate this close to the nominal one is the nominal rate
 RUN_FACTS = ("dataset", "sensor", "rate_hz", "train_seqs", "train_duration_s", "train_t0_ns", "beats_calibrated")
 
 
@@ -239,6 +240,16 @@ def model_rate(meta: dict) -> float | None:
     """Training rate of a model, from its metadata (None when unknown)."""
     rate = meta.get("rate_hz") or (meta.get("sensor") or {}).get("rate_hz")
     return float(rate) if rate else None
+
+
+def resample_rate(meta: dict) -> float | None:
+    """The rate `correct --resample` puts a recording on: the sensor's nominal rate where the rate measured on the
+    training stamps is within `NOMINAL_RATE_MATCH` of it (EuRoC's clock runs at 200.0026 Hz: a user asks for 200),
+    else the measured rate (a nominal rate the data did not have is no target)."""
+    measured, nominal = model_rate(meta), (meta.get("sensor") or {}).get("rate_hz")
+    if nominal and (measured is None or abs(measured / float(nominal) - 1) <= NOMINAL_RATE_MATCH):
+        return float(nominal)
+    return measured
 
 
 def _label(meta: dict) -> str:

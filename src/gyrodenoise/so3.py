@@ -21,6 +21,8 @@ from scipy.spatial.transform import Rotation
 from gyrodenoise.arrays import as_rows
 
 _SMALL = 1e-6  # below this angle (rad) the Taylor branches are exact to float64 precision
+# log(check=True): how far from a rotation a matrix may be, per dtype (2000 float32 steps drift ~1e-4)
+_ROTATION_TOL = {torch.float64: 1e-6, torch.float32: 1e-3}
 MAX_STEP_S = 1.0  # integrate_gyro: a median step above this is stamps or nanoseconds, not periods (IMUs: >= 5 Hz)
 
 
@@ -117,9 +119,15 @@ def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
     return _quat_wxyz(R).roll(-1, dims=-1)
 
 
-def log(R: torch.Tensor) -> torch.Tensor:
-    """Logarithm map (..., 3, 3) -> (..., 3) rotation vectors with norm in [0, pi]."""
+def log(R: torch.Tensor, check: bool = True) -> torch.Tensor:
+    """Logarithm map (..., 3, 3) -> (..., 3) rotation vectors with norm in [0, pi].
+
+    `check` refuses matrices that are not rotations (R^T R = I and det 1 within `_ROTATION_TOL` of their dtype):
+    the quaternion of any other matrix is still unit, so its "angle" would look plausible. The loss passes False:
+    its matrices are products of `exp`, and the check waits for the device (a host sync) at every step."""
     _torch_only(R, "log", "Rotation.from_matrix(R).as_rotvec()")
+    if check:
+        _check_rotations(R, "log")
     q = _quat_wxyz(R)
     w, v = q[..., 0], q[..., 1:]
     s2 = (v * v).sum(-1)
@@ -130,6 +138,26 @@ def log(R: torch.Tensor) -> torch.Tensor:
     w_taylor = torch.where(small, w, 1.0)
     factor = torch.where(small, 2.0 / w_taylor - 2.0 * s2 / (3.0 * w_taylor**3), 2.0 * torch.atan2(s, w) / s)
     return v * factor[..., None]
+
+
+def _check_rotations(R: torch.Tensor, what: str) -> None:
+    if R.shape[-2:] != (3, 3):
+        raise ValueError(f"{what}: expected rotation matrices of shape (..., 3, 3), got {tuple(R.shape)}")
+    if R.numel() == 0:
+        return
+    tol = _ROTATION_TOL.get(R.dtype, _ROTATION_TOL[torch.float32])
+    eye = torch.eye(3, dtype=R.dtype, device=R.device)
+    ortho = (R.transpose(-1, -2) @ R - eye).abs().amax(dim=(-1, -2))
+    det = torch.linalg.det(R)
+    bad = ~((ortho <= tol) & ((det - 1).abs() <= tol))  # NaN is bad too
+    if bool(bad.any()):
+        k = tuple(int(i) for i in torch.nonzero(bad)[0]) if bad.dim() else ()
+        where = f"the matrix at index {k}" if k else "the matrix"
+        raise ValueError(
+            f"{what}: {where} is not a rotation (max |R^T R - I| {float(ortho[k]):.3g}, det "
+            f"{float(det[k]):.6g}; tolerance {tol:g} in {R.dtype}): give body-to-world rotation matrices, e.g. "
+            "from so3.exp or Rotation.as_matrix(), re-orthonormalised if they were averaged or interpolated"
+        )
 
 
 def tree_product(R: torch.Tensor, levels: int) -> torch.Tensor:
