@@ -74,7 +74,10 @@ def test_one_member_equals_the_model_exactly():
     with torch.no_grad():
         mean, std = ens.forward_with_spread(x)
         assert torch.equal(mean, m(x)) and torch.equal(ens(x), m(x))
-    assert not std.any()
+    assert std.isnan().all()  # one member measures no spread: not a zero that reads as certainty
+    assert predict_with_spread(ens, imu)[1] is None
+    sc = StreamingCorrector(ens)
+    assert sc.push_chunk_with_spread(imu[:50])[1] is None and sc.push_with_spread(imu[50])[1] is None
     assert ens.receptive_field == m.receptive_field
     assert torch.equal(ens.C_hat, m.C_hat)
 

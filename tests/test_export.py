@@ -7,7 +7,7 @@ import pytest
 import torch
 from _models import random_imu, random_model
 
-from gyrodenoise.export import INPUT_NAME, ExportWrapper, export_onnx, export_pt2, main
+from gyrodenoise.export import INPUT_NAME, OUTPUT_NAME, ExportWrapper, export_onnx, export_pt2, main, output_names
 from gyrodenoise.models.build import build_model
 from gyrodenoise.pretrained import save_model
 from gyrodenoise.stateful_graph import StatefulCorrection
@@ -220,3 +220,22 @@ def test_stateful_torch_export_streams_in_chunks(tiny, tmp_path):
         torch.from_numpy(x[:, :5]), torch.zeros(1, StatefulCorrection(tiny).state_size), torch.tensor([True])
     )
     assert y.grad_fn is None and state.grad_fn is None
+
+
+def test_a_one_member_ensemble_exports_its_member_without_a_std(tiny, tmp_path):
+    """One member measures no spread: the ONNX graph (batch and stateful) has no gyro_std output (it output zeros,
+    which read as certainty), and its gyro is the member's."""
+    pytest.importorskip("onnxscript")
+    ort = pytest.importorskip("onnxruntime")
+    from gyrodenoise.models.ensemble import EnsembleCorrection
+
+    ens = EnsembleCorrection([tiny]).eval()
+    assert output_names(ens) == [OUTPUT_NAME]
+    x = random_imu(300, seed=3).astype(np.float32)[None]
+    sess = ort.InferenceSession(str(export_onnx(ens, tmp_path / "m.onnx")), providers=["CPUExecutionProvider"])
+    assert [o.name for o in sess.get_outputs()] == [OUTPUT_NAME]
+    assert np.abs(sess.run(None, {INPUT_NAME: x})[0] - torch_out(tiny, x)).max() < ATOL
+    step = StatefulCorrection(ens)
+    with torch.no_grad():
+        outs = step(torch.from_numpy(x), step.initial_state(1), torch.tensor([True]))
+    assert len(outs) == 2 and np.abs(outs[0].numpy() - torch_out(tiny, x)).max() < ATOL

@@ -113,8 +113,7 @@ def correct_gyro(
         std = None if parts[0][1] is None else np.concatenate([s for _, s in parts])
     else:
         raise ValueError(f"engine={engine!r}; choose one of {ENGINES}")
-    # a one-member ensemble's spread is 0, not a certainty: no std columns, as the C example writes none
-    return gyro, (std if len(getattr(model, "members", ())) > 1 else None)
+    return gyro, std  # None for a one-member ensemble too: no std columns, as the C example writes none
 
 
 STD_HEADER = ",w_std_x [rad s^-1],w_std_y [rad s^-1],w_std_z [rad s^-1]"

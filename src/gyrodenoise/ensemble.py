@@ -139,7 +139,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     if len(members) == 1:  # allowed (it equals the member), but its uncertainty output says nothing
         warnings.warn(
             f"an ensemble of one member ({records[0]['path']}) has no spread: correct writes no w_std columns for it "
-            "and the figures' bands are 0; give two or more member files for an uncertainty",
+            "and the figures draw no band; give two or more member files for an uncertainty",
             ModelQualityWarning,
             stacklevel=2,
         )

@@ -35,7 +35,7 @@ from torch import nn
 from gyrodenoise import c_export
 from gyrodenoise.atomic import atomic_path, output_path_problem
 from gyrodenoise.models.build import not_built_in
-from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, has_spread
 from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings, quiet_library_notices
 from gyrodenoise.pretrained import load_model, sensor_model
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
@@ -52,7 +52,7 @@ class ExportWrapper(nn.Module):
     def __init__(self, model: CorrectionModel) -> None:
         super().__init__()
         self.model = copy.deepcopy(model).cpu().float()  # the caller's model stays as it was
-        self.is_ensemble = isinstance(model, EnsembleCorrection)
+        self.is_ensemble = has_spread(model)  # a one-member ensemble: its member's output, no std
         self.eval()
 
     def forward(self, imu: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
@@ -65,7 +65,7 @@ PARITY_TOL_RAD_S = 1e-4  # a graph that differs from the model by more is refuse
 
 
 def output_names(model: CorrectionModel) -> list[str]:
-    return [OUTPUT_NAME, STD_NAME] if isinstance(model, EnsembleCorrection) else [OUTPUT_NAME]
+    return [OUTPUT_NAME, STD_NAME] if has_spread(model) else [OUTPUT_NAME]
 
 
 def _example(model: CorrectionModel, n: int = 0) -> torch.Tensor:
@@ -157,6 +157,7 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
     out["gyrodenoise.normalization"] = "inside the graph: feed raw SI values"
     if isinstance(model, EnsembleCorrection):
         out["gyrodenoise.ensemble_members"] = str(len(model.members))
+    if has_spread(model):
         out["gyrodenoise.gyro_std"] = (
             f"per-sample std of the members' corrected gyro (ddof 1) x spread_scale {float(model.spread_scale):g}; "
             "it ranks the error but underestimates it (see the model card)"

@@ -27,7 +27,7 @@ from torch import nn
 
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.denoiser import CalibratedImu, DilatedCNNDenoiser
-from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection
+from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, has_spread
 
 
 def _blocks(net: nn.Sequential) -> tuple[list[nn.Sequential], nn.Conv1d]:
@@ -92,8 +92,8 @@ class StatefulCorrection(nn.Module):
         super().__init__()
         check_stream_form(model)
         model = copy.deepcopy(model).cpu().float().eval()
-        self.is_ensemble = isinstance(model, EnsembleCorrection)
-        members = list(model.members) if self.is_ensemble else [model]
+        self.is_ensemble = has_spread(model)  # a one-member ensemble steps its member and outputs no std
+        members = list(model.members) if isinstance(model, EnsembleCorrection) else [model]
         self.steps = nn.ModuleList(_MemberStep(m) for m in members)
         self.spread_scale = float(getattr(model, "spread_scale", 1.0))
         self.state_size = sum(s.state_size for s in self.steps)
@@ -115,5 +115,4 @@ class StatefulCorrection(nn.Module):
         if not self.is_ensemble:
             return outs[0], new_state
         stack = torch.stack(outs)
-        std = stack.std(0, correction=1) * self.spread_scale if len(outs) > 1 else torch.zeros_like(outs[0])
-        return stack.mean(0), std, new_state
+        return stack.mean(0), stack.std(0, correction=1) * self.spread_scale, new_state

@@ -251,10 +251,11 @@ class StreamingCorrector:
         self._pos = [ly.span - 1 for ly in self.layers]  # index of the newest row
 
     # ------------------------------------------------------------------ ensembles
-    def _mean_std(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def _mean_std(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+        if len(outs) == 1:  # one member measures no spread: none, as `predict_with_spread`
+            return outs[0], None
         stack = np.stack(outs)
-        std = stack.std(0, ddof=1) * self.spread_scale if len(outs) > 1 else np.zeros_like(stack[0])
-        return stack.mean(0), std
+        return stack.mean(0), stack.std(0, ddof=1) * self.spread_scale
 
     def _stamps(self, t_ns, n: int) -> np.ndarray | int | None:
         """The call's timestamps, checked against the stream's before anything changes (None: not given)."""
@@ -325,11 +326,11 @@ class StreamingCorrector:
             )
 
     def push_with_spread(self, sample: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model."""
+        """(corrected gyro (3,), std over the ensemble's members (3,)); std None for a single model or member."""
         return self._run(sample, t_ns, chunk=False)
 
     def push_chunk_with_spread(self, chunk: ArrayLike, t_ns: StampLike = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model."""
+        """(corrected gyro (N, 3), std over the ensemble's members (N, 3)); std None for a single model or member."""
         return self._run(chunk, t_ns, chunk=True)
 
     # ------------------------------------------------------------------ per sample

@@ -63,12 +63,13 @@ class EnsembleCorrection(nn.Module):
         """(mean, std) over the members, each (B, N, 3) rad/s.
 
         std is the sample standard deviation (K - 1 in the denominator: the unbiased variance of
-        the members' spread) times `spread_scale`; a single member has no spread and gets zeros.
+        the members' spread) times `spread_scale`. A single member measures no spread: NaN, not a zero that reads
+        as certainty (the numpy, streaming and ONNX paths give no std at all for it: `has_spread`).
         """
         out = self.member_outputs(imu)
         mean = out.mean(0)
         if len(self.members) == 1:
-            return mean, torch.zeros_like(mean)
+            return mean, torch.full_like(mean, float("nan"))
         return mean, out.std(0, correction=1) * self.spread_scale
 
     @property
@@ -81,6 +82,11 @@ class EnsembleCorrection(nn.Module):
 CorrectionModel = GyroCorrection | EnsembleCorrection
 
 
+def has_spread(model: object) -> bool:
+    """An ensemble of two or more members: the only model whose members' spread means something."""
+    return isinstance(model, EnsembleCorrection) and len(model.members) > 1
+
+
 def model_device(model: nn.Module) -> torch.device:
     return next(iter(model.buffers()), torch.zeros(())).device
 
@@ -88,7 +94,7 @@ def model_device(model: nn.Module) -> torch.device:
 @torch.no_grad()
 def predict_with_spread(model: CorrectionModel, imu: np.ndarray | torch.Tensor) -> tuple[np.ndarray, np.ndarray | None]:
     """Corrected gyro (N, 3) float64 of one whole sequence (N, 6) in eval mode, and the ensemble's
-    per-sample std (N, 3) float64 (None for a single model, which has no spread)."""
+    per-sample std (N, 3) float64 (None for a single model or a one-member ensemble: neither has a spread)."""
     columns = " of gyro x, y, z [rad/s] then accelerometer x, y, z [m/s^2] (np.hstack([gyro, acc]))"
     arr = as_rows(imu.detach().cpu().numpy() if isinstance(imu, torch.Tensor) else imu, "imu", 6, columns)
     if len(arr) == 0 or not np.isfinite(arr).all():
@@ -101,7 +107,7 @@ def predict_with_spread(model: CorrectionModel, imu: np.ndarray | torch.Tensor) 
     model.eval()
     x = torch.as_tensor(arr, dtype=torch.float32, device=model_device(model))[None]
     try:
-        if isinstance(model, EnsembleCorrection):
+        if has_spread(model):
             mean, std = model.forward_with_spread(x)
             return mean[0].double().cpu().numpy(), std[0].double().cpu().numpy()
         return model(x)[0].double().cpu().numpy(), None
