@@ -79,3 +79,19 @@ def test_seed_null_draws_a_seed_and_records_it(root, tmp_path, capsys):
     again = train(config(root, tmp_path / "again", f"seed={summary['seed']}", "trainer.max_epochs=1",
                          "optim.scheduler.T_0=1"))  # fmt: skip
     assert again["val"] == summary["val"]
+
+
+def test_a_stop_in_the_last_epoch_finishes_the_run(root, tmp_path, capsys):
+    """The training is complete there: a checkpoint would resume to nothing (it was written, and the run exited
+    130 without its test and model file)."""
+    run = tmp_path / "run"
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        summary = _run(root, run, "+callbacks.interrupt._target_=test_damaged_inputs.TerminateAtEpoch",
+                       "+callbacks.interrupt.epoch=4")  # fmt: skip
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+    assert summary["epochs"] == 5 and (run / "model.pt").is_file()
+    assert not (run / "checkpoints" / "interrupted.ckpt").exists()
+    assert "SIGTERM came in the training's last epoch" in capsys.readouterr().err

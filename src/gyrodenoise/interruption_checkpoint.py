@@ -6,8 +6,9 @@ A checkpoint written in the middle of a step, as Lightning writes one on an exce
 batch-norm statistics had seen the step's batch while the optimiser had not stepped, its random stream had drawn the
 next crop, and Lightning re-enters the unfinished epoch on resuming (an audit measured 14.48 deg instead of the
 uninterrupted run's 10.28 after a Ctrl-C and a resume). A second Ctrl-C stops at once and writes nothing: the run then
-goes on from its last.ckpt. One epoch is one optimiser step, well under a second on a CPU, so the wait is short;
-SLURM's grace period after SIGTERM (30 s by default) covers it.
+goes on from its last.ckpt. A stop asked in the last epoch writes nothing either: the training is complete, and the run
+finishes (its test and model file) with exit code 0. One epoch is one optimiser step, well under a second on a CPU, so
+the wait is short; SLURM's grace period after SIGTERM (30 s by default) covers it.
 
 It does what Lightning's OnExceptionCheckpoint does, and is not one on purpose: with an OnExceptionCheckpoint among
 the callbacks, Lightning turns `fit(ckpt_path=None)` into `ckpt_path="last"` and silently restores the newest
@@ -70,13 +71,20 @@ class InterruptionCheckpoint(Checkpoint):
         )
 
     def on_train_epoch_end(self, trainer: L.Trainer, *_: Any) -> None:
-        if self.stop_signal is not None and not self.saved:
+        if self.stop_signal is not None and not self.saved and not _last_epoch(trainer):
             trainer.save_checkpoint(self.ckpt_path, weights_only=False)  # said, or Lightning logs its default
             self.saved = True
             trainer.should_stop = True
 
     def on_train_end(self, *_: Any) -> None:
         self._restore()
+        if self.stop_signal is not None and not self.saved:  # it came in the last epoch: nothing is left to resume
+            print(
+                f"{signal.Signals(self.stop_signal).name} came in the training's last epoch: the training is complete, "
+                "so the run finishes (its test and model file) instead of writing a checkpoint to resume from",
+                file=sys.stderr,
+                flush=True,
+            )
 
     def on_exception(self, *_: Any, **__: Any) -> None:
         self._restore()
@@ -92,6 +100,14 @@ class InterruptionCheckpoint(Checkpoint):
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous = {}
+
+
+def _last_epoch(trainer: L.Trainer) -> bool:
+    """This epoch ends the fit anyway (max_epochs or max_steps reached): a checkpoint would resume to nothing."""
+    epochs, steps = trainer.max_epochs, trainer.max_steps
+    return (epochs is not None and epochs >= 0 and trainer.current_epoch + 1 >= epochs) or (
+        steps is not None and steps >= 0 and trainer.global_step >= steps
+    )
 
 
 def stopped_by(trainer: L.Trainer) -> int | None:
