@@ -95,3 +95,27 @@ def test_a_stop_in_the_last_epoch_finishes_the_run(root, tmp_path, capsys):
     assert summary["epochs"] == 5 and (run / "model.pt").is_file()
     assert not (run / "checkpoints" / "interrupted.ckpt").exists()
     assert "SIGTERM came in the training's last epoch" in capsys.readouterr().err
+
+
+def test_a_checkpoint_of_a_version_without_a_setting_resumes_with_a_warning(root, tmp_path):
+    """A later version that adds a data setting refused every older checkpoint ('window' absent there)."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.train import check_resumed_settings, resume_settings
+
+    first = config(root, tmp_path / "first", "seed=0", "trainer.max_epochs=1", "optim.scheduler.T_0=2")
+    first.callbacks.last_checkpoint.every_n_epochs = 1
+    train(first)
+    path = tmp_path / "first" / "checkpoints" / "last.ckpt"
+    ckpt = torch.load(path, weights_only=False)
+    settings = resume_settings(first)
+    window = settings["dataset"]["window"]
+    del ckpt["run_settings"]["dataset"]["window"]  # as written by a version without it
+    torch.save(ckpt, path)
+    hparams = dict(ckpt["hyper_parameters"])
+    with pytest.warns(UserWarning, match=rf"without dataset.window \(here {window}\)"):
+        assert check_resumed_settings(str(path), hparams, resume_settings(first)) == 1
+    first.dataset.window = window // 2  # a setting the checkpoint recorded still has to match
+    ckpt["run_settings"]["dataset"]["window"] = window
+    torch.save(ckpt, path)
+    with pytest.raises(ConfigError, match=rf"dataset.window={window} there, {window // 2} here"):
+        check_resumed_settings(str(path), hparams, resume_settings(first))

@@ -372,9 +372,19 @@ def check_resumed_settings(ckpt_path: str, hparams: dict, settings: dict | None 
             settings["seed"] = ckpt["run_settings"].get("seed")
         was |= _flat(ckpt["run_settings"])
         now |= _flat(settings)
-    differ = [k for k in sorted(set(was) | set(now)) if k not in RUNTIME_ONLY and was.get(k) != now.get(k)]
-    if differ:
-        listed = "; ".join(f"{k}={was.get(k)!r} there, {now.get(k)!r} here" for k in differ[:6])
+    keys = [k for k in sorted(set(was) | set(now)) if k not in RUNTIME_ONLY and was.get(k) != now.get(k)]
+    # a key the checkpoint lacks is a setting a later version added (null keys are equal already): refusing it would
+    # refuse every resume across an upgrade, so it is said, not refused
+    if added := [k for k in keys if k not in was]:
+        warnings.warn(
+            f"resuming from {ckpt_path}, written by a version without "
+            + ", ".join(f"{k} (here {now[k]!r})" for k in added)
+            + ": the resumed epochs use these values; if they change what the run learns, start afresh",
+            UserWarning,
+            stacklevel=2,
+        )
+    if differ := [k for k in keys if k in was]:
+        listed = "; ".join(f"{k}={was[k]!r} there, {now.get(k)!r} here" for k in differ[:6])
         raise ConfigError(
             f"resuming from {ckpt_path}, whose run was trained with other settings ({listed}): a resumed run goes on "
             "with the checkpoint's weights, optimiser and schedule, so these would be recorded but not used. Give the "
