@@ -578,6 +578,10 @@ def test_ensemble_of_members_that_all_failed_warns_and_duplicates_are_refused(tm
         ensemble_cli.make_ensemble([paths[0], paths[0]])
     with pytest.raises(ValueError, match="the same member twice"):  # an ensemble brings its members
         ensemble_cli.make_ensemble([ens, paths[1]])
+    # the same weights re-saved with other metadata: another file, the same network (compared bytes passed it)
+    resaved = save_model(load_model(paths[0])[0], {"name": "denoiser", **TINY}, tmp_path / "copy.pt", meta | {"x": 1})
+    with pytest.raises(ValueError, match=r"the same member twice: .*copy.pt and .*m1.pt \(same weights\)"):
+        ensemble_cli.make_ensemble([paths[0], paths[1], resaved])
 
 
 def test_reference_without_its_data_says_how_to_give_the_folder(tmp_path, capsys):

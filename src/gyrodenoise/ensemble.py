@@ -23,11 +23,14 @@ recordings, against which `correct` and `evaluate` check new recordings (`gyrode
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import re
 import sys
 import warnings
 from pathlib import Path
+
+import torch
 
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
@@ -104,6 +107,30 @@ def _common(records: list[dict], key: str):
     return values[0] if all(v == values[0] for v in values) else None
 
 
+def weights_digest(model: torch.nn.Module) -> str:
+    """sha256 of a network's parameters and buffers (names, dtypes, shapes, values): the same weights saved in two
+    files, with other metadata or another name, have the same digest."""
+    h = hashlib.sha256()
+    for name, t in sorted(model.state_dict().items()):
+        t = t.detach().cpu().contiguous()
+        h.update(f"{name}:{t.dtype}:{tuple(t.shape)};".encode())
+        h.update(t.numpy().tobytes() if t.dtype != torch.bfloat16 else t.float().numpy().tobytes())
+    return h.hexdigest()
+
+
+def _refuse_twins(members: list, records: list[dict]) -> None:
+    """One network twice would weigh it double and shrink the spread: refused, whether as the same file or as the same
+    weights in two files (re-saved, copied with other metadata)."""
+    seen: dict[str, dict] = {}
+    for m, r in zip(members, records, strict=True):
+        digest = weights_digest(m)
+        if digest in seen:
+            first = seen[digest]
+            same = "identical files" if r.get("sha256") and r.get("sha256") == first.get("sha256") else "same weights"
+            raise ValueError(f"the same member twice: {r['path']} and {first['path']} ({same})")
+        seen[digest] = r
+
+
 def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[EnsembleCorrection, dict, dict]:
     """Load the member files -> (ensemble model, model config, metadata). An ensemble file among
     them contributes its members (and their records)."""
@@ -129,13 +156,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
             cfgs.append(dict(meta["model"]))
             records.append(member_record(meta["path"], meta))
     check_compatible(records, allow_mixed)
-    seen: dict[str, str] = {}
-    for r in records:  # one network twice would weigh it double and shrink the spread
-        sha = r.get("sha256")
-        if sha in seen:
-            raise ValueError(f"the same member twice: {r['path']} and {seen[sha]} (identical files)")
-        if sha:  # older records may lack it: not comparable
-            seen[sha] = r["path"]
+    _refuse_twins(members, records)
     if len(members) == 1:  # allowed (it equals the member), but its uncertainty output says nothing
         warnings.warn(
             f"an ensemble of one member ({records[0]['path']}) has no spread: correct writes no w_std columns for it "
