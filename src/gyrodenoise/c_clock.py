@@ -24,6 +24,7 @@ import math
 from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.stream_clock import (
     CLOCK_JUMP_SAMPLES,
+    RATE_TRACK_MIN,
     RATE_WINDOW,
     STREAM_FAST_FACTOR,
     STREAM_GAP_FACTOR,
@@ -58,7 +59,7 @@ def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
     """The stamped step's thresholds in ns, as StreamClock decides: min_step (shorter: refused), max_step (longer:
     a gap; 0: GAP_FACTOR x the stream's mean step; -1: none), and the sum of the first RATE_WINDOW steps that does
     not warn, [rate_sum_min, rate_sum_max]."""
-    free = {"min_step": 1, "rate_sum_min": 0, "rate_sum_max": INT64_MAX, "period": 0}
+    free = {"min_step": 1, "rate_sum_min": 0, "rate_sum_max": INT64_MAX, "period": 0, "step_max_off": 0}
     if not memory:  # StreamClock(None, gaps=False): the order only
         return {**free, "max_step": -1}
     if not rate_hz:  # StreamClock(None): the period learnt from the stream (gaps only)
@@ -71,6 +72,7 @@ def step_limits(rate_hz: float, memory: bool) -> dict[str, int]:
         "rate_sum_min": lo,
         "rate_sum_max": hi,
         "period": round(period),  # the time base's step (StreamClock._base)
+        "step_max_off": math.floor(RATE_TOL * round(period)),  # StreamClock._step_max_off
     }
 
 
@@ -96,6 +98,8 @@ def header_defines(rate_hz: float, memory: bool) -> str:
         ("GD_MAX_STEP_NS", f"INT64_C({lim['max_step']})", max_doc),
         ("GD_PERIOD_NS", f"INT64_C({lim['period']})", "the time base's step (0: none, the steps alone decide)"),
         ("GD_TIME_BASE_GAIN", str(TIME_BASE_GAIN), "the time base moves by 1/this of a sample's deviation"),
+        ("GD_RATE_TRACK_MIN", str(RATE_TRACK_MIN), "intervals taken before its step is their mean, not the period"),
+        ("GD_STEP_MAX_OFF_NS", f"INT64_C({lim['step_max_off']})", "its step within this of GD_PERIOD_NS"),
         ("GD_CLOCK_JUMP_SAMPLES", str(CLOCK_JUMP_SAMPLES), "this many stamps in a row before the last: restart"),
         ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps (and early refusals) averaged, once per stream, for the rate"),
         ("GD_RATE_TOL", f"{RATE_TOL!r}f", "relative rate difference that gives GD_RATE_OFF"),
@@ -113,6 +117,8 @@ STATE_FIELDS = """\
     int stamped;                                          /* gd_step_t has stamped this stream */
     int64_t last_ns;                                      /* the stamp of its last sample */
     int64_t lag_ns;                                       /* its last stamp less where the time base puts it */
+    uint64_t track_ns, track_n;                           /* its taken steps' sum and intervals (base_step) */
+    int early_since;                                      /* a GD_REFUSED_EARLY since its last sample taken */
     int late_in_a_row;                                    /* samples refused in a row as GD_REFUSED_ORDER */
     uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */
     uint64_t n_early;                                     /* its samples refused as GD_REFUSED_EARLY */
@@ -126,8 +132,9 @@ DECLARATION = """\
      GD_REFUSED_ORDER in a row (GD_CLOCK_JUMP_SAMPLES of them restart) and of GD_REFUSED_EARLY (the rate's average
      counts them);
    With the model's rate (GD_PERIOD_NS > 0) a sample is judged against its expected time: the stream's time base
-   advances GD_PERIOD_NS per sample taken and follows the stamps by 1/GD_TIME_BASE_GAIN of their deviation, so a
-   driver's jitter passes;
+   advances one step per sample taken (GD_PERIOD_NS; after GD_RATE_TRACK_MIN intervals the stream's mean interval,
+   within GD_STEP_MAX_OFF_NS of it) and follows the stamps by 1/GD_TIME_BASE_GAIN of their deviation, so a driver's
+   jitter passes; a sample a step less the early tolerance late or more is one missing sample, stepped over;
    - GD_RESTARTED: after a gap, the sample started a new stream (Python raises there; its caller resets and pushes);
    - GD_RATE_OFF: taken, and the stream's rate is off the model's (Python warns).
    Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). Each gd_state is
@@ -151,6 +158,8 @@ void gd_reset(gd_state *s)
     memset(s->newest, 0, sizeof s->newest); /* a state never zeroed (on the stack) holds any index here */
     s->stamped = 0;
     s->last_ns = s->lag_ns = 0;
+    s->track_ns = s->track_n = 0;
+    s->early_since = 0;
     s->late_in_a_row = 0;
     s->steps_ns = s->n_steps = s->n_early = 0;
     s->rate_checked = 0;
@@ -180,20 +189,32 @@ static int64_t lag_after(int64_t dev)
     return dev - dev / GD_TIME_BASE_GAIN;
 }}
 
+/* the time base's step: GD_PERIOD_NS, or the taken samples' mean interval once GD_RATE_TRACK_MIN were taken, within
+   GD_STEP_MAX_OFF_NS of it (StreamClock.base_step). The mean of a stream's steps: a loop on the deviations would see
+   those of one sign only where samples are refused as early, and drift off */
+static int64_t base_step(const gd_state *s)
+{{
+    int64_t off; /* a taken step is at most a few periods: the mean fits int64 */
+    if (s->track_n < GD_RATE_TRACK_MIN) return GD_PERIOD_NS;
+    off = (int64_t)(s->track_ns / s->track_n) - GD_PERIOD_NS;
+    off = off > GD_STEP_MAX_OFF_NS ? GD_STEP_MAX_OFF_NS : off < -GD_STEP_MAX_OFF_NS ? -GD_STEP_MAX_OFF_NS : off;
+    return GD_PERIOD_NS + off;
+}}
+
 /* the sample's deviation from its expected time, without overflow for any int64 stamps: from the step since the
-   last stamp (exact as unsigned: t_ns > last_ns) and the base's small lag behind that stamp; a step over 2^62 ns is
-   a gap whatever the lag (*gap set, no deviation) */
-static int64_t deviation(const gd_state *s, uint64_t step_ns, int *gap)
+   last stamp (exact as unsigned: t_ns > last_ns), the base's small lag behind that stamp and its step; a step over
+   2^62 ns is a gap whatever the lag (*gap set, no deviation) */
+static int64_t deviation(const gd_state *s, uint64_t step_ns, int64_t bstep, int *gap)
 {{
     *gap = step_ns > (UINT64_C(1) << 62);
-    return *gap ? 0 : (int64_t)step_ns + s->lag_ns - GD_PERIOD_NS;
+    return *gap ? 0 : (int64_t)step_ns + s->lag_ns - bstep;
 }}
 
 int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], float *std_out)
 {{
     int code = GD_OK;
     uint64_t step_ns = 0;
-    int64_t dev = 0;
+    int64_t dev = 0, bstep = 0;
     if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
     if (s->stamped) {{
         if (t_ns <= s->last_ns && ++s->late_in_a_row < GD_CLOCK_JUMP_SAMPLES) return GD_REFUSED_ORDER;
@@ -206,9 +227,11 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
         step_ns = (uint64_t)t_ns - (uint64_t)s->last_ns; /* exact: t_ns > last_ns */
         if (GD_PERIOD_NS > 0) {{ /* against the sample's expected time on the time base */
             int gap;
-            dev = deviation(s, step_ns, &gap);
+            bstep = base_step(s);
+            dev = deviation(s, step_ns, bstep, &gap);
             if (!gap && dev < GD_MIN_STEP_NS - GD_PERIOD_NS) {{
                 s->n_early++; /* a sample that came: the rate's average counts it */
+                s->early_since = 1;
                 return GD_REFUSED_EARLY;
             }}
             if (gap || dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
@@ -234,8 +257,20 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
             if (scaled < rate_sum_min * n || scaled > rate_sum_max * n) code = GD_RATE_OFF;
         }}
     }}
-    s->lag_ns = s->stamped && GD_PERIOD_NS > 0 ? lag_after(dev) : 0; /* without a rate: unused */
+    if (s->stamped && GD_PERIOD_NS > 0) {{
+        /* a step less the early tolerance late or more: one sample missing, the base steps over it. A step with a
+           sample refused as early inside is left out of the track (the stream's jitter, or one sample too many?) */
+        const int missed = dev - bstep >= GD_MIN_STEP_NS - GD_PERIOD_NS;
+        s->lag_ns = lag_after(missed ? dev - bstep : dev);
+        if (!s->early_since) {{
+            s->track_ns += step_ns;
+            s->track_n += 1 + (uint64_t)missed;
+        }}
+    }} else {{
+        s->lag_ns = 0; /* a new stream, or without a rate: unused */
+    }}
     s->late_in_a_row = 0;
+    s->early_since = 0;
     s->stamped = 1;
     s->last_ns = t_ns;
     return code;

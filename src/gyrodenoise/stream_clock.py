@@ -9,7 +9,12 @@ With the model's rate known, a sample is judged against the time it is expected 
 stamp alone: the stream's time base advances one period per sample taken and follows the stamps with a gain of
 1/TIME_BASE_GAIN (integer ns, as the C export's `gd_step_t` computes it). A driver's jitter (a late stamp, then an
 on-time one that came "early" after it) then passes, while a stream at twice the model's rate is still refused
-every other sample and two missing samples are still a gap. Refusals say which kind they are (`StreamTimeError.kind`).
+every other sample and two missing samples are still a gap. The base's step is the stream's own mean interval once
+RATE_TRACK_MIN intervals were taken (within RATE_TOL of the model's period): with the period as its step, a stream a
+fraction f fast lagged the base by TIME_BASE_GAIN f periods, and its jitter then reached the early limit (4-5 % of the
+samples of a stream 3-4 % fast with +-1.5 ms jitter were refused). A sample about one period late is one missing
+sample: the base steps over it, so a second one a few samples later is not taken for a gap. Refusals say which kind
+they are (`StreamTimeError.kind`).
 """
 
 from __future__ import annotations
@@ -41,6 +46,10 @@ CLOCK_JUMP_SAMPLES = 20
 # the time base moves by 1/8 of each sample's deviation from its expected time (a power of two: the C export's integer
 # division is exact, and Python's truncation toward zero below matches C99's)
 TIME_BASE_GAIN = 8
+# the base's step is the mean interval of the samples taken (their steps' sum over their count, a sample about a
+# period late counting two: the one missing and itself) once this many intervals were taken; a mean, not a loop on the
+# deviations: samples refused as early would leave out the deviations of one sign and drive a loop off
+RATE_TRACK_MIN = 32
 
 
 RESTARTS_IN_A_ROW = 5  # this many restarts (gaps, clock jumps) within RATE_WINDOW samples taken: a warning, once
@@ -122,20 +131,42 @@ class StreamClock:
                 math.floor(gap_factor * period) - whole,
             )
             self._rate_bounds = rate_sum_bounds(rate_hz)
+            self._step_max_off = math.floor(RATE_TOL * whole)  # the base's step within RATE_TOL of the period
         self.reset()
 
     def reset(self) -> None:
         self.late_in_a_row = 0  # single samples refused in a row as not after the last one taken
         self.last_ns: int | None = None
         self.base_ns: int | None = None  # where the time base puts the last sample taken
+        self.track: tuple[int, int] = (0, 0)  # the taken samples' steps: sum (ns) and intervals (`base_step`)
         self._steps_sum, self._steps_n = 0, 0  # the steps taken
         self._early_n = 0  # samples refused as early: they came, between two taken ones (the rate's average)
+        self._early_since = False  # one was refused since the last sample taken (its step is left out of the track)
         self._rate_checked = False
 
-    def _advance(self, base: int, t: int) -> int:
-        """The time base after taking a sample stamped `t` (checked: its deviation is within the tolerance)."""
-        whole = self._base[0]
-        return base + whole + _toward_zero(t - (base + whole), TIME_BASE_GAIN)
+    def base_step(self, track: tuple[int, int]) -> int:
+        """The time base's step (ns): the period, or the taken samples' mean interval once RATE_TRACK_MIN were taken,
+        within RATE_TOL of the period (integer floor division, as the C export's unsigned one)."""
+        whole, (total, n) = self._base[0], track
+        if n < RATE_TRACK_MIN:
+            return whole
+        return whole + max(-self._step_max_off, min(self._step_max_off, total // n - whole))
+
+    def _advance(
+        self, base: int, track: tuple[int, int], last: int, t: int, after_early: bool
+    ) -> tuple[int, tuple[int, int]]:
+        """(time base, track) after taking a sample stamped `t` (checked: its deviation is within the tolerance) after
+        the one stamped `last`. A sample late by a step less the early tolerance (0.6 period) or more is one missing
+        sample (two are a gap): the base steps over it. A step with a sample refused as early inside is left out of
+        the track: whether that sample was the stream's (jitter) or one too many (a faster stream) is not known, and
+        either guess would drive the track off."""
+        step = self.base_step(track)
+        expected = base + step
+        missed = t - expected >= step + self._base[1]
+        expected += step if missed else 0
+        if not after_early:
+            track = (track[0] + t - last, track[1] + 1 + missed)
+        return expected + _toward_zero(t - expected, TIME_BASE_GAIN), track
 
     @property
     def period_ns(self) -> float | None:
@@ -150,8 +181,8 @@ class StreamClock:
         if one and self.last_ns is not None:
             t1 = int(t_ns)  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
             if self._base is not None:
-                whole, lo, hi = self._base
-                if t1 > self.last_ns and lo <= t1 - (self.base_ns + whole) <= hi:
+                _, lo, hi = self._base
+                if t1 > self.last_ns and lo <= t1 - self.base_ns - self.base_step(self.track) <= hi:
                     return t1
             else:
                 step = t1 - self.last_ns
@@ -220,6 +251,7 @@ class StreamClock:
             )
         if kind == "early":
             self._early_n += 1  # a sample that came: the rate's average counts it
+            self._early_since = True
             plausible = steps[k] >= 1e9 / IMU_RATE_RANGE_HZ[1]  # a rate an IMU samples at, not a unit
             looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
             raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks, dev), "early", index)
@@ -246,8 +278,8 @@ class StreamClock:
 
     def _check_against_time_base(self, t: np.ndarray, full: np.ndarray, steps: np.ndarray, n: int, where, at) -> None:
         """Each sample against its expected time on the stream's time base, in order (the base moves with each)."""
-        whole, lo, hi = self._base
-        base, last = self.base_ns, self.last_ns
+        _, lo, hi = self._base
+        base, track, last = self.base_ns, self.track, self.last_ns
         for i, ti in enumerate(t.tolist()):
             k = i - 1 + (len(full) - n)  # the step that ends at this sample
             if last is not None and ti <= last:
@@ -255,19 +287,25 @@ class StreamClock:
             if base is None:  # the stream's first sample
                 base = last = ti
                 continue
-            dev = ti - (base + whole)
+            dev = ti - base - self.base_step(track)
             if dev < lo:
                 self._refuse("early", k, full, steps, n, where, at, self.period_ns, dev)
             if dev > hi:
                 self._refuse("gap", k, full, steps, n, where, at, self.period_ns)
-            base, last = self._advance(base, ti), ti
+            (base, track), last = self._advance(base, track, last, ti, self._early_since and i == 0), ti
 
     def commit(self, t: np.ndarray | int) -> None:
         """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
         self.late_in_a_row = 0
         if self._base is not None:
+            last, after_early = self.last_ns, self._early_since
             for ti in [t] if isinstance(t, int) else t.tolist():
-                self.base_ns = ti if self.base_ns is None else self._advance(self.base_ns, ti)
+                if self.base_ns is None:  # the stream's first sample
+                    self.base_ns = ti
+                else:
+                    self.base_ns, self.track = self._advance(self.base_ns, self.track, last, ti, after_early)
+                last, after_early = ti, False
+        self._early_since = False
         if isinstance(t, int):  # check's one-sample path: plain ints
             self._steps_sum += t - self.last_ns
             self._steps_n += 1
