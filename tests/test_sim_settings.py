@@ -40,6 +40,17 @@ def test_a_vibration_above_the_output_nyquist_is_refused(traj):
         simulate_imu(traj, [build_effect("vibration", frequency_hz=120.0, amplitude=[0.01, 0, 0])], duration_s=5)
 
 
+def test_a_band_limited_vibration_past_the_output_nyquist_is_refused(traj):
+    """Only the band's centre was checked: a band from 80 to 120 Hz at 200 Hz folded its upper half back into the
+    output, which its amplitude and spectral shape do not describe."""
+    band = build_effect("vibration", frequency_hz=100.0 - 10.0, bandwidth_hz=40.0, amplitude=[0.01, 0, 0])
+    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past the IMU's Nyquist "
+                       r"frequency \(100 Hz at 200 Hz\).*bandwidth_hz at most 20"):  # fmt: skip
+        simulate_imu(traj, [band], duration_s=2)
+    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=20.0, amplitude=[0.01, 0, 0])
+    assert np.isfinite(simulate_imu(traj, [within], duration_s=2).gyro).all()
+
+
 def test_a_time_offset_delays_the_accelerometer_too(traj):
     """It is the IMU's stamps that are late: both sensors hold the motion of t - delta."""
     delta = 0.005

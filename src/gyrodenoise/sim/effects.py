@@ -435,6 +435,15 @@ class Vibration(Effect):
                     f"({out_rate / 2:g} Hz at {out_rate:g} Hz): its amplitude is the line's in the IMU output, and no "
                     "line above that frequency can appear there; give the frequency the line has in the recording"
                 )
+            if bw > 0 and f + bw / 2 > out_rate / 2:
+                # the band's part above the output's Nyquist frequency would fold back below it, where the band's
+                # amplitude and shape (`band_psd`, what the detector fits) say nothing of it
+                raise ValueError(
+                    f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
+                    f"past the IMU's Nyquist frequency ({out_rate / 2:g} Hz at {out_rate:g} Hz), and would alias "
+                    f"into the output; give bandwidth_hz at most {2 * (out_rate / 2 - f):g} (the band within the "
+                    "Nyquist frequency) or a higher rate_hz"
+                )
             a = a / self.output_gain(f, sig.rate_hz, m)
         if bw <= 0:
             phase = rng.uniform(0, 2 * np.pi, 3)
