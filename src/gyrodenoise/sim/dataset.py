@@ -18,6 +18,7 @@ import numpy as np
 from gyrodenoise.atomic import write_text
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
+from gyrodenoise.sim.accel import acc_effects_from_config
 from gyrodenoise.sim.effects import Bias, Effect, WhiteNoise, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import asl_written, simulate_imu, write_asl
@@ -29,8 +30,14 @@ GENERATOR_VERSION = 2
 KINDS = {"drone": drone_trajectory, "hand": handheld_trajectory}
 
 
+# settings added since, at the value that simulates what was simulated before them: left out of the key, so the data
+# sets generated before they existed keep their folders
+NEUTRAL_SETTINGS = {"acc_error_model": ([], None)}
+
+
 def generation_key(generation: Mapping, names: list[str]) -> str:
-    blob = json.dumps({"v": GENERATOR_VERSION, "gen": generation, "names": sorted(names)}, sort_keys=True)
+    gen = {k: v for k, v in generation.items() if not (k in NEUTRAL_SETTINGS and v in NEUTRAL_SETTINGS[k])}
+    blob = json.dumps({"v": GENERATOR_VERSION, "gen": gen, "names": sorted(names)}, sort_keys=True)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
 
 
@@ -48,6 +55,13 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
     entries = [dict(c) if hasattr(c, "keys") else c for c in generation.get("error_model", [])]  # DictConfig -> dict
     effects: list[Effect] = effects_from_config(entries, "dataset.generation.error_model")
+    acc_entries = generation.get("acc_error_model") or []
+    if isinstance(acc_entries, str | Mapping):  # a list is iterable; a mapping or a string would read as its keys
+        raise ValueError(
+            f"dataset.generation.acc_error_model={acc_entries!r}: a list of {{name, units, params}} entries (or [])"
+        )
+    acc_entries = [dict(c) if hasattr(c, "keys") else c for c in acc_entries]
+    acc_effects = acc_effects_from_config(acc_entries, "dataset.generation.acc_error_model")
     jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
     if not jitter >= 0:  # NaN included
         raise ValueError(f"dataset.generation.bias_jitter_rad_s={jitter!r}: the turn-on bias spread in rad/s, >= 0")
@@ -61,6 +75,7 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
         seed=int(rng.integers(1 << 30)),
         acc_noise_density=float(generation.get("acc_noise_density", 2.0e-3)),
         acc_bias=tuple(generation.get("acc_bias", (0.0, 0.0, 0.0))),
+        acc_effects=acc_effects,
     )
     # several jobs may generate the same data set at once (a job array on a fresh cache): the first copy stays
     return write_asl(folder / name, sim, keep_existing=True)

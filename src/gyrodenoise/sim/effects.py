@@ -9,6 +9,9 @@ Each effect has
   coefficient, shape (N, 3, k)), `prepare(...)` (search of its nonlinear parameter, e.g. a frequency)
   and `params_from_fit(...)` (coefficients -> parameters with standard errors).
 
+`EFFECTS` is the discrepancy workflow's vocabulary; `SIM_EFFECTS` adds the effects that are only simulated (bias
+instability). The accelerometer's effects are in `sim.accel`.
+
 Residual convention: r = measured gyro - true body rate. Stages give the order of application:
 0 inputs (time offset), 1 sensor response to the true inputs, 2 additive errors, 3 front-end limits,
 4 output (after decimation to the IMU rate).
@@ -16,6 +19,7 @@ Residual convention: r = measured gyro - true body rate. Stages give the order o
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -23,6 +27,7 @@ from scipy import signal
 
 from gyrodenoise import fft_threads
 from gyrodenoise.allan import fit_allan_noise
+from gyrodenoise.sim import flicker
 from gyrodenoise.sim.array_memo import ArrayMemo, digest
 from gyrodenoise.sim.context import FitContext, SignalContext
 
@@ -35,11 +40,21 @@ G0 = 9.80665
 _MISALIGN_PAIRS = [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
 
 
+# the discrepancy workflow's vocabulary: every effect it can detect and fit
 EFFECTS: dict[str, type[Effect]] = {}
+# every gyro effect the simulator takes: the vocabulary and the effects only simulated (no detector: a workflow that
+# was asked for one would silently leave it out, so it refuses them as unknown instead)
+SIM_EFFECTS: dict[str, type[Effect]] = {}
 
 
 def register(cls: type[Effect]) -> type[Effect]:
     EFFECTS[cls.name] = cls
+    SIM_EFFECTS[cls.name] = cls
+    return cls
+
+
+def register_simulated_only(cls: type[Effect]) -> type[Effect]:
+    SIM_EFFECTS[cls.name] = cls
     return cls
 
 
@@ -116,6 +131,14 @@ class Effect:
         """A parameter `prepare` searched that ended at an end of its search (e.g. "tau 2 s, the shortest searched"):
         the best value may lie beyond it. None: no searched parameter, or not at an end."""
         return None
+
+
+def misalignment_matrix(angles: np.ndarray) -> np.ndarray:
+    """M (3x3, zero diagonal) of the six angles [xy, xz, yx, yz, zx, zy] (rad): row i, column j is M[i, j]."""
+    M = np.zeros((3, 3))
+    for (i, j), a in zip(_MISALIGN_PAIRS, np.asarray(angles, dtype=np.float64), strict=True):
+        M[i, j] = a
+    return M
 
 
 def _axis_columns(values: np.ndarray) -> np.ndarray:
@@ -208,10 +231,7 @@ class Misalignment(Effect):
     REFERENCE = 1e-3  # 1 mrad
 
     def matrix(self) -> np.ndarray:
-        M = np.zeros((3, 3))
-        for (i, j), a in zip(_MISALIGN_PAIRS, self.params["angles"], strict=True):
-            M[i, j] = a
-        return M
+        return misalignment_matrix(self.params["angles"])
 
     def apply(self, sig, y, rng):
         return y + sig.omega @ self.matrix().T
@@ -722,6 +742,52 @@ class BiasRandomWalk(Effect):
         return float(np.max(self.params["density"]))
 
 
+@register_simulated_only
+class BiasInstability(Effect):
+    """Bias instability: a flicker (1/f) bias, the flat floor of the Allan deviation that datasheets quote as "bias
+    instability" or "in-run bias stability". `instability` is that floor (rad/s; IEEE Std 952's 0.664 B for a
+    two-sided PSD B^2 / (2 pi f)), flat between the averaging times `tau_min` and `tau_max` (s) and falling off
+    beyond them: a sum of first-order Gauss-Markov processes with log-spaced correlation times (`sim.flicker`),
+    each started in its stationary state.
+
+    Simulated only: the discrepancy workflow has no detector for it (a stationary bias wander that white noise plus
+    a bias random walk stand in for), so it is not in EFFECTS."""
+
+    name = "bias_instability"
+    stochastic = True
+    DATASHEET = {"instability": ("deg/h", 3600 / DEG), "tau_min": ("s", 1.0), "tau_max": ("s", 1.0)}
+    PRIOR = (1e-7, 1e-3)
+    DEFAULTS = {"instability": np.zeros(3), "tau_min": 1.0, "tau_max": 1000.0}
+
+    def __init__(self, **params: Any) -> None:
+        super().__init__(**params)
+        check_flicker_band(self.name, float(self.params["tau_min"]), float(self.params["tau_max"]))
+
+    def apply(self, sig, y, rng):
+        floor = np.broadcast_to(self.params["instability"], (3,))
+        if not floor.any():
+            return y
+        tau_min, tau_max = float(self.params["tau_min"]), float(self.params["tau_max"])
+        return y + flicker.draw(floor, tau_min, tau_max, len(y), sig.rate_hz, rng)
+
+    def magnitude(self) -> float:
+        return float(np.max(self.params["instability"]))
+
+
+def check_flicker_band(effect: str, tau_min: float, tau_max: float) -> None:
+    """One line for a flicker band no bank can have (the averaging times between which the Allan floor is flat)."""
+    if not (np.isfinite(tau_min) and np.isfinite(tau_max) and 0 < tau_min < tau_max):
+        raise ValueError(
+            f"effect {effect!r}: params.tau_max = {tau_max:g} must be above params.tau_min = {tau_min:g} (s, both "
+            "above 0): the averaging times between which the Allan deviation is flat at the instability"
+        )
+    if tau_max / tau_min > flicker.MAX_SPAN:
+        raise ValueError(
+            f"effect {effect!r}: params.tau_max / params.tau_min = {tau_max / tau_min:.3g} spans more than "
+            f"{flicker.MAX_SPAN:.0e} (one Gauss-Markov term per half decade); give a narrower band"
+        )
+
+
 @register
 class Quantization(Effect):
     """Output quantisation: y = q round(y / q) (the LSB, applied at the output rate)."""
@@ -757,29 +823,37 @@ class Quantization(Effect):
 
 
 def build_effect(name: str, **params: Any) -> Effect:
-    """The effect `name` with parameters in SI (those not given keep their defaults), checked as a config entry's
-    are (`effect_from_config`)."""
-    if name not in EFFECTS:
-        raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(sorted(EFFECTS))}")
-    cls = EFFECTS[name]
+    """The gyro effect `name` (of SIM_EFFECTS) with parameters in SI (those not given keep their defaults), checked
+    as a config entry's are (`effect_from_config`)."""
+    return build_from(SIM_EFFECTS, name, params)
+
+
+def build_from(registry: Mapping[str, type[Effect]], name: str, params: Mapping[str, Any]) -> Effect:
+    """`build_effect` over another vocabulary (the accelerometer's: `sim.accel`)."""
+    if name not in registry:
+        raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(sorted(registry))}")
+    cls = registry[name]
     unknown = set(params) - set(cls.DEFAULTS)
     if unknown:
         raise ValueError(f"effect {name!r}: unknown parameter(s) {sorted(unknown)}; expected {sorted(cls.DEFAULTS)}")
     return cls(**{k: _param_value(name, k, v, np.shape(cls.DEFAULTS[k]), "si", cls) for k, v in params.items()})
 
 
-NON_NEGATIVE = frozenset({"density", "step", "frequency_hz", "bandwidth_hz"})
-POSITIVE = frozenset({"limit", "corner_hz", "tau"})  # 0 would be a division by zero or a sensor that reads 0
+NON_NEGATIVE = frozenset({"density", "step", "frequency_hz", "bandwidth_hz", "instability"})
+# 0 would be a division by zero or a sensor that reads 0
+POSITIVE = frozenset({"limit", "corner_hz", "tau", "tau_min", "tau_max"})
 ENTRY_KEYS = ("name", "units", "params")
 
 
-def effect_from_config(cfg: dict) -> Effect:
+def effect_from_config(cfg: dict, registry: Mapping[str, type[Effect]] | None = None) -> Effect:
     """{'name': ..., 'units': 'si'|'datasheet', 'params': {...}} -> Effect.
 
     Every parameter must be given (a file that omits one has most likely misspelt it), as one number or as many as
     the parameter has (a 3x3 matrix also as 9 numbers), finite, not negative where a negative value means nothing
     (densities, steps, frequencies) and above 0 where 0 does too (limits, corner frequencies, time constants). An
-    entry has no other keys than name, units and params."""
+    entry has no other keys than name, units and params. `registry`: the vocabulary (default: the gyro's,
+    SIM_EFFECTS)."""
+    registry = SIM_EFFECTS if registry is None else registry
     name = cfg.get("name")
     extra = [k for k in cfg if k not in ENTRY_KEYS]
     if extra:  # a misspelt 'units' would otherwise read datasheet figures as SI
@@ -787,12 +861,12 @@ def effect_from_config(cfg: dict) -> Effect:
             f"effect {name!r}: unknown key(s) {extra}; an entry has {', '.join(ENTRY_KEYS)}"
             + (" (did you mean 'units'?)" if "unit" in extra else "")
         )
-    if name not in EFFECTS:
-        raise ValueError(f"'name' {name!r} must be one of {', '.join(sorted(EFFECTS))}")
+    if name not in registry:
+        raise ValueError(f"'name' {name!r} must be one of {', '.join(sorted(registry))}")
     units = cfg.get("units", "si")
     if units not in ("si", "datasheet"):
         raise ValueError(f"effect {name!r}: 'units' is {units!r}; use 'si' or 'datasheet' (the datasheet units)")
-    cls = EFFECTS[name]
+    cls = registry[name]
     params = cfg.get("params") or {}
     if not isinstance(params, dict):
         raise ValueError(f"effect {name!r}: 'params' must be a mapping of {sorted(cls.DEFAULTS)}")
@@ -807,7 +881,7 @@ def effect_from_config(cfg: dict) -> Effect:
     return cls.from_datasheet(**checked) if units == "datasheet" else cls(**checked)
 
 
-def effects_from_config(entries: list, where: str) -> list[Effect]:
+def effects_from_config(entries: list, where: str, registry: Mapping[str, type[Effect]] | None = None) -> list[Effect]:
     """Every entry of an error-model list through `effect_from_config`; an error names `where[i]` (the file or the
     config key) and the field."""
     out = []
@@ -815,7 +889,7 @@ def effects_from_config(entries: list, where: str) -> list[Effect]:
         if not isinstance(entry, dict):
             raise ValueError(f"{where}[{i}] is {entry!r}; expected a mapping {{name, units, params}}")
         try:
-            out.append(effect_from_config(entry))
+            out.append(effect_from_config(entry, registry))
         except (TypeError, ValueError) as err:
             raise ValueError(f"{where}[{i}]: {err}") from None
     return out

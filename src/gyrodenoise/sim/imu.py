@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.data.asl_write import asl_written, pose_values, write_sequence
+from gyrodenoise.sim.accel import apply_acc_error_model, check_acc_effects
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import Effect, WhiteNoise
 from gyrodenoise.sim.trajectory import SmoothTrajectory
@@ -55,8 +56,10 @@ def simulate_imu(
     margin_s: float = 0.5,
     acc_noise_density: float = 2.0e-3,
     acc_bias: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    acc_effects: list[Effect] | None = None,
 ) -> SimulatedImu:
-    """Gyro from `effects`; accelerometer = specific force + constant bias + white noise.
+    """Gyro from `effects`; accelerometer = specific force through `acc_effects` (`gyrodenoise.sim.accel`: scale
+    factor, misalignment, bias random walk, bias instability) + constant bias + white noise.
 
     Stamps start `margin_s` after the trajectory start (the spline's ends are less reliable) and
     are exact integer nanoseconds. The error model's time 0 is the first stamp (power-on). A time offset in
@@ -64,6 +67,8 @@ def simulate_imu(
     `duration_s`: the stamps span at most this long (N samples over N - 1 periods).
     """
     _check_settings(rate_hz, duration_s, oversample, acc_noise_density, acc_bias)
+    acc_effects = list(acc_effects or [])
+    check_acc_effects(effects, acc_effects)
     rng = np.random.default_rng(seed)
     period_ns = int(round(1e9 / rate_hz))
     span = traj.t_end - traj.t_start - 2 * margin_s
@@ -101,13 +106,12 @@ def simulate_imu(
         if e.stage == 4:
             gyro = e.apply(out_sig, gyro, rng)
     f = sig.f.reshape(n, m, 3).mean(1)  # the time offset (stage 0) has moved the inputs both sensors see
-    acc = (
-        f
-        + np.asarray(acc_bias)
-        + WhiteNoise(density=np.full(3, acc_noise_density)).apply(
-            SignalContext(t_rel, f, f, f, rate_hz), np.zeros_like(f), rng
-        )
+    white = WhiteNoise(density=np.full(3, acc_noise_density)).apply(
+        SignalContext(t_rel, f, f, f, rate_hz), np.zeros_like(f), rng
     )
+    if acc_effects:  # drawn after everything else, so a model without them keeps every other draw
+        f = apply_acc_error_model(acc_effects, sig, rng).reshape(n, m, 3).mean(1)
+    acc = f + np.asarray(acc_bias) + white
     kin = traj.evaluate(t_traj)
     return SimulatedImu(
         t_ns=t_ns,
@@ -122,6 +126,8 @@ def simulate_imu(
             "seed": seed,
             "effects": [e.to_dict() for e in effects],
             "acc_noise_density": acc_noise_density,
+            # only when given: a simulation without them writes the sim.json it wrote before they existed
+            **({"acc_effects": [e.to_dict() for e in acc_effects]} if acc_effects else {}),
         },
     )
 
