@@ -179,6 +179,15 @@ def tree_product(R: torch.Tensor, levels: int) -> torch.Tensor:
     return R
 
 
+def _check_median_step(med: float) -> None:
+    """Both integrations: a median step outside [0, MAX_STEP_S] is stamps or nanoseconds, not sample periods."""
+    if not 0 <= med <= MAX_STEP_S:
+        raise ValueError(
+            f"dt: median step {med:.4g}; expected sample periods in seconds (0.005 at 200 Hz), e.g. "
+            "np.diff(t, prepend=t[0]) with t in s: were timestamps, or nanoseconds, given?"
+        )
+
+
 def integrate_gyro_torch(R0: torch.Tensor, gyro: torch.Tensor, dt: torch.Tensor) -> torch.Tensor:
     """`integrate_gyro` on torch tensors (float64, on their device): what validation runs on the GPU.
 
@@ -186,8 +195,8 @@ def integrate_gyro_torch(R0: torch.Tensor, gyro: torch.Tensor, dt: torch.Tensor)
     """
     if dt.dtype != torch.float64:  # DESIGN.md: time is float64; float32 steps drift 9e-6 rad in 1e5 steps
         raise ValueError(f"dt is {dt.dtype}; give the steps in float64 seconds (time is never float32)")
-    if len(dt) > 1 and not 0 <= (med := float(dt[1:].median())) <= MAX_STEP_S:
-        raise ValueError(f"dt: median step {med:.4g}; expected sample periods in seconds (0.005 at 200 Hz)")
+    if len(dt) > 1:
+        _check_median_step(float(dt[1:].median()))
     if len(gyro) == 0:
         return torch.zeros((0, 3, 3), dtype=torch.float64, device=gyro.device)
     gyro = gyro.double()
@@ -215,11 +224,8 @@ def integrate_gyro(R0: np.ndarray, gyro: np.ndarray, dt: np.ndarray) -> np.ndarr
         dt = np.full(len(gyro), float(dt))
     if dt.shape != (len(gyro),):
         raise ValueError(f"dt has shape {dt.shape}; expected ({len(gyro)},) like gyro, or one sample period (s)")
-    if len(dt) > 1 and not 0 <= (med := float(np.median(dt[1:]))) <= MAX_STEP_S:
-        raise ValueError(
-            f"dt: median step {med:.4g}; expected sample periods in seconds (0.005 at 200 Hz), e.g. "
-            "np.diff(t, prepend=t[0]) with t in s: were timestamps, or nanoseconds, given?"
-        )
+    if len(dt) > 1:
+        _check_median_step(float(np.median(dt[1:])))
     if np.shape(R0) != (3, 3):
         raise ValueError(f"R0 has shape {np.shape(R0)}; expected a (3, 3) rotation matrix (body to world)")
     r0 = np.asarray(R0, dtype=np.float64)
