@@ -14,14 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from gyrodenoise.sim import flicker
 from gyrodenoise.sim.context import SignalContext
 from gyrodenoise.sim.effects import (
     G0,
+    BiasInstability,
     BiasRandomWalk,
     Effect,
     build_from,
-    check_flicker_band,
     effects_from_config,
     misalignment_matrix,
 )
@@ -83,24 +82,12 @@ class AccBiasRandomWalk(AccelerometerEffect):
 
 
 @_register
-class AccBiasInstability(AccelerometerEffect):
+class AccBiasInstability(AccelerometerEffect, BiasInstability):
     """Bias instability: the flat floor `instability` (m/s^2; datasheet mg, "in-run bias stability") of the Allan
-    deviation between the averaging times `tau_min` and `tau_max` (s); as the gyro's `bias_instability`."""
+    deviation between the averaging times `tau_min` and `tau_max` (s); the gyro's `bias_instability` in the
+    accelerometer's units."""
 
-    name = "bias_instability"
     DATASHEET = {"instability": ("mg", 1.0 / MG), "tau_min": ("s", 1.0), "tau_max": ("s", 1.0)}
-    DEFAULTS = {"instability": np.zeros(3), "tau_min": 1.0, "tau_max": 1000.0}
-
-    def __init__(self, **params: Any) -> None:
-        super().__init__(**params)
-        check_flicker_band(self.name, float(self.params["tau_min"]), float(self.params["tau_max"]))
-
-    def apply(self, sig, y, rng):
-        floor = np.broadcast_to(self.params["instability"], (3,))
-        if not floor.any():
-            return y
-        tau_min, tau_max = float(self.params["tau_min"]), float(self.params["tau_max"])
-        return y + flicker.draw(floor, tau_min, tau_max, len(y), sig.rate_hz, rng)
 
 
 def build_acc_effect(name: str, **params: Any) -> Effect:
