@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -56,6 +57,23 @@ def test_correct_arrays_checks_units_and_shapes_and_names_its_own_arguments():
         gd.correct_arrays(t, gyro.T, acc, "euroc-calibrated")
     with pytest.raises(ValueError, match="time_unit='min'"):
         gd.correct_arrays(t, gyro, acc, "euroc-calibrated", time_unit="min")
+    bad = gyro.copy()
+    bad[100, 1] = np.nan  # it was "imu: 1 rows hold NaN/inf", naming neither the argument nor the row
+    with pytest.raises(ValueError, match=r"gyro\[100, 1\] is nan \(row 101"):
+        gd.correct_arrays(t, bad, acc, "euroc-calibrated")
+
+
+def test_the_python_api_pages_first_example_runs(monkeypatch):
+    """docs/python-api.md's first block, as written (it used seq.t_ns, which Sequence lacked)."""
+    from conftest import DATA_ROOT, require_data
+
+    require_data("euroc", "MH_02_easy")
+    monkeypatch.setenv("GYRODENOISE_DATA", str(DATA_ROOT))
+    text = (Path(__file__).parents[1] / "docs" / "python-api.md").read_text()
+    block = text.split("```python\n", 1)[1].split("```", 1)[0]
+    scope: dict = {}
+    exec(compile(block, "docs/python-api.md", "exec"), scope)  # noqa: S102
+    assert np.allclose(scope["c"].gyro, scope["gyro"], atol=1e-6) and abs(scope["aoe_3d"] - 4.94) < 0.005
 
 
 def test_array_functions_refuse_what_they_would_get_wrong_silently():

@@ -229,6 +229,15 @@ def correct_arrays(
     if t_in.shape != (len(gyro),) or len(acc) != len(gyro):
         raise ValueError(f"t {t_in.shape}, gyro {gyro.shape}, acc {acc.shape}: give one stamp and one row per sample")
     check_units(time_unit, gyro_unit, acc_unit)
+    for name, arr in (("t", t_in), ("gyro", gyro), ("acc", acc)):  # named here: the model sees one stacked array
+        if np.issubdtype(arr.dtype, np.number) and not np.isfinite(arr).all():
+            k = np.argwhere(~np.isfinite(arr))[0]
+            where = f"{name}[{', '.join(str(int(i)) for i in k)}]"
+            raise ValueError(
+                f"{where} is {arr[tuple(k)]} (row {int(k[0]) + 1}, counted from 1; {int((~np.isfinite(arr)).sum())} "
+                "value(s) in all): repair or drop those rows first; the network's outputs depend on the last ~2.5 s "
+                "of samples, so one bad sample spoils hundreds of outputs"
+            )
     largest = float(np.abs(t_in).max()) if t_in.size else 0.0
     if largest * TIME_UNITS[time_unit] > INT64_MAX:  # would wrap around in int64 ns
         advice = beyond_int64_advice(np.diff(t_in.astype(np.float64)), time_unit)

@@ -39,6 +39,11 @@ class Sequence:
         return np.concatenate([self.gyro, self.acc], axis=1)
 
     @property
+    def t_ns(self) -> np.ndarray:
+        """(N,) int64 ns stamps: t0_ns + t (exact for any recording under ~100 days: float64 s keeps the ns)."""
+        return self.t0_ns + np.round(self.t * 1e9).astype(np.int64)
+
+    @property
     def dt(self) -> np.ndarray:
         """(N,) dt_n = t_n - t_{n-1}; dt_0 repeats dt_1 (unused by integration)."""
         d = np.diff(self.t)
