@@ -525,6 +525,18 @@ def test_a_header_column_of_no_axis_does_not_break_the_columns_read_off_it():
     assert columns_from_names(["time", "ax", "ay", "az", "gx", "gy", "gz"]) == "1,5,6,7,2,3,4"
 
 
+def test_a_time_column_named_in_seconds_is_the_time_and_its_unit():
+    """'time_s', 't_sec', 'seconds' (a fresh-user audit): neither the time column nor a unit, so no --columns was read
+    off the header and --time-unit s had to be given by hand; a frame's S (w_RS_S) stays no unit."""
+    from gyrodenoise.data.asl_header import _split, columns_from_names, declared_units
+
+    for name in ("time_s", "t_s", "timestamp_s", "time_sec", "seconds", "stamp_seconds"):
+        names = [name, "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z"]
+        assert columns_from_names(names) == "1,5,6,7,2,3,4", name
+        assert declared_units(name, names[4:], names[1:4]) == {"time": "s"}, name
+    assert _split("w_RS_S_x [rad s^-1]") == ("w_rs_s_x", "rad s^-1") and _split("s") == ("s", "")
+
+
 def test_stamps_in_exponent_form_that_lost_their_digits_are_refused(tmp_path):
     """'1.600000000000e+18' (ns written as floats by a spreadsheet or pandas): the samples' times were rounded to a
     millisecond and read without a word; 16 digits (1 µs) still read."""

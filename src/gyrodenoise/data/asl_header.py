@@ -29,7 +29,7 @@ _SHORT_KIND = {"g": "gyro", "w": "gyro", "a": "acc", "p": "pos", "q": "quat"}
 _GLUED_AXIS = re.compile(
     r"(acc|accel|accelerometer|acceleration|gyr|gyro|gyroscope|omega|angvel|rate|pos|position|quat)[wxyz]$"
 )
-_TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s"}
+_TIME_UNITS = {"us": "µs", "µs": "µs", "ms": "ms", "s": "s", "sec": "s", "secs": "s", "seconds": "s"}
 
 
 # a unit written into the name ('gyro_x_dps', 'acc_x_g', 'time_us'); bare 's' and 'm' are not taken (w_RS_S)
@@ -38,13 +38,22 @@ _UNIT_SUFFIX = re.compile(
 )
 
 
+# seconds glued to a time column's name ('time_s', 't_sec', 'timestamp_seconds', or 'seconds' alone): only after a time
+# word, since a bare 's' suffix elsewhere is a frame's name (w_RS_S)
+_SECONDS_SUFFIX = re.compile(r"^(?:(t|time|times?tamp|stamp|ts)[_ ])?(s|sec|secs|seconds)$")
+
+
 def _split(name: str) -> tuple[str, str]:
-    """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1'); 'gyro_x_dps' -> ('gyro_x', 'dps')."""
+    """'w_RS_S_x [rad s^-1]' -> ('w_rs_s_x', 'rad s^-1'); 'gyro_x_dps' -> ('gyro_x', 'dps');
+    'time_s' -> ('time', 's')."""
     name = name.strip().strip("\"'")
     m = re.match(r"^\s*#?\s*([^\[(]*?)\s*(?:[\[(]([^\])]*)[\])])?\s*$", name)
     if not m:
         return name.lower(), ""
     base, unit = m.group(1).lower(), (m.group(2) or "").strip().lower()
+    seconds = None if unit else _SECONDS_SUFFIX.match(base.lstrip("#").strip())
+    if seconds and (seconds.group(1) or seconds.group(2) != "s"):  # a column named 's' alone says nothing
+        return seconds.group(1) or "time", "s"
     suffix = None if unit else _UNIT_SUFFIX.match(base)
     return (suffix.group(1), suffix.group(2)) if suffix else (base, unit)
 
