@@ -112,3 +112,23 @@ def test_real_recordings_in_rad_s_are_never_called_deg_s(dataset, request):
         assert not gyro_scale_verdict(d.acc, d.gyro, rate).wrong_unit, path
         named += gyro_scale_verdict(d.acc, np.degrees(d.gyro), rate).unit == "deg/s"
     assert named >= len(files) // 3  # where rests or slow tilts are long enough to judge
+
+
+def test_a_stream_in_deg_s_moving_fast_is_told_after_its_first_samples():
+    """A fresh-user audit pushed 35 s of V1_01 in deg/s (99th percentile 42 rad/s as read) and got no warning, where
+    `correct` refuses the file at once: the range check now runs on the stream's first UNIT_PROBE samples, once."""
+    from gyrodenoise.streaming import UNIT_PROBE
+
+    t = np.arange(UNIT_PROBE + 50) / RATE
+    gyro = 0.6 * np.sin(2 * np.pi * 0.7 * t[:, None] + np.arange(3))  # ~1 rad/s of motion, read in deg/s
+    acc = np.tile([0.0, 0.0, 9.81], (len(t), 1))
+    sc = StreamingCorrector(CalibratedImu())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sc.push_chunk(np.concatenate([np.degrees(gyro), acc], 1))
+        sc.push_chunk(np.concatenate([np.degrees(gyro), acc], 1))
+    said = [w for w in caught if "99th-percentile" in str(w.message)]
+    assert len(said) == 1 and "pi/180" in str(said[0].message)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        StreamingCorrector(CalibratedImu()).push_chunk(np.concatenate([gyro, acc], 1))

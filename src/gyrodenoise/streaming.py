@@ -34,7 +34,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import special
 from torch import nn
 
-from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX, SanityWarning, gravity_norm
+from gyrodenoise.data.checks import ACC_ABS_MAX, GYRO_ABS_MAX, GYRO_P99_MAX, SanityWarning, gravity_norm
 from gyrodenoise.data.gyro_scale import gyro_scale_verdict, gyro_unit_message
 from gyrodenoise.models.build import check_stream_form
 from gyrodenoise.models.denoiser import ACTIVATIONS, DilatedCNNDenoiser
@@ -299,6 +299,9 @@ class StreamingCorrector:
         if not self._acc_judged:
             self._acc_judged = True
             self._warn_acc_unit(seen, rate)
+            if self._warn_gyro_range(seen):  # said already: the gravity test after GYRO_PROBE_S would say it again
+                self._unit_probe = None
+                return
         if len(seen) >= GYRO_PROBE_S * rate:
             self._unit_probe = None
             verdict = gyro_scale_verdict(seen[:, 3:], seen[:, :3], rate)
@@ -309,6 +312,21 @@ class StreamingCorrector:
                     SanityWarning,
                     stacklevel=4,
                 )
+
+    def _warn_gyro_range(self, seen: np.ndarray) -> bool:
+        """`correct`'s range check on the stream's first UNIT_PROBE samples: a 99th-percentile rate no motion reaches
+        is a gyro in deg/s (a deg/s gyro in slow motion passes here; the gravity test after GYRO_PROBE_S finds it)."""
+        p99 = float(np.percentile(np.linalg.norm(seen[:, :3], axis=1), 99))
+        if p99 <= GYRO_P99_MAX:
+            return False
+        warnings.warn(
+            f"the gyro's 99th-percentile norm over the stream's first {len(seen)} samples is {p99:.3g} rad/s "
+            f"({np.degrees(p99):.0f} deg/s); real motion stays below ~{GYRO_P99_MAX:g} rad/s: it looks like deg/s. "
+            "The model needs rad/s: multiply the gyro by pi/180 (0.0174533) before pushing",
+            SanityWarning,
+            stacklevel=5,
+        )
+        return True
 
     def _warn_acc_unit(self, seen: np.ndarray, rate: float) -> None:
         norm = gravity_norm(seen[:, 3:], seen[:, :3], rate)
