@@ -108,7 +108,7 @@ def test_calibrated_model(g_sensitivity, tmp_path, compiler):
     assert_matches_python(model, imu, gyro, std)
     assert "GD_N_RINGS          0 " in (tmp_path / "c" / c_export.HEADER).read_text()
     # the example stops at a refused sample or a malformed line, naming it
-    for text, said in (("0,0,0,0,0,0,9.8\n1,nan,0,0,0,0,9.8\n", "sample 2 (t=1)"), ("t\n0,1,2\n", "line 2:")):
+    for text, said in (("0,0,0,0,0,0,9.8\n1,nan,0,0,0,0,9.8\n", "line 2 (sample 2, t=1)"), ("t\n0,1,2\n", "line 2:")):
         done = subprocess.run([str(exe)], input=text, capture_output=True, text=True)
         assert done.returncode == 1 and said in done.stderr
 

@@ -254,11 +254,13 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
 
     text = c_export.example_input(imu, t)
     done = run(text)
-    restarted = "sample 21 (t=3100000000): a gap before it, or the clock went back: the stream restarted"
+    restarted = "line 22 (sample 21, t=3100000000): a gap before it, or the clock went back: the stream restarted"
     assert done.returncode == 0 and restarted in done.stderr
     repeated = text.replace("\n1010000000,", "\n1005000000,")  # sample 3 stamped as sample 2
     done = run(repeated)
-    assert done.returncode == 1 and "sample 3 (t=1005000000): its stamp is not after the previous" in done.stderr
+    assert (
+        done.returncode == 1 and "line 4 (sample 3, t=1005000000): its stamp is not after the previous" in done.stderr
+    )
     assert len(done.stdout.splitlines()) == 1 + 39 and "1 of 40 samples refused" in done.stderr
     seconds = "t,gx,gy,gz,ax,ay,az\n1403636579.758555,0,0,0,0,0,9.8\n"
     done = run(seconds)
@@ -275,6 +277,19 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
     done = run("1000000000," + "0" * 2000 + ",0,0,0,0,9.8\n")
     assert done.returncode == 1 and "line 1: longer than" in done.stderr
     assert run("1000000000,0,0,0,0,0,9.8\r\n").returncode == 0  # CRLF line ends
+    # a fresh-user audit: a header putting the accelerometer first read g as rad/s without a word; a short line ended
+    # the run saying nothing of the lines it did not read
+    done = run("time_ns,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n1000000000,0,0,9.8,0,0,0\n")
+    assert done.returncode == 1 and not done.stdout.strip().splitlines()[1:]
+    assert "line 1: the header names column 2 'acc_x' where gyro x is read" in done.stderr
+    done = run(text.replace("\n1010000000,", "\n1010000000\n", 1))  # sample 3 cut short
+    assert done.returncode == 1 and len(done.stdout.splitlines()) == 1 + 2
+    assert "line 4: expected t,gx,gy,gz,ax,ay,az; stopped there: the lines after it were not read (2 samples" in (
+        done.stderr
+    )
+    assert (
+        run("#timestamp [ns],w_x [rad s^-1],w_y,w_z,a_x [m s^-2],a_y,a_z\n1000000000,0,0,0,0,0,9.8\n").returncode == 0
+    )
 
 
 INT64_MAX, INT64_MIN = 2**63 - 1, -(2**63)

@@ -23,11 +23,14 @@ EXAMPLE_CODE = """\
 /* Correct a CSV stream with the exported model: lines t,gx,gy,gz,ax,ay,az (t integer nanoseconds, gyro rad/s, acc
    m/s^2) on stdin, lines t,wx,wy,wz (corrected gyro rad/s{std_cols_doc}) on stdout, t copied as written. Empty
    lines and lines that start with a letter or # (a header, comments) are skipped; any other line must be 7 numbers.
+   A header before the first sample whose names put the accelerometer where the gyro is read (or the reverse) stops
+   the run: the columns are read by position.
 
    Each sample goes through gd_step_t with its stamp, as an onboard loop would: a refused sample (a NaN, a stamp not
    after the previous one or too soon after it) is dropped, with a line on stderr and no output line; after a gap the
    stream restarts (said on stderr). With {unstamped}, t is not read: the samples are taken as consecutive (gd_step).
-   Exit status: 0, or 1 when a sample was refused or a line was not t,gx,gy,gz,ax,ay,az.
+   Exit status: 0, or 1 when a sample was refused (said with its line number) or a line was not t,gx,gy,gz,ax,ay,az
+   (the run stops there, and says how many samples before it were written).
 
    Compile: {compile}
    Run:     ./gyrodenoise < imu.csv > corrected.csv
@@ -49,6 +52,34 @@ static const char *refusal(int code)
 {refusals}
     }}
     return "refused";
+}}
+
+/* a line that ends the run: what was wrong, and that the lines after it were not read */
+static int stop(long lineno, long n, const char *why)
+{{
+    fprintf(stderr, "line %ld: %s; stopped there: the lines after it were not read (%ld samples before it were)\\n",
+            lineno, why, n);
+    return 1;
+}}
+
+/* a header's column names against the order read (t, gyro x y z, acc x y z): the column number (from 1) of the first
+   name that says the other sensor (acc where a gyro is read, gyro where an acc is read), or 0 */
+static int header_mismatch(const char *line, char *name, size_t size)
+{{
+    char buf[1024];
+    int col = 0;
+    snprintf(buf, sizeof buf, "%s", line);
+    for (char *f = strtok(buf, ",\\r\\n"); f; f = strtok(NULL, ",\\r\\n"), col++) {{
+        for (char *c = f; *c; c++) *c = (char)tolower((unsigned char)*c);
+        const int gyro = strstr(f, "gyr") || strstr(f, "omega") || strstr(f, "ang_vel") || strstr(f, "rad/s") ||
+                         strstr(f, "deg/s") || strstr(f, "dps");
+        const int acc = strstr(f, "acc") || strstr(f, "m/s^2") || strstr(f, "m s^-2");
+        if ((col >= 1 && col <= 3 && acc && !gyro) || (col >= 4 && col <= 6 && gyro && !acc)) {{
+            snprintf(name, size, "%s", f + strspn(f, " \\t#"));
+            return col + 1;
+        }}
+    }}
+    return 0;
 }}
 
 /* t as int64 ns: digits only (a sign allowed), spaces after them */
@@ -75,13 +106,20 @@ int main(int argc, char **argv)
     printf("t,wx,wy,wz{std_cols}\\n");
     while (fgets(line, sizeof line, stdin)) {{
         lineno++;
-        if (!strchr(line, '\\n') && !feof(stdin)) {{
-            fprintf(stderr, "line %ld: longer than %d characters: not t,gx,gy,gz,ax,ay,az\\n", lineno,
-                    (int)sizeof line - 2);
-            return 1;
-        }}
+        if (!strchr(line, '\\n') && !feof(stdin))
+            return stop(lineno, n, "longer than 1022 characters: not t,gx,gy,gz,ax,ay,az");
         char *p = line + strspn(line, " \\t\\r\\n"), *end;
-        if (*p == '\\0' || *p == '#' || isalpha((unsigned char)*p)) continue; /* empty, a comment, a header */
+        if (*p == '\\0' || *p == '#' || isalpha((unsigned char)*p)) {{ /* empty, a comment, a header */
+            char name[256], why[400];
+            const int col = n == 0 ? header_mismatch(p, name, sizeof name) : 0;
+            if (col) {{
+                snprintf(why, sizeof why, "the header names column %d '%.200s' where %s %c is read: write the "
+                         "columns as t,gx,gy,gz,ax,ay,az (they are read by position)", col, name,
+                         col <= 4 ? "gyro" : "acc", "xyz"[(col - 2) % 3]);
+                return stop(lineno, n, why);
+            }}
+            continue;
+        }}
         const char *t = p;
         float imu[6], w[3], sd[3];
         int64_t t_ns = 0;
@@ -89,35 +127,31 @@ int main(int argc, char **argv)
             p = strchr(p, ',');
             if (p) *p++ = '\\0'; /* ends t (c == 0), then steps over each comma */
             imu[c] = p ? strtof(p, &end) : 0.0f;
-            if (!p || end == p) {{
-                fprintf(stderr, "line %ld: expected t,gx,gy,gz,ax,ay,az\\n", lineno);
-                return 1;
-            }}
+            if (!p || end == p) return stop(lineno, n, "expected t,gx,gy,gz,ax,ay,az");
             p = end;
         }}
-        if (p[strspn(p, " \\t\\r\\n")] != '\\0') {{
-            fprintf(stderr, "line %ld: more than 7 columns: expected t,gx,gy,gz,ax,ay,az\\n", lineno);
-            return 1;
-        }}
+        if (p[strspn(p, " \\t\\r\\n")] != '\\0')
+            return stop(lineno, n, "more than 7 columns: expected t,gx,gy,gz,ax,ay,az");
         if (stamped && !read_stamp(t, &t_ns)) {{
-            fprintf(stderr, "line %ld: t=%s is not integer nanoseconds: write t as int64 ns (seconds x 1e9), or "
-                            "run with {unstamped} to take the samples as consecutive, unchecked\\n", lineno, t);
-            return 1;
+            char why[300];
+            snprintf(why, sizeof why, "t=%.40s is not integer nanoseconds: write t as int64 ns (seconds x 1e9), or "
+                     "run with {unstamped} to take the samples as consecutive, unchecked", t);
+            return stop(lineno, n, why);
         }}
         n++;
         const int code = stamped ? gd_step_t(&state, t_ns, imu, w, sd) : gd_step(&state, imu, w, sd);
         if (code < 0) {{
-            fprintf(stderr, "sample %ld (t=%s): %s: dropped\\n", n, t, refusal(code));
+            fprintf(stderr, "line %ld (sample %ld, t=%s): %s: dropped\\n", lineno, n, t, refusal(code));
             refused++;
             continue;
         }}
         if (code == GD_RESTARTED)
-            fprintf(stderr, "sample %ld (t=%s): a gap before it, or the clock went back: the stream restarted (the "
-                            "next %d outputs are less accurate)\\n", n, t, GD_RECEPTIVE_FIELD);
+            fprintf(stderr, "line %ld (sample %ld, t=%s): a gap before it, or the clock went back: the stream "
+                            "restarted (the next %d outputs are less accurate)\\n", lineno, n, t, GD_RECEPTIVE_FIELD);
         if (code == GD_RATE_OFF)
-            fprintf(stderr, "sample %ld (t=%s): the stream's rate is more than %g %% off the model's %g Hz: "
-                            "resample it, or use a model trained at its rate\\n", n, t, 100.0 * (double)GD_RATE_TOL,
-                    (double)GD_RATE_HZ);
+            fprintf(stderr, "line %ld (sample %ld, t=%s): the stream's rate is more than %g %% off the model's %g "
+                            "Hz: resample it, or use a model trained at its rate\\n", lineno, n, t,
+                    100.0 * (double)GD_RATE_TOL, (double)GD_RATE_HZ);
         printf("%s,%.9g,%.9g,%.9g", t, (double)w[0], (double)w[1], (double)w[2]);
 {std_print}        printf("\\n");
     }}
