@@ -574,6 +574,17 @@ def test_ensemble_of_members_that_all_failed_warns_and_duplicates_are_refused(tm
     ens = save_model(model, cfg, tmp_path / "ens.pt", ens_meta)
     msg = not_better_warning(load_model(ens)[1])
     assert msg is not None and "none of its 2 members" in msg and "4.00 deg vs 3.30 deg" in msg
+    # with the members' own baselines beside them, that is what it names (it named the shipped 'own-calibrated'-like)
+    cal = save_model(calibrated_model(0), {"name": "calibrated"}, tmp_path / "calibrated.pt")
+    with_cal = [
+        save_model(random_model(seed=s, **TINY), {"name": "denoiser", **TINY}, tmp_path / f"c{s}.pt",
+                   meta | {"calibrated_model": "calibrated.pt"})
+        for s in (3, 4)
+    ]  # fmt: skip
+    with pytest.warns(UserWarning, match="did not beat"):
+        model, cfg, ens_meta = ensemble_cli.make_ensemble(with_cal)
+    msg = not_better_warning(load_model(save_model(model, cfg, tmp_path / "ens2.pt", ens_meta))[1])
+    assert f"use the calibrated model '{cal}' instead" in msg
     with pytest.raises(ValueError, match="the same member twice"):
         ensemble_cli.make_ensemble([paths[0], paths[0]])
     with pytest.raises(ValueError, match="the same member twice"):  # an ensemble brings its members

@@ -80,8 +80,17 @@ def member_record(path: str | Path, meta: dict) -> dict:
         "test": test,
         "beats_calibrated": meta.get("beats_calibrated"),
         "calibrated_val_aoe_deg": meta.get("calibrated_val_aoe_deg"),
+        "calibrated_model": _beside(path, meta.get("calibrated_model")),
         "command": meta.get("command"),
     }
+
+
+def _beside(path: Path, name: str | None) -> str | None:
+    """The member's calibrated baseline (recorded as a file name beside it) as a path, where that file is."""
+    if not name:
+        return None
+    found = Path(name) if Path(name).is_absolute() else path.parent / name
+    return str(found) if found.is_file() else None
 
 
 def check_compatible(records: list[dict], allow_mixed: bool = False) -> None:
@@ -146,6 +155,7 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
                 warnings.warn(
                     f"{p}: its spread_scale {model.spread_scale:g} was fitted for that ensemble and is not carried "
                     "into the new one (set one with `python -m gyrodenoise.ensemble scale`)",
+                    ModelQualityWarning,
                     stacklevel=2,
                 )
             members += list(model.members)
@@ -167,9 +177,10 @@ def make_ensemble(paths: list[str | Path], allow_mixed: bool = False) -> tuple[E
     beats = [r.get("beats_calibrated") for r in records]
     if any(b is False for b in beats):
         bad = [r["path"] for r in records if r.get("beats_calibrated") is False]
-        warnings.warn(f"ensemble members that did not beat the calibrated baseline: {bad}", stacklevel=2)
+        warnings.warn(f"ensemble members that did not beat the calibrated baseline: {bad}", ModelQualityWarning, 2)
     if leaky := [r["path"] for r in records if r.get("causal") is False]:
-        warnings.warn(f"ensemble members that are not causal (they read later samples): {leaky}", stacklevel=2)
+        msg = f"ensemble members that are not causal (they read later samples): {leaky}"
+        warnings.warn(msg, ModelQualityWarning, stacklevel=2)
     cal_vals = [r["calibrated_val_aoe_deg"] for r in records if r.get("calibrated_val_aoe_deg") is not None]
     finite = [r["val_aoe_deg"] for r in records if r.get("val_aoe_deg") is not None]
     rates = [r["rate_hz"] for r in records if r.get("rate_hz")]

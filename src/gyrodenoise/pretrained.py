@@ -300,6 +300,9 @@ def not_better_warning(meta: dict) -> str | None:
         # recorded as a file name beside the model file: say where it is
         beside = Path(meta["path"]).parent / instead
         instead = str(beside) if beside.is_file() else instead
+    if not instead and all_members_failed:  # the baseline fitted with a member on its data, not a shipped one
+        fitted = [r["calibrated_model"] for r in meta.get("members") or [] if r.get("calibrated_model")]
+        instead = fitted[0] if fitted else None
     shipped, dataset = available_models(), meta.get("dataset")
     if (
         not instead
