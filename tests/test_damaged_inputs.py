@@ -82,6 +82,8 @@ def test_a_truncated_checkpoint_to_resume_from_is_refused(root, tmp_path):
     every_7 = config(root, tmp_path / "run", f"ckpt_path={bad}", "callbacks.last_checkpoint.every_n_epochs=7")
     with pytest.raises(ConfigError, match=r"last.ckpt \(written every 7 epochs\)"):
         train(every_7)
+    with pytest.raises(ConfigError, match=r"no\.ckpt: no such file; give"):  # not called damaged
+        train(config(root, tmp_path / "run", f"ckpt_path={tmp_path / 'no.ckpt'}"))
 
 
 class InterruptAtEpoch(L.Callback):

@@ -437,8 +437,13 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
         with open_dict(cfg):
             cfg.ckpt_path = str(resume)
     if cfg.get("ckpt_path") and not zipfile.is_zipfile(cfg.ckpt_path):  # before any data is read
+        what = (
+            "not a readable Lightning checkpoint (truncated or damaged)"
+            if Path(cfg.ckpt_path).is_file()
+            else ("no such file")
+        )
         raise ConfigError(
-            f"ckpt_path={cfg.ckpt_path}: not a readable Lightning checkpoint (missing, truncated or damaged); give "
+            f"ckpt_path={cfg.ckpt_path}: {what}; give "
             f"a run's checkpoints/last.ckpt ({_last_ckpt_cadence(cfg)}), or leave ckpt_path out to start afresh"
         )
     if cfg.get("seed") is None and not cfg.get("ckpt_path"):  # drawn, and recorded, so that the run can be rerun

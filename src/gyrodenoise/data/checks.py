@@ -72,7 +72,7 @@ def check_time_order(rec: ImuRecording, drop_duplicates: bool = False, report: C
         k = int(back[0]) + 1
         raise SanityCheckError(
             f"{_where(rec, k)}: timestamp ({rec.describe('t')}) goes back in time from line "
-            f"{rec.lines[k - 1]} ({back.size} such places). "
+            f"{rec.lines[k - 1]} ({back.size} such place{'s' if back.size > 1 else ''}). "
             + (
                 back_in_time_advice(rec.t_ns, rec.lines)
                 or "Sort the file by time (e.g. `sort -t, -k1,1n`) or check that --columns maps the time column."
