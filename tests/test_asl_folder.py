@@ -165,6 +165,13 @@ def test_missing_sequences_fail_before_training(asl_root):
                           window=256)  # fmt: skip
     with pytest.raises(FileNotFoundError, match=r"python -m gyrodenoise.data.fetch euroc --dest \S*nowhere$"):
         euroc.check_sequences(test=False)
+    # a typo of a folder that is there: that folder, not a download into the typo (a fresh-user audit's 'eurocc')
+    (asl_root / "euroc_x").mkdir()
+    typo = ImuDataModule(name="euroc", root=str(asl_root / "euroc_xx"), train_seqs=["MH_01_easy"], test_seqs=[],
+                         window=256)  # fmt: skip
+    with pytest.raises(FileNotFoundError, match=r"euroc_xx: data folder not found; did you mean \S*euroc_x\?") as err:
+        typo.check_sequences(test=False)
+    assert "fetch" not in str(err.value)
     # the dataset's folder named twice (GYRODENOISE_DATA set to .../euroc, read as .../euroc/euroc): no download
     twice = ImuDataModule(name="my_imu", root=str(asl_root / "my_imu"), train_seqs=["walk_1"], test_seqs=[], window=256)
     with pytest.raises(FileNotFoundError, match=rf"but {asl_root} holds walk_1: set dataset.root={asl_root}, or"):

@@ -235,6 +235,13 @@ class ImuDataModule(L.LightningDataModule):
             )
         if missing and not root.is_dir():  # the whole folder: a test-only hint would mislead
             relative = "" if root.is_absolute() else f" (relative paths start at {Path.cwd()})"
+            siblings = [d.name for d in root.parent.iterdir() if d.is_dir()] if root.parent.is_dir() else []
+            near = misspelt(root.name, siblings)  # 'eurocc' beside 'euroc': a typo, not a dataset to download
+            if near:
+                raise FileNotFoundError(
+                    f"{self.root}: data folder not found{relative}; did you mean {root.parent / near}? (set "
+                    "dataset.root to it, or GYRODENOISE_DATA to the folder that holds it)"
+                )
             raise FileNotFoundError(
                 f"{self.root}: data folder not found{relative}; it should hold "
                 f"{', '.join(missing)} in the ASL layout (<root>/<sequence>/mav0/imu0/data.csv). Set dataset.root "
