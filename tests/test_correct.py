@@ -277,6 +277,21 @@ def test_gap_warns_with_line(tmp_path, model_file, capsys):
     assert (np.diff(t) == 5_000_000).all()
 
 
+def test_missing_samples_are_said_one_as_a_note_two_as_a_gap(tmp_path, model_file, capsys):
+    """A fresh-user audit dropped single lines: nothing was said (steps of 2 periods), and two in a row (3 periods)
+    passed too, where the streaming corrector refuses them (its gap is 2.5 periods)."""
+    t_ns, gyro, acc = synth()
+    keep = np.ones(len(t_ns), bool)
+    keep[[500, 900]] = False
+    f = write_asl(tmp_path / "one.csv", t_ns[keep], gyro[keep], acc[keep])
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "a"], capsys)
+    assert code == 0 and f"note: {f}:502: 2 single missing sample(s)" in err and "gap(s)" not in err
+    keep[1500:1502] = False
+    f = write_asl(tmp_path / "two.csv", t_ns[keep], gyro[keep], acc[keep])
+    code, _, err = run([f, "-m", model_file, "-o", tmp_path / "b"], capsys)
+    assert code == 0 and "1 gap(s)" in err and "2 single missing" in err
+
+
 def test_time_in_seconds_read_as_ns_says_so(tmp_path, model_file, capsys):
     t_ns, gyro, acc = synth()
     f = tmp_path / "seconds.csv"

@@ -253,3 +253,10 @@ def test_a_refused_chunk_names_its_first_refused_sample():
     with pytest.raises(StreamTimeError) as refused:
         sc.push_chunk(imu[3:6], t_ns=np.array([t[3] + 10**9, t[4], t[5]]))
     assert (refused.value.kind, refused.value.index) == ("gap", 0)
+
+
+def test_a_file_and_a_stream_of_it_take_the_same_steps_as_gaps():
+    from gyrodenoise.data.checks import FILE_GAP_FACTOR
+    from gyrodenoise.stream_clock import STREAM_GAP_FACTOR
+
+    assert FILE_GAP_FACTOR == STREAM_GAP_FACTOR

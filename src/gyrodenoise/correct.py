@@ -383,6 +383,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"note: {no_reference_note(meta)}")
     for w in [*model_warnings, *res.report.warnings]:
         print(f"warning: {w}", file=sys.stderr)
+    for n in res.report.notes:
+        print(f"note: {n}", file=sys.stderr)
     if rec.units_from_header:  # read in the units its header declares: say so, the flags would override them
         said = ", ".join(f"{k} in {rec.units[k]}" for k in rec.units_from_header)
         print(f"note: read {said}, as the header declares (--{rec.units_from_header[0]}-unit ... overrides)")
@@ -422,6 +424,7 @@ def _main(argv: list[str] | None) -> int:
         "beats_calibrated": meta.get("beats_calibrated"),
         "model_trained_on": trained_on(meta),
         "warnings": model_warnings + res.report.warnings,
+        "notes": res.report.notes,
         "outputs": {"imu_csv": portable_path(out_csv), "orientation_tum": portable_path(out_tum)},
     }
     write_json(summary_file, summary)

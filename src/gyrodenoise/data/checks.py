@@ -17,7 +17,6 @@ import numpy as np
 from gyrodenoise.data.gyro_scale import gyro_scale_verdict, gyro_unit_message
 from gyrodenoise.data.imu_csv import G0, TIME_UNITS, ImuRecording, time_units_for_period
 from gyrodenoise.data.readers import (
-    GAP_FACTOR,
     IMU_RATE_RANGE_HZ,
     DataFormatError,
     back_in_time_advice,
@@ -34,6 +33,9 @@ SATURATED_RUNS = 2  # an axis at its largest magnitude in this many separate run
 # a clipped range spans thousands of the sensor's steps (2**15 on a 16-bit gyro); a quantized gyro at rest or in slow
 # motion repeats its largest value, a few steps, in many runs without being clipped
 SATURATED_MIN_STEPS = 256
+# a step longer than this many median periods is a gap (two or more samples missing): the streaming corrector's
+# STREAM_GAP_FACTOR, so that a file and a stream of it are judged alike (3.0 let two missing samples in a row pass)
+FILE_GAP_FACTOR = 2.5
 RATE_TOL = 0.05  # relative rate difference to the model's training rate that warns
 G_TOL_REST, G_TOL_MOVING = 0.10, 0.30  # relative |acc| - g tolerance with / without a rest period
 
@@ -53,6 +55,7 @@ class CheckReport:
     rest_fraction: float = 0.0
     warnings: list[str] = field(default_factory=list)
     misfits: list[str] = field(default_factory=list)  # of the warnings, those that say the model does not fit (rate)
+    notes: list[str] = field(default_factory=list)  # what was taken as it is, said (single missing samples)
 
     def warn(self, msg: str) -> None:
         self.warnings.append(msg)
@@ -132,11 +135,19 @@ def check_time_unit(rec: ImuRecording, report: CheckReport) -> None:
     )
 
 
-def check_gaps(rec: ImuRecording, report: CheckReport, factor: float = GAP_FACTOR, resample: bool = False) -> None:
-    """Warn about gaps in the timestamps (not when --resample interpolates over them)."""
+def check_gaps(rec: ImuRecording, report: CheckReport, factor: float = FILE_GAP_FACTOR, resample: bool = False) -> None:
+    """Warn about gaps in the timestamps (not when --resample interpolates over them); note single missing samples
+    (a step of about two periods), which are taken as consecutive as the streaming corrector takes them."""
     d = np.diff(rec.t_ns)
     period = float(np.median(d))
     gaps = np.flatnonzero(d > factor * period)
+    singles = np.flatnonzero((d > 1.5 * period) & (d <= factor * period))
+    if singles.size and not resample:
+        report.notes.append(
+            f"{_where(rec, int(singles[0]) + 1)}: {singles.size} single missing sample(s) (a step of about two "
+            f"periods, the first after line {rec.lines[singles[0]]}), taken as consecutive; --resample interpolates "
+            "them"
+        )
     if not gaps.size or resample:
         return
     k = int(gaps[np.argmax(d[gaps])])
