@@ -9,6 +9,7 @@ low-pass applied to the reconstructed rate also smooths that rate's error, which
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -197,6 +198,33 @@ def test_effects_that_stood_in_for_the_low_pass_droop_are_removed(tmp_path, monk
     assert [s["removed"] for s in sel.steps if "removed" in s] == ["scale_factor"]
 
 
+def test_a_time_offset_the_final_check_removes_is_not_named_in_the_notes(tmp_path, monkeypatch):
+    """The final backward check (`rank._recheck_named`) runs after the delay-or-low-pass choice and may remove the
+    time offset the choice kept; the verdict then carried the choice's sentence about an offset no longer named
+    ("no missing effect found (time offset or sensor bandwidth: not separable ...)"). Built here: the choice told
+    that the two cannot be separated on this motion, the final check given a threshold the offset cannot clear."""
+    from gyrodenoise.discrepancy import lowpass_choice, rank
+    from gyrodenoise.discrepancy.workflow import NO_EFFECT, verdict_text
+
+    separable, recheck = lowpass_choice.delay_or_lowpass, rank._recheck_named
+
+    def inseparable(*args):
+        return replace(separable(*args), separable=False)
+
+    def strict(design, final, selected, base, thresholds, bic_threshold, steps):
+        return recheck(design, final, selected, base, {**thresholds, "time_offset": np.inf}, bic_threshold, steps)
+
+    monkeypatch.setattr(lowpass_choice, "delay_or_lowpass", inseparable)
+    monkeypatch.setattr(rank, "_recheck_named", strict)
+    _, sel = _selection(tmp_path, "time_offset")
+    assert "time_offset" not in sel.named and {"added": "time_offset"}.items() <= sel.steps[0].items()
+    assert any(s.get("removed") == "time_offset" for s in sel.steps)
+    assert verdict_text(sel.named, sel.equivalences, sel.cautions) == NO_EFFECT
+    assert sel.equivalences == [] and not any("time_offset" in c or "time offset" in c for c in sel.cautions)
+    d = sel.delay_or_lowpass  # the choice's record keeps what it decided, and says what became of it
+    assert d["kept"] == "time_offset" and d["removed_by_backward_check"] == "time_offset"
+
+
 def test_a_strong_low_pass_reads_the_noise_floor_from_its_own_residual(tmp_path, monkeypatch):
     """10 Hz behind the mocap, 2 x 40 s. The base residual holds the low-pass's own power: read from it, the
     sensor's floor was 80 times too high and the mocap error's level nothing, so nothing charged a low-pass for
@@ -237,6 +265,10 @@ def test_caution_when_the_margin_is_within_the_statistics_spread(kept, dbic, swi
         margin = abs(dbic - (10.0 if switch is None else switch))
         assert f"margin of {margin:.0f}" in cautions[0] and "(~14)" in cautions[0]
         assert cautions[0].endswith(f"it may be {other}")
+    # the final backward check removed the offset the choice kept: no choice left to caution about
+    removed = SimpleNamespace(delay_or_lowpass=d | {"removed_by_backward_check": "time_offset"}, named=[], effects={})
+    if kept == "time_offset":
+        assert Selection.cautions.fget(removed) == []
     # an exact ground truth (nothing smoothed): no caution whatever the margin
     exact = SimpleNamespace(delay_or_lowpass=d | {"truth_error_smoothing_bic": 0.0}, named=[], effects={})
     assert Selection.cautions.fget(exact) == []

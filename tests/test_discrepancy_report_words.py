@@ -51,3 +51,17 @@ def test_a_corner_read_beside_a_time_offset_says_both_parts_of_its_se():
     (line,) = _corner_se_words({"delay_or_lowpass": d})
     assert "beside a time offset" in line and "7.97 ms" in line
     assert "3.03 Hz with the rows taken as white, times 0.97" in line and "corner's part, 0.335 ms" in line
+
+
+def test_a_corner_read_beside_a_time_offset_the_final_check_removed_does_not_name_the_offset():
+    d = {
+        "kept": "both",
+        "removed_by_backward_check": "time_offset",
+        "delay_s": 0.00797,
+        "both_corner_se_white_hz": 3.03,
+        "both_corner_se_colour_factor": 0.97,
+        "both_delay_se_from_corner_s": 0.000335,
+    }
+    (line,) = _corner_se_words({"delay_or_lowpass": d})
+    assert "which the final backward check then removed" in line and "3.03 Hz" in line
+    assert "ms" not in line and "time offset's standard error" not in line

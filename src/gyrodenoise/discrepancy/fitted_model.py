@@ -69,7 +69,9 @@ class Selection:
     def equivalences(self) -> list[str]:
         """Named effects that this motion cannot tell from another (sentences for the report)."""
         d = self.delay_or_lowpass
-        return [d["sentence"]] if d is not None and not d["separable"] else []
+        if d is None or d["separable"] or d.get("removed_by_backward_check"):  # a removed offset: equivalent to none
+            return []
+        return [d["sentence"]]
 
     @property
     def cautions(self) -> list[str]:
@@ -90,6 +92,8 @@ class Selection:
         ]
         d = self.delay_or_lowpass
         if d is None or d.get("truth_error_smoothing_bic", 0.0) <= 0 or "delta_bic_lowpass_vs_offset" not in d:
+            return out
+        if d.get("removed_by_backward_check"):  # the offset the choice kept is no longer named: no choice to caution
             return out
         if d["kept"] == "both":  # the pair against the better one of them: the droop at the pair's corner
             thr = d["threshold"]  # one parameter more: the detection threshold

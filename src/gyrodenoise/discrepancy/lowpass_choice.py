@@ -6,6 +6,8 @@ and the low-pass beside an offset, each corner searched on its profile (`Lowpass
 the data prefer. A low-pass applied to the reconstructed true rate also smooths the ground truth's own noise, which
 the sensor never saw: `truth_error_smoothing` is that gain, charged to every low-pass fit (here and in
 `rank.score_step`).
+The final backward check of the selection (`rank._recheck_named`) may still remove a time offset the choice kept;
+`after_backward_check` then marks the choice's record, so that the report's notes speak only of what is named.
 """
 
 from __future__ import annotations
@@ -126,6 +128,17 @@ def choose(
     effects["sensor_bandwidth"].params["corner_hz"] = np.asarray(best[1])
     d, r, v = best[2]
     return d, r, v, out | {"kept": "sensor_bandwidth"}
+
+
+def after_backward_check(out: dict | None, selected: list[str]) -> dict | None:
+    """The choice's record (`choose`) once the selection's final backward check has run. Where that check removed a
+    time offset the choice kept (alone, or beside the low-pass), the record says so (`removed_by_backward_check`) and
+    `kept` stays what the choice decided: the equivalence sentence, the margin caution and the corner's words read
+    the flag (an offset no longer named is neither equivalent to a low-pass nor part of a pair). Else `out` as it
+    is."""
+    if out is None or out["kept"] not in ("time_offset", "both") or "time_offset" in selected:
+        return out
+    return out | {"removed_by_backward_check": "time_offset"}
 
 
 class LowpassProfile:

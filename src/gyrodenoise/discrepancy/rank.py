@@ -447,6 +447,8 @@ def select_effects(
     # named after it (an audit's piecewise-linear bias, a 'bias random walk' of 0 +- 1.5 SE, took the slow part of
     # a scale factor, a g-sensitivity and a time offset at step 1, and stayed)
     design, final = _recheck_named(design, final, selected, base, thresholds, bic_threshold, steps)
+    # a time offset the delay-or-low-pass choice kept may be gone now: its record must not name it
+    delay_lp = lowpass_choice.after_backward_check(delay_lp, selected)
     if trusted_band and nuisance_residuals is None and corner is None:
         # the reconstruction model again (band, sensor floor, error level), on the selected model's residual (a
         # low-pass the motion named included): the base residual holds the effects' own power

@@ -37,6 +37,13 @@ def _label(c: dict) -> str:
 def _corner_se_words(report: dict) -> list[str]:
     """Where a named low-pass's corner was read from the motion, what its standard error is made of."""
     d = report.get("delay_or_lowpass") or {}
+    if d.get("kept") == "both" and d.get("removed_by_backward_check"):
+        return [
+            f"sensor_bandwidth corner_hz: read from the motion's droop beside a time offset, which the final "
+            f"backward check then removed (given the other named effects it no longer cleared its threshold); its "
+            f"standard error is that pair's profile, {_fmt(d['both_corner_se_white_hz'])} Hz with the rows taken as "
+            f"white, times {d['both_corner_se_colour_factor']:.2f} for the residual's colour."
+        ]
     if d.get("kept") == "both":
         return [
             f"sensor_bandwidth corner_hz: read from the motion's droop beside a time offset (the two share the delay "
