@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrodenoise.discrepancy.report import _corner_se_words, _gap_words, _raw_sample_evidence_md
+from gyrodenoise.discrepancy.report import _agreement, _corner_se_words, _gap_words, _raw_sample_evidence_md
 
 
 def test_quantization_is_reported_with_its_lattice():
@@ -65,3 +65,12 @@ def test_a_corner_read_beside_a_time_offset_the_final_check_removed_does_not_nam
     (line,) = _corner_se_words({"delay_or_lowpass": d})
     assert "which the final backward check then removed" in line and "3.03 Hz" in line
     assert "ms" not in line and "time offset's standard error" not in line
+
+
+def test_the_held_out_agreement_says_what_its_p_is_against():
+    t = {"separable_on_held_out": True, "birge_ratio": 2.13, "p_value": 5.3e-6, "se_factor": 2.13}
+    assert _agreement(t) == "R 2.13, p 5.3e-06; SE x2.13"  # one fit sequence: against the regression's errors
+    spread = {"birge_ratio": 1.54, "p_value": 0.21}
+    assert _agreement(t | {"p_value": 0.12, "fit_sequences": spread}) == (
+        "R 2.13, p 0.12 against the fit sequences' spread (R 1.54, p 0.21 against their halves); SE x2.13"
+    )

@@ -455,9 +455,12 @@ def _agreement(t: dict | None) -> str:
         return ""
     if not t["separable_on_held_out"]:
         return "not separable there"
-    return f"R {t['birge_ratio']:.2f}, p {t['p_value']:.2g}" + (
-        f"; SE x{t['se_factor']:.2f}" if t["se_factor"] > 1 else ""
-    )
+    out = f"R {t['birge_ratio']:.2f}, p {t['p_value']:.2g}"
+    spread = t.get("fit_sequences")
+    if spread:  # the p is against the fit sequences' own spread (`transfer`), which is checked against their halves
+        out += f" against the fit sequences' spread (R {spread['birge_ratio']:.2f}"
+        out += f", p {spread['p_value']:.2g} against their halves)" if "p_value" in spread else ")"
+    return out + (f"; SE x{t['se_factor']:.2f}" if t["se_factor"] > 1 else "")
 
 
 def _closed(e: dict) -> str:
@@ -595,7 +598,11 @@ def markdown(report: dict) -> str:
             "two estimates' difference (`gyrodenoise.discrepancy.transfer`). The regression's alone were up to ~2 "
             "times too small on independent test data; scaled, they were near calibrated "
             "(benchmarks/results/discrepancy_se_calibration_from10.md). A small p there means the constant did not "
-            "transfer: the held-out motion gives another value.",
+            "transfer: the held-out motion gives another value. With two or more fit sequences that each separate "
+            "the constant, p is an F-test against their own spread (the regression's errors fall short by about the "
+            "same factor on every sequence: against them alone a constant shared by every flight was called "
+            "different); that spread has its own p against the halves of each sequence, and a small one means the "
+            "fit sequences do not share one value.",
             "",
         ]
         lines += [
