@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrodenoise.discrepancy.report import _agreement, _corner_se_words, _gap_words, _raw_sample_evidence_md
+from gyrodenoise.discrepancy.report import (
+    _agreement,
+    _corner_se_words,
+    _gap_words,
+    _raw_sample_evidence_md,
+    _simulator_model_md,
+)
 
 
 def test_quantization_is_reported_with_its_lattice():
@@ -74,3 +80,14 @@ def test_the_held_out_agreement_says_what_its_p_is_against():
     assert _agreement(t | {"p_value": 0.12, "fit_sequences": spread}) == (
         "R 2.13, p 0.12 against the fit sequences' spread (R 1.54, p 0.21 against their halves); SE x2.13"
     )
+
+
+def test_the_simulator_model_says_the_bias_spread_and_what_was_taken_out():
+    b = {
+        "between_sequence_rad_s": 3.42e-5, "observed_std_rad_s": 6.24e-5, "estimation_std_rad_s": [4.03e-5] * 3,
+        "se_inflation": 1.76, "sequences": 5,
+    }  # fmt: skip
+    text = " ".join(_simulator_model_md({"simulator_model": "error_model.yaml", "bias_spread": b}))
+    assert "between the 5 sequences (fit and held-out): 0.002 deg/s" in text and "x1.76" in text
+    assert "alone spread by 0.0036 deg/s" in text
+    assert "turn-on bias's spread" not in " ".join(_simulator_model_md({"simulator_model": "error_model.yaml"}))

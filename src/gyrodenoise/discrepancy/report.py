@@ -314,12 +314,25 @@ def _simulator_model_md(report: dict) -> list[str]:
     name = report.get("simulator_model")
     if not name:
         return []
-    return [
+    lines = [
         f"The model with the named effects, as a simulator configuration: `{name}` (SI units; the turn-on bias "
         "as the fit sequences' mean and spread): `python -m gyrodenoise.train dataset=sim "
         f"dataset.generation.error_model_file=<this folder>/{name}` simulates with it.",
         "",
     ]
+    b = report.get("bias_spread")
+    if b:
+        tau, own = np.degrees(b["between_sequence_rad_s"]), np.degrees(b["estimation_std_rad_s"])
+        seen = b.get("observed_std_rad_s")
+        lines += [
+            f"The turn-on bias's spread between the {b['sequences']} sequences (fit and held-out): {tau:.2g} deg/s "
+            f"(`bias_jitter_rad_s`): their estimates' spread less what the estimates' own errors account for, "
+            f"{_fmt(own)} deg/s (x, y, z; the fit's standard errors x{b['se_inflation']:.2f}, the factor the "
+            "sequences' halves show they fall short by), by the method of moments, at least 0"
+            + (f" (the fit sequences' estimates alone spread by {np.degrees(seen):.2g} deg/s)." if seen else "."),
+            "",
+        ]
+    return lines
 
 
 def _gt_gaps_md(report: dict) -> list[str]:

@@ -8,8 +8,10 @@ simulated dataset's `generation` settings, so the next simulation includes the e
 
 `rate_hz` records the fitted recordings' rate: a simulation at another rate warns (effects above that rate's
 Nyquist frequency were never measured). The turn-on bias is the mean over the fit sequences, and its spread between
-them becomes `bias_jitter_rad_s` (null with one fitted sequence: a spread it cannot measure, so the simulated
-dataset keeps its own setting).
+them becomes `bias_jitter_rad_s`: the report's `bias_spread` (`bias_spread.py`: over the fit and held-out sequences,
+the estimates' own errors taken out; their plain standard deviation gave ~5e-5 rad/s where every sequence had the
+same bias), or, in a report written before it, the fit sequences' plain standard deviation (null with one fitted
+sequence and no `bias_spread`: a spread it cannot measure, so the simulated dataset keeps its own setting).
 Lines of the raw gyro above the compared band that are in every fitted recording are added as band-limited
 vibrations (`gyro_lines.simulator_vibration`): the truth cannot judge them, but a simulator of this gyro needs them.
 """
@@ -35,7 +37,11 @@ def simulator_model(report: dict) -> dict:
         if name == "bias":  # per sequence in the data; the simulator draws it around the mean
             per_seq = np.asarray(params.pop("bias_per_sequence", [params["bias"]]), dtype=float)
             params["bias"] = per_seq.mean(0).tolist()
-            jitter = float(per_seq.std(0, ddof=1).mean()) if len(per_seq) > 1 else None
+            spread = report.get("bias_spread")  # the estimates' own errors taken out (`bias_spread`)
+            if spread is not None:
+                jitter = float(spread["between_sequence_rad_s"])
+            elif len(per_seq) > 1:  # a report written before: the plain spread, those errors included
+                jitter = float(per_seq.std(0, ddof=1).mean())
         entries.append(_entry(name, params))
     for e in report.get("named_effects") or []:
         entries.append(_entry(e["name"], e["params"]))

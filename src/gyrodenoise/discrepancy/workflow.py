@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.discrepancy.bias_spread import bias_spread
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
 from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
@@ -267,6 +268,8 @@ def run(
         "gap_after": gap_after,
         "base_model": base,
         "base_params": base_params,
+        # the turn-on bias's spread between the fit sequences, their estimates' own errors taken out (for `sim_model`)
+        "bias_spread": bias_spread(sel, holdout),
         "fit_sequences": [fc.name for fc in fit],
         "holdout_sequences": [fc.name for fc in holdout],
         "selection_steps": sel.steps,
