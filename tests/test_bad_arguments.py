@@ -185,3 +185,16 @@ def test_a_setting_that_is_not_a_number_ends_in_one_line(override, said):
 
     with pytest.raises(ConfigError, match=re.escape(said)):
         check_choices(compose_config("train", [override, "paths.output_dir=unused"]))
+
+
+def test_discrepancy_root_defaults_to_the_data_folder_like_the_other_tools(tmp_path, monkeypatch, capsys):
+    """--root was required where the other tools read $GYRODENOISE_DATA (a fresh-user audit)."""
+    from gyrodenoise.discrepancy.__main__ import parse_args
+
+    argv = ["--fit", "a", "--holdout", "b", "--out", str(tmp_path / "out")]
+    monkeypatch.setenv("GYRODENOISE_DATA", str(tmp_path))
+    assert parse_args(argv).root == tmp_path / "euroc"
+    monkeypatch.delenv("GYRODENOISE_DATA")
+    with pytest.raises(SystemExit):
+        parse_args(argv)
+    assert "--root DIR: the folder of ASL sequences (or set GYRODENOISE_DATA" in capsys.readouterr().err

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
 import time
@@ -45,12 +46,18 @@ def _effects(s: str) -> list[str]:
     return names
 
 
-EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere):
+EXAMPLE = """a first run in ~20 s: docs/discrepancy.md, "Find the effect a simulator misses" (test world, no null draws)
+example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 554 s on a 2-core VM):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
       --network euroc --gyro-noise-density 1.6968e-4 --out outputs/discrepancy_euroc
 each sequence held out once, verdicts side by side: python -m gyrodenoise.discrepancy.splits --help
 """
+
+
+def _default_root() -> Path | None:
+    data = os.environ.get("GYRODENOISE_DATA")
+    return Path(data) / "euroc" if data else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,7 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     vocabulary = ", ".join(sorted(EFFECTS))
     p.add_argument(
-        "--root", required=True, type=Path, metavar="DIR", help="folder of ASL sequences (DIR/NAME/mav0/...); required"
+        "--root",
+        type=Path,
+        metavar="DIR",
+        default=_default_root(),
+        help="folder of ASL sequences (DIR/NAME/mav0/...); default $GYRODENOISE_DATA/euroc, as the other tools "
+        + (f"(here {_default_root()})" if _default_root() else "(GYRODENOISE_DATA is not set here: give --root)"),
     )
     p.add_argument(
         "--fit", nargs="+", required=True, metavar="NAME", help="sequences the effects are fitted on; required"
@@ -214,6 +226,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--min-gain {args.min_gain:g}: a share between 0 and 1 (0.05 for 5 %)")
     if args.null_draws < 0:
         p.error(f"--null-draws {args.null_draws}: 0 (the fixed --bic-threshold alone) or more re-simulations")
+    if args.root is None:
+        p.error("--root DIR: the folder of ASL sequences (or set GYRODENOISE_DATA to the folder that holds euroc/)")
     if problem := output_path_problem(args.out, folder=True):  # found before the minutes of work, not after
         p.error(f"--out {args.out}: {problem}")
     if args.network is not None:  # a wrong model is said now, not after the minutes of the effects' selection

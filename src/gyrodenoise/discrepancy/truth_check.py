@@ -116,7 +116,8 @@ def check_truth(
     (that white noise's PSD, or the gyro's own floor where that is lower: `own_floor`) and whether the truth follows
     the gyro."""
     nper = min(int(NPERSEG_S * fs), len(gyro))
-    f, coh = signal.coherence(gyro, truth, fs, nperseg=nper, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):  # 0/0 at the 0-Hz bin after detrending: no band reads it
+        f, coh = signal.coherence(gyro, truth, fs, nperseg=nper, axis=0)
     _, p_gyro = signal.welch(gyro - gyro.mean(0), fs, nperseg=nper, axis=0)
     res = gyro - truth
     _, p_res = signal.welch(res - res.mean(0), fs, nperseg=nper, axis=0)
