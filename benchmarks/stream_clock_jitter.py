@@ -1,5 +1,6 @@
 """How many samples the stream clock refuses on imperfect stamps: a stream a few % off the model's rate, with uniform
-jitter, single missing samples, or a driver whose every other stamp is late. Python's `StreamClock` (the C export's
+jitter, single missing samples, a stream much slower than the model's (restarts expected), or a driver whose every
+other stamp is late. Python's `StreamClock` (the C export's
 `gd_step_t` decides alike: tests/test_c_export_stamps.py). No model is run: the clock alone decides.
 
     python benchmarks/stream_clock_jitter.py [--out benchmarks/results/stream_clock_jitter.md]
@@ -59,6 +60,8 @@ def rows() -> list[tuple[str, np.ndarray]]:
         for jitter in (0.5e6, 1.0e6, 1.5e6):
             out.append((f"{fast:.0%} fast, jitter ±{jitter / 1e6:g} ms", jittered(fast, jitter)))
     out.append(("3% fast, jitter ±1 ms, 5% single samples missing", with_single_drops(jittered(0.03, 1.0e6, 2), 0.05)))
+    for slow in (0.05, 0.1, 0.2, 0.3, 0.5):  # slower streams: restarted as gaps from ~15 % slow (50 %: 100 Hz)
+        out.append((f"{slow:.0%} slow, no jitter", (np.arange(N) * PERIOD_NS / (1 - slow)).astype(np.int64)))
     for late in (2.4e6, 2.6e6, 3.0e6, 4.0e6):
         t = np.arange(2000) * PERIOD_NS + np.where(np.arange(2000) % 2, int(late), 0)
         out.append((f"every other stamp {late / 1e6:g} ms late", t.astype(np.int64)))

@@ -374,3 +374,27 @@ def test_two_models_with_their_own_prefixes_link_into_one_program(tmp_path, comp
         np.testing.assert_allclose(np.array(got, dtype=float), ref[-1], atol=ATOL)
     with pytest.raises(ValueError, match="a C identifier"):
         c_export.export_c(net, tmp_path / "x", prefix="9lives")
+
+
+NAN_DRIVER = r"""
+#include <stdio.h>
+#include "gyrodenoise_model.h"
+static gd_state st;
+int main(void)
+{
+    float imu[6] = {0.1f, -0.2f, 0.05f, 0.0f, 0.0f, 9.81f}, w[3], sd[3] = {0.0f, 0.0f, 0.0f};
+    if (gd_step(&st, imu, w, sd) != 0) return 2;
+    printf("%d %d %d\n", sd[0] != sd[0], sd[1] != sd[1], sd[2] != sd[2]);
+    return 0;
+}
+"""
+
+
+def test_one_network_writes_a_nan_spread_not_zeros(tmp_path, compiler):
+    """A single network measures no spread: its std_out read 0, a certainty (a review of the one-member change)."""
+    compiled(random_model(seed=4, **SMALL), tmp_path, compiler)
+    driver, exe = tmp_path / "c" / "nan_driver.c", tmp_path / "nan_driver"
+    driver.write_text(NAN_DRIVER)
+    cmd = [*compiler.split(), "-O2", "-std=c99", "-Wall", "-Werror", "-o", str(exe), str(driver)]
+    subprocess.run([*cmd, str(tmp_path / "c" / c_export.SOURCE), "-lm"], check=True)
+    assert subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split() == ["1", "1", "1"]

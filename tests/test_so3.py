@@ -151,3 +151,16 @@ def test_log_refuses_a_matrix_that_is_not_a_rotation():
     for s in steps[1:]:
         prod = prod @ s
     so3.log(prod)
+
+
+def test_validations_aoe_of_nan_weights_is_nan_not_a_rotation_error():
+    """Diverged weights give NaN orientations: the validation AOE must be NaN (TrainingDiverged then names the cure),
+    not log's 'not a rotation' error (a review of the rotation check)."""
+    from gyrodenoise.metrics import aoe_torch
+
+    gyro = torch.full((100, 3), 0.1, dtype=torch.float64)
+    gyro[50] = float("nan")
+    dt = torch.full((100,), 0.005, dtype=torch.float64)
+    R_est = so3.integrate_gyro_torch(torch.eye(3, dtype=torch.float64), gyro, dt)
+    R_gt = so3.integrate_gyro_torch(torch.eye(3, dtype=torch.float64), gyro.nan_to_num(), dt)
+    assert math.isnan(aoe_torch(R_gt, R_est)[0])

@@ -260,3 +260,15 @@ def test_a_file_and_a_stream_of_it_take_the_same_steps_as_gaps():
     from gyrodenoise.stream_clock import STREAM_GAP_FACTOR
 
     assert FILE_GAP_FACTOR == STREAM_GAP_FACTOR
+
+
+def test_an_empty_chunk_keeps_the_early_refusal_it_follows():
+    """A review: an empty push_chunk cleared the flag that leaves the next step out of the rate's track (C, which has
+    no empty push, kept it): Python and C would then disagree."""
+    sc = StreamingCorrector(random_model(), rate_hz=200.0)
+    sc.push_chunk(random_imu(5), t_ns=stamps(5))
+    with pytest.raises(StreamTimeError):
+        sc.push(random_imu(1)[0], t_ns=int(stamps(5)[-1]) + 1_000_000)
+    assert sc.clock._early_since
+    assert sc.push_chunk(random_imu(0), t_ns=np.zeros(0, dtype=np.int64)).shape == (0, 3)
+    assert sc.clock._early_since

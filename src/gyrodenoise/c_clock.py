@@ -24,6 +24,7 @@ import math
 from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.stream_clock import (
     CLOCK_JUMP_SAMPLES,
+    MISSED_SHARE,
     RATE_TRACK_MIN,
     RATE_WINDOW,
     STREAM_FAST_FACTOR,
@@ -38,8 +39,8 @@ CODES = (
     (
         "GD_RESTARTED",
         1,
-        "gd_step_t: taken after a gap, or after GD_CLOCK_JUMP_SAMPLES stamps in a row before the last "
-        "one taken (the clock went back): a new stream",
+        "gd_step_t: taken after a gap (or a missing sample beyond 1 in GD_MISSED_SHARE), or after "
+        "GD_CLOCK_JUMP_SAMPLES stamps in a row before the last one taken (the clock went back): a new stream",
     ),
     ("GD_RATE_OFF", 2, "gd_step_t: taken; the stream's rate is over GD_RATE_TOL off GD_RATE_HZ"),
     ("GD_REFUSED_SAMPLE", -1, "a NaN/inf, or a value beyond GD_GYRO_ABS_MAX / GD_ACC_ABS_MAX"),
@@ -100,6 +101,7 @@ def header_defines(rate_hz: float, memory: bool) -> str:
         ("GD_TIME_BASE_GAIN", str(TIME_BASE_GAIN), "the time base moves by 1/this of a sample's deviation"),
         ("GD_RATE_TRACK_MIN", str(RATE_TRACK_MIN), "intervals taken before its step is their mean, not the period"),
         ("GD_STEP_MAX_OFF_NS", f"INT64_C({lim['step_max_off']})", "its step within this of GD_PERIOD_NS"),
+        ("GD_MISSED_SHARE", str(MISSED_SHARE), "a missing sample stepped over more than 1 in this many: a gap"),
         ("GD_CLOCK_JUMP_SAMPLES", str(CLOCK_JUMP_SAMPLES), "this many stamps in a row before the last: restart"),
         ("GD_RATE_WINDOW", str(RATE_WINDOW), "steps (and early refusals) averaged, once per stream, for the rate"),
         ("GD_RATE_TOL", f"{RATE_TOL!r}f", "relative rate difference that gives GD_RATE_OFF"),
@@ -119,6 +121,7 @@ STATE_FIELDS = """\
     int64_t lag_ns;                                       /* its last stamp less where the time base puts it */
     uint64_t track_ns, track_n;                           /* its taken steps' sum and intervals (base_step) */
     int early_since;                                      /* a GD_REFUSED_EARLY since its last sample taken */
+    uint64_t n_missed;                                    /* its samples stepped over as missing */
     int late_in_a_row;                                    /* samples refused in a row as GD_REFUSED_ORDER */
     uint64_t steps_ns, n_steps;                           /* the sum and number of its steps */
     uint64_t n_early;                                     /* its samples refused as GD_REFUSED_EARLY */
@@ -160,6 +163,7 @@ void gd_reset(gd_state *s)
     s->last_ns = s->lag_ns = 0;
     s->track_ns = s->track_n = 0;
     s->early_since = 0;
+    s->n_missed = 0;
     s->late_in_a_row = 0;
     s->steps_ns = s->n_steps = s->n_early = 0;
     s->rate_checked = 0;
@@ -215,6 +219,7 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
     int code = GD_OK;
     uint64_t step_ns = 0;
     int64_t dev = 0, bstep = 0;
+    int missed = 0;
     if (!sample_ok(imu)) return GD_REFUSED_SAMPLE;
     if (s->stamped) {{
         if (t_ns <= s->last_ns && ++s->late_in_a_row < GD_CLOCK_JUMP_SAMPLES) return GD_REFUSED_ORDER;
@@ -237,6 +242,16 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
             if (gap || dev > GD_MAX_STEP_NS - GD_PERIOD_NS) {{
                 gd_reset(s);
                 code = GD_RESTARTED;
+            }} else if (dev - bstep >= GD_MIN_STEP_NS - GD_PERIOD_NS &&
+                       (int64_t)step_ns - 2 * bstep >= GD_MIN_STEP_NS - GD_PERIOD_NS) {{
+                /* a step less the early tolerance late, two steps after the last sample taken: one sample missing,
+                   stepped over; more than one in GD_MISSED_SHARE samples taken (besides the first): a gap */
+                if ((uint64_t)GD_MISSED_SHARE * s->n_missed < s->n_steps + (uint64_t)GD_MISSED_SHARE) {{
+                    missed = 1;
+                }} else {{
+                    gd_reset(s);
+                    code = GD_RESTARTED;
+                }}
             }}
         }} else {{
             if (step_ns < (uint64_t)GD_MIN_STEP_NS) return GD_REFUSED_EARLY;
@@ -258,10 +273,10 @@ int gd_step_t(gd_state *s, int64_t t_ns, const float imu[6], float gyro_out[3], 
         }}
     }}
     if (s->stamped && GD_PERIOD_NS > 0) {{
-        /* a step less the early tolerance late or more: one sample missing, the base steps over it. A step with a
-           sample refused as early inside is left out of the track (the stream's jitter, or one sample too many?) */
-        const int missed = dev - bstep >= GD_MIN_STEP_NS - GD_PERIOD_NS;
+        /* a step with a sample refused as early inside is left out of the track (the stream's jitter, or one sample
+           too many?) */
         s->lag_ns = lag_after(missed ? dev - bstep : dev);
+        s->n_missed += (uint64_t)missed;
         if (!s->early_since) {{
             s->track_ns += step_ns;
             s->track_n += 1 + (uint64_t)missed;

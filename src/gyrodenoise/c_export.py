@@ -231,7 +231,7 @@ typedef struct gd_state {{
 void gd_reset(gd_state *s);
 
 /* Consume one sample imu = {{gx, gy, gz [rad/s], ax, ay, az [m/s^2]}}; write the corrected gyro [rad/s] to gyro_out
-   and, when std_out is not NULL, the members' spread per axis [rad/s] (zeros for a single network).
+   and, when std_out is not NULL, the members' spread per axis [rad/s] (NaN for one network: no spread).
    Returns GD_OK (0), or GD_REFUSED_SAMPLE (-1) when the sample holds a NaN/inf or a value beyond GD_GYRO_ABS_MAX /
    GD_ACC_ABS_MAX: it would spoil a receptive field of outputs, so it is refused and the state is left unchanged
    (nothing is written); GD_REFUSED_UNSTAMPED (-4) on a stream gd_step_t stamped. Timestamps are not checked: feed
@@ -355,6 +355,15 @@ static int sample_ok(const float imu[6])
     return 1;
 }}
 
+/* a quiet NaN from its bits (NAN itself is folded away or warned about under -ffast-math): one network's "spread" */
+static float no_spread(void)
+{{
+    const uint32_t u = UINT32_C(0x7fc00000);
+    float x;
+    memcpy(&x, &u, sizeof x);
+    return x;
+}}
+
 /* one step of a checked sample: every member, then their mean and spread */
 static void step(gd_state *s, const float imu[6], float gyro_out[3], float *std_out)
 {{
@@ -366,7 +375,7 @@ static void step(gd_state *s, const float imu[6], float gyro_out[3], float *std_
         const float mean = sum / GD_N_MEMBERS;
         for (int k = 0; k < GD_N_MEMBERS; k++) sq += (s->member_out[k][a] - mean) * (s->member_out[k][a] - mean);
         gyro_out[a] = mean;
-        if (std_out) std_out[a] = GD_N_MEMBERS > 1 ? sqrtf(sq / (GD_N_MEMBERS - 1)) * spread_scale : 0.0f;
+        if (std_out) std_out[a] = GD_N_MEMBERS > 1 ? sqrtf(sq / (GD_N_MEMBERS - 1)) * spread_scale : no_spread();
     }}
 }}
 

@@ -50,6 +50,10 @@ TIME_BASE_GAIN = 8
 # period late counting two: the one missing and itself) once this many intervals were taken; a mean, not a loop on the
 # deviations: samples refused as early would leave out the deviations of one sign and drive a loop off
 RATE_TRACK_MIN = 32
+# a step-over (one missing sample) needs the step since the last sample taken to span about two periods too (a late
+# sample after a lag that built up is a slower stream, not a missing sample), and at most one in MISSED_SHARE samples
+# taken stepped over besides the stream's first: more are a stream at half the rate or a lossy link, refused as a gap
+MISSED_SHARE = 10
 
 
 RESTARTS_IN_A_ROW = 5  # this many restarts (gaps, clock jumps) within RATE_WINDOW samples taken: a warning, once
@@ -142,6 +146,7 @@ class StreamClock:
         self._steps_sum, self._steps_n = 0, 0  # the steps taken
         self._early_n = 0  # samples refused as early: they came, between two taken ones (the rate's average)
         self._early_since = False  # one was refused since the last sample taken (its step is left out of the track)
+        self.missed = 0  # samples stepped over as missing in this stream
         self._rate_checked = False
 
     def base_step(self, track: tuple[int, int]) -> int:
@@ -152,20 +157,26 @@ class StreamClock:
             return whole
         return whole + max(-self._step_max_off, min(self._step_max_off, total // n - whole))
 
+    def _step_over(self, step: int, dev: int, raw: int, n_steps: int, n_missed: int) -> bool | None:
+        """Whether a sample `dev` ns after its expected time (taken: within the tolerance), `raw` ns after the last one
+        taken, follows one missing sample (True: the base steps over it), is late (False), or follows one missing
+        sample too many (None: a gap). `n_steps`, `n_missed`: the stream's steps taken and step-overs before it."""
+        lo = self._base[1]
+        if dev < step + lo or raw < 2 * step + lo:
+            return False
+        return True if MISSED_SHARE * n_missed < n_steps + MISSED_SHARE else None
+
     def _advance(
-        self, base: int, track: tuple[int, int], last: int, t: int, after_early: bool
+        self, base: int, track: tuple[int, int], last: int, t: int, after_early: bool, over: bool
     ) -> tuple[int, tuple[int, int]]:
-        """(time base, track) after taking a sample stamped `t` (checked: its deviation is within the tolerance) after
-        the one stamped `last`. A sample late by a step less the early tolerance (0.6 period) or more is one missing
-        sample (two are a gap): the base steps over it. A step with a sample refused as early inside is left out of
-        the track: whether that sample was the stream's (jitter) or one too many (a faster stream) is not known, and
-        either guess would drive the track off."""
+        """(time base, track) after taking a sample stamped `t` (checked: within the tolerance, and `over` from
+        `_step_over`) after the one stamped `last`: the base steps over one missing sample where `over`. A step with a
+        sample refused as early inside is left out of the track: whether that sample was the stream's (jitter) or one
+        too many (a faster stream) is not known, and either guess would drive the track off."""
         step = self.base_step(track)
-        expected = base + step
-        missed = t - expected >= step + self._base[1]
-        expected += step if missed else 0
+        expected = base + step + (step if over else 0)
         if not after_early:
-            track = (track[0] + t - last, track[1] + 1 + missed)
+            track = (track[0] + t - last, track[1] + 1 + over)
         return expected + _toward_zero(t - expected, TIME_BASE_GAIN), track
 
     @property
@@ -182,7 +193,13 @@ class StreamClock:
             t1 = int(t_ns)  # one sample: plain ints (~1 us, not ~100 with numpy arrays)
             if self._base is not None:
                 _, lo, hi = self._base
-                if t1 > self.last_ns and lo <= t1 - self.base_ns - self.base_step(self.track) <= hi:
+                step = self.base_step(self.track)
+                dev, raw = t1 - self.base_ns - step, t1 - self.last_ns
+                if (
+                    raw > 0
+                    and lo <= dev <= hi
+                    and self._step_over(step, dev, raw, self._steps_n, self.missed) is not None
+                ):
                     return t1
             else:
                 step = t1 - self.last_ns
@@ -228,7 +245,9 @@ class StreamClock:
             self._refuse(kind, k, full, steps, n, where, at, period)
         return t
 
-    def _refuse(self, kind: str, k: int, full: np.ndarray, steps: np.ndarray, n: int, where, at, period, dev=None):
+    def _refuse(
+        self, kind: str, k: int, full: np.ndarray, steps: np.ndarray, n: int, where, at, period, dev=None, missed=None
+    ):
         """Raise the StreamTimeError of the step k (ending at sample k + 1 of `full`, the last stamp taken and this
         call's), counting what the stream's later decisions need: refusals as late in a row (the clock's jump),
         early ones (the rate's average), gaps (restarts in a row)."""
@@ -256,6 +275,8 @@ class StreamClock:
             looks = f"; these steps look like a {1e9 / steps[k]:.4g} Hz stream" if plausible else ""
             raise StreamTimeError(_early_message(where(k), steps[k], period, at, looks, dev), "early", index)
         self._restarted()
+        if missed is not None:  # about a period late once too often
+            raise StreamTimeError(_missed_message(where(k), *missed, period, at), "gap", index)
         raise StreamTimeError(_gap_message(where(k), steps[k], self.gap_factor, period, at), "gap", index)
 
     def _restarted(self) -> None:
@@ -280,6 +301,7 @@ class StreamClock:
         """Each sample against its expected time on the stream's time base, in order (the base moves with each)."""
         _, lo, hi = self._base
         base, track, last = self.base_ns, self.track, self.last_ns
+        n_steps, n_missed = self._steps_n, self.missed
         for i, ti in enumerate(t.tolist()):
             k = i - 1 + (len(full) - n)  # the step that ends at this sample
             if last is not None and ti <= last:
@@ -287,25 +309,35 @@ class StreamClock:
             if base is None:  # the stream's first sample
                 base = last = ti
                 continue
-            dev = ti - base - self.base_step(track)
+            step = self.base_step(track)
+            dev = ti - base - step
             if dev < lo:
                 self._refuse("early", k, full, steps, n, where, at, self.period_ns, dev)
             if dev > hi:
                 self._refuse("gap", k, full, steps, n, where, at, self.period_ns)
-            (base, track), last = self._advance(base, track, last, ti, self._early_since and i == 0), ti
+            over = self._step_over(step, dev, ti - last, n_steps, n_missed)
+            if over is None:
+                self._refuse("gap", k, full, steps, n, where, at, self.period_ns, missed=(n_missed + 1, n_steps + 1))
+            (base, track), last = self._advance(base, track, last, ti, self._early_since and i == 0, over), ti
+            n_steps, n_missed = n_steps + 1, n_missed + over
 
     def commit(self, t: np.ndarray | int) -> None:
         """Record the stamps of a call that went through; compare the rate once enough steps were seen."""
         self.late_in_a_row = 0
+        stamps = [t] if isinstance(t, int) else t.tolist()
         if self._base is not None:
-            last, after_early = self.last_ns, self._early_since
-            for ti in [t] if isinstance(t, int) else t.tolist():
+            last, after_early, n_steps = self.last_ns, self._early_since, self._steps_n
+            for ti in stamps:
                 if self.base_ns is None:  # the stream's first sample
                     self.base_ns = ti
                 else:
-                    self.base_ns, self.track = self._advance(self.base_ns, self.track, last, ti, after_early)
+                    step = self.base_step(self.track)
+                    over = bool(self._step_over(step, ti - self.base_ns - step, ti - last, n_steps, self.missed))
+                    self.base_ns, self.track = self._advance(self.base_ns, self.track, last, ti, after_early, over)
+                    self.missed, n_steps = self.missed + over, n_steps + 1
                 last, after_early = ti, False
-        self._early_since = False
+        if stamps:  # an empty call takes nothing: a sample refused as early before it still is
+            self._early_since = False
         if isinstance(t, int):  # check's one-sample path: plain ints
             self._steps_sum += t - self.last_ns
             self._steps_n += 1
@@ -346,6 +378,15 @@ def _early_message(where: str, step: int, period: float, at: str, looks: str, de
         f"{where} comes {step * 1e-6:.4g} ms after the previous one{expected}, under {STREAM_FAST_FACTOR:g} of the "
         f"model's period ({period * 1e-6:.3f} ms{at}){looks}: the stream is faster than the model's rate (resample "
         f"it), or its stamps are not ns ({UNITS_HINT}; micro- or milliseconds look like this). The state is unchanged"
+    )
+
+
+def _missed_message(where: str, missed: int, taken: int, period: float, at: str) -> str:
+    return (
+        f"{where} comes about one period ({period * 1e-6:.3f} ms{at}) after its expected time: a missing sample, "
+        f"{missed} in {taken} samples of this stream, more than one in {MISSED_SHARE}: a stream slower than the "
+        "model's rate (resample it), or a link that loses samples (fill them first). Call reset() and push it as the "
+        "first sample of a new stream (the state is unchanged)"
     )
 
 
