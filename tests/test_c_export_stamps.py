@@ -284,7 +284,7 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
     assert "line 1: the header names column 2 'acc_x' where gyro x is read" in done.stderr
     done = run(text.replace("\n1010000000,", "\n1010000000\n", 1))  # sample 3 cut short
     assert done.returncode == 1 and len(done.stdout.splitlines()) == 1 + 2
-    assert "line 4: expected t,gx,gy,gz,ax,ay,az; stopped there: the lines after it were not read (2 samples" in (
+    assert "line 4: expected t,gx,gy,gz,ax,ay,az; stopped there: the lines after it were not read (the 2 samples" in (
         done.stderr
     )
     assert (

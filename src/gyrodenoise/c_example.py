@@ -30,7 +30,7 @@ EXAMPLE_CODE = """\
    after the previous one or too soon after it) is dropped, with a line on stderr and no output line; after a gap the
    stream restarts (said on stderr). With {unstamped}, t is not read: the samples are taken as consecutive (gd_step).
    Exit status: 0, or 1 when a sample was refused (said with its line number) or a line was not t,gx,gy,gz,ax,ay,az
-   (the run stops there, and says how many samples before it were written).
+   (the run stops there, and says how many samples before it were read).
 
    Compile: {compile}
    Run:     ./gyrodenoise < imu.csv > corrected.csv
@@ -57,8 +57,8 @@ static const char *refusal(int code)
 /* a line that ends the run: what was wrong, and that the lines after it were not read */
 static int stop(long lineno, long n, const char *why)
 {{
-    fprintf(stderr, "line %ld: %s; stopped there: the lines after it were not read (%ld samples before it were)\\n",
-            lineno, why, n);
+    fprintf(stderr, "line %ld: %s; stopped there: the lines after it were not read (the %ld samples before it were: "
+                    "their outputs, or the refusals said above)\\n", lineno, why, n);
     return 1;
 }}
 

@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from gyrodenoise.data.checks import gravity_norm
 from gyrodenoise.data.imu_csv import G0
-from gyrodenoise.data.readers import GAP_FACTOR, DataFormatError  # GAP_FACTOR: the corrector's gap, as training's
+from gyrodenoise.data.readers import GAP_FACTOR, DataFormatError  # GAP_FACTOR: training's gap
 from gyrodenoise.data.sequence import Sequence
 from gyrodenoise.paths import portable_path
 
