@@ -155,6 +155,17 @@ def c_decisions(
     return rows[:, 0].astype(int).tolist(), rows[:, 1:]
 
 
+def decided_alike(stamps: list[int], seed: int, tmp_path, compiler) -> list[int]:
+    """A random network at 200 Hz on `stamps` in Python and in C: the same codes, the same outputs where taken."""
+    model, imu = random_denoiser(), random_imu(len(stamps), seed=seed)
+    codes, out = python_decisions(model, 200.0, stamps, imu)
+    c_codes, c_out = c_decisions(model, {"name": "test", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler)
+    assert c_codes == codes
+    taken = np.array(codes) >= 0
+    assert np.abs(c_out[taken] - out[taken]).max() < ATOL
+    return codes
+
+
 def random_denoiser():
     model = random_model(seed=4, **SMALL)
     model.net[-1].weight.data *= 10  # corrections of ~1 rad/s: a sample fed twice or lost shows in the outputs
@@ -200,12 +211,7 @@ def test_a_jittery_stream_is_judged_alike_against_the_time_base(tmp_path, compil
     slow = jitter[-1] + 5_150_000 * np.arange(1, 501)
     fast = slow[-1] + 4_650_000 * np.arange(1, 501)
     stamps = (1_403_636_579_000_000_000 + np.concatenate([jitter, slow, fast])).tolist()
-    model, imu = random_denoiser(), random_imu(len(stamps), seed=2)
-    codes, out = python_decisions(model, 200.0, stamps, imu)
-    c_codes, c_out = c_decisions(model, {"name": "test", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler)
-    assert c_codes == codes
-    taken = np.array(codes) >= 0
-    assert np.abs(c_out[taken] - out[taken]).max() < ATOL
+    codes = decided_alike(stamps, 2, tmp_path, compiler)
     assert 0 < codes.count(CODE["GD_REFUSED_EARLY"]) < 0.05 * len(codes)  # the jitter's rare outliers, the fast part
 
 
@@ -335,12 +341,7 @@ def test_the_time_base_follows_the_streams_rate_and_steps_over_a_missing_sample(
     t = np.arange(n) * 5_000_000 / 1.04 + rng.uniform(-1_500_000, 1_500_000, n)  # 4 % fast, +-0.3 period
     drops = np.sort(rng.choice(np.arange(100, n - 1, 3), 60, replace=False))  # single samples, some 3 apart
     stamps = (1_403_636_579_000_000_000 + np.delete(t, drops).astype(np.int64)).tolist()
-    model, imu = random_denoiser(), random_imu(len(stamps), seed=3)
-    codes, out = python_decisions(model, 200.0, stamps, imu)
-    c_codes, c_out = c_decisions(model, {"name": "test", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler)
-    assert c_codes == codes
-    taken = np.array(codes) >= 0
-    assert np.abs(c_out[taken] - out[taken]).max() < ATOL
+    codes = decided_alike(stamps, 3, tmp_path, compiler)
     assert codes.count(CODE["GD_RESTARTED"]) == 0 and codes.count(CODE["GD_REFUSED_EARLY"]) < 0.005 * len(codes)
 
 
@@ -350,7 +351,5 @@ def test_a_stream_much_slower_than_the_model_is_still_refused_as_gaps(slow, tmp_
     200 Hz model) without a gap, only a rate warning. A step-over needs a step of about two periods, and at most one in
     MISSED_SHARE samples: C decides alike."""
     stamps = (1_000_000_000 + np.round(np.arange(600) * 5e6 / (1 - slow))).astype(np.int64).tolist()
-    model, imu = random_denoiser(), random_imu(len(stamps), seed=4)
-    codes, _ = python_decisions(model, 200.0, stamps, imu)
-    c_codes, _ = c_decisions(model, {"name": "test", "rate_hz": 200.0}, stamps, imu, tmp_path, compiler)
-    assert c_codes == codes and codes.count(CODE["GD_RESTARTED"]) > 0.04 * len(codes)  # 4.7 % at 20 % slow before
+    codes = decided_alike(stamps, 4, tmp_path, compiler)
+    assert codes.count(CODE["GD_RESTARTED"]) > 0.04 * len(codes)  # 4.7 % at 20 % slow before
