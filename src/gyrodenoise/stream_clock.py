@@ -166,14 +166,15 @@ class StreamClock:
             return False
         return True if MISSED_SHARE * n_missed < n_steps + MISSED_SHARE else None
 
+    @staticmethod
     def _advance(
-        self, base: int, track: tuple[int, int], last: int, t: int, after_early: bool, over: bool
+        base: int, step: int, track: tuple[int, int], last: int, t: int, after_early: bool, over: bool
     ) -> tuple[int, tuple[int, int]]:
         """(time base, track) after taking a sample stamped `t` (checked: within the tolerance, and `over` from
-        `_step_over`) after the one stamped `last`: the base steps over one missing sample where `over`. A step with a
-        sample refused as early inside is left out of the track: whether that sample was the stream's (jitter) or one
-        too many (a faster stream) is not known, and either guess would drive the track off."""
-        step = self.base_step(track)
+        `_step_over`) after the one stamped `last`, the base's step being `step` (`base_step(track)`): the base steps
+        over one missing sample where `over`. A step with a sample refused as early inside is left out of the track:
+        whether that sample was the stream's (jitter) or one too many (a faster stream) is not known, and either guess
+        would drive the track off."""
         expected = base + step + (step if over else 0)
         if not after_early:
             track = (track[0] + t - last, track[1] + 1 + over)
@@ -318,7 +319,7 @@ class StreamClock:
             over = self._step_over(step, dev, ti - last, n_steps, n_missed)
             if over is None:
                 self._refuse("gap", k, full, steps, n, where, at, self.period_ns, missed=(n_missed + 1, n_steps + 1))
-            (base, track), last = self._advance(base, track, last, ti, self._early_since and i == 0, over), ti
+            (base, track), last = self._advance(base, step, track, last, ti, self._early_since and i == 0, over), ti
             n_steps, n_missed = n_steps + 1, n_missed + over
 
     def commit(self, t: np.ndarray | int) -> None:
@@ -333,7 +334,8 @@ class StreamClock:
                 else:
                     step = self.base_step(self.track)
                     over = bool(self._step_over(step, ti - self.base_ns - step, ti - last, n_steps, self.missed))
-                    self.base_ns, self.track = self._advance(self.base_ns, self.track, last, ti, after_early, over)
+                    moved = self._advance(self.base_ns, step, self.track, last, ti, after_early, over)
+                    self.base_ns, self.track = moved
                     self.missed, n_steps = self.missed + over, n_steps + 1
                 last, after_early = ti, False
         if stamps:  # an empty call takes nothing: a sample refused as early before it still is
