@@ -46,11 +46,11 @@ def _effects(s: str) -> list[str]:
     return names
 
 
-EXAMPLE = """a first run in ~20 s: docs/discrepancy.md, "Find the effect a simulator misses" (test world, no null draws)
-example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 554 s on a 2-core VM):
+EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 554 s, 2 cores):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
       --network euroc --gyro-noise-density 1.6968e-4 --out outputs/discrepancy_euroc
+a first run in ~20 s: docs/discrepancy.md, "Find the effect a simulator misses" (test world, no null draws)
 each sequence held out once, verdicts side by side: python -m gyrodenoise.discrepancy.splits --help
 """
 
