@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrodenoise.discrepancy.fitted_model import Selection
-from gyrodenoise.discrepancy.replicates import Replicates, block, views_of
+from gyrodenoise.discrepancy.replicates import block, replicates_of
 from gyrodenoise.sim.context import FitContext
 
 
@@ -34,7 +34,7 @@ def bias_spread(sel: Selection, holdout: list[FitContext]) -> dict | None:
         return None
     b = np.atleast_2d(np.asarray(b, dtype=float))
     n_fit = len(b)
-    reps = Replicates(sel, views_of(sel, holdout))
+    reps = replicates_of(sel, holdout)
     held = reps.estimates("bias", list(range(n_fit, len(reps.views))))
     s = n_fit + len(held)
     if s < 2:

@@ -61,6 +61,9 @@ class Selection:
     lattice: dict | None = None
     # named sensor constants refitted on the held-out sequences (`transfer.transfer_check`): chi-square, Birge ratio
     transfer: dict[str, dict] = field(default_factory=dict)
+    # the selected model refitted on each sequence and each half (`replicates.replicates_of`), made once: the held-out
+    # check and the bias spread both read it
+    replicates: object | None = None
     # the reconstruction error's level of the first pass and the model whose residual moved it (`rank.select_effects`
     # then selected again with the refitted level); None: no second pass
     nuisance_refit: dict | None = None

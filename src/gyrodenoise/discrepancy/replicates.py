@@ -39,10 +39,11 @@ def chi2_of(a: Estimate, b: Estimate) -> float:
 
 class Replicates:
     """The selection's regression model refitted on each of `views` alone (contexts as the model sees them: through
-    a named sensor low-pass already) and on each half of each; computed when first asked, read per effect."""
+    a named sensor low-pass already) and on each half of each; computed when first asked, read per effect. `key`: the
+    held-out sequences' names it was made for (`replicates_of`)."""
 
-    def __init__(self, sel: Selection, views: list[FitContext]) -> None:
-        self.sel, self.views = sel, views
+    def __init__(self, sel: Selection, views: list[FitContext], key: tuple[str, ...] = ()) -> None:
+        self.sel, self.views, self.key = sel, views, key
         self.regress = [n for n in sel.selected if not sel.effects[n].stochastic]
 
     def _fit(self, fc: FitContext) -> tuple[Design, FitResult]:
@@ -124,3 +125,13 @@ def among(estimates: list[Estimate]) -> dict | None:
 def views_of(sel: Selection, holdout: list[FitContext]) -> list[FitContext]:
     """The fit sequences as the final design sees them, then the held-out ones through the same sensor low-pass."""
     return [*sel.design.fcs, *(sensor_view(fc, sel.corner_hz) for fc in holdout)]
+
+
+def replicates_of(sel: Selection, holdout: list[FitContext]) -> Replicates:
+    """The selection's `Replicates` over its fit sequences and `holdout`, made once and kept on it (`sel.replicates`):
+    the held-out check and the bias spread each refitted every sequence and half before, 1-3 s each."""
+    key = tuple(fc.name for fc in holdout)
+    found = sel.replicates
+    if not isinstance(found, Replicates) or found.sel is not sel or found.key != key:
+        found = sel.replicates = Replicates(sel, views_of(sel, holdout), key)
+    return found

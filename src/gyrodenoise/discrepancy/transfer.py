@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from gyrodenoise.discrepancy.design import Design, sensor_view
+from gyrodenoise.discrepancy.design import Design
 from gyrodenoise.discrepancy.fitted_model import Selection
-from gyrodenoise.discrepancy.replicates import Replicates, among, block, chi2_of, views_of
+from gyrodenoise.discrepancy.replicates import among, block, chi2_of, replicates_of
 from gyrodenoise.sim.context import FitContext
 
 
@@ -45,11 +45,10 @@ def transfer_check(sel: Selection, holdout: list[FitContext]) -> dict[str, dict]
     shared = [n for n in sel.named if n in regress and not sel.effects[n].per_sequence]
     if not shared or not holdout or sel.design is None:
         return {}
-    view = [sensor_view(fc, sel.corner_hz) for fc in holdout]
-    design = Design(view, {n: sel.effects[n] for n in regress}, sel.sigma)
-    res = design.fit(regress)
-    reps = Replicates(sel, views_of(sel, holdout))
+    reps = replicates_of(sel, holdout)
     n_fit = len(sel.design.fcs)
+    design = Design(reps.views[n_fit:], {n: sel.effects[n] for n in regress}, sel.sigma)  # the held-out together
+    res = design.fit(regress)
     out = {}
     for name in shared:
         others = [n for n in regress if n != name]
