@@ -36,7 +36,7 @@ from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings
 from gyrodenoise.paths import portable_path
-from gyrodenoise.pretrained import ModelQualityWarning, load_model, save_model
+from gyrodenoise.pretrained import ModelQualityWarning, calibrated_beside, load_model, save_model
 from gyrodenoise.provenance import file_sha256
 
 SCALE_RANGE = (1e-3, 1e3)  # spread factors `scale` accepts
@@ -80,17 +80,9 @@ def member_record(path: str | Path, meta: dict) -> dict:
         "test": test,
         "beats_calibrated": meta.get("beats_calibrated"),
         "calibrated_val_aoe_deg": meta.get("calibrated_val_aoe_deg"),
-        "calibrated_model": _beside(path, meta.get("calibrated_model")),
+        "calibrated_model": calibrated_beside(path, meta.get("calibrated_model")),
         "command": meta.get("command"),
     }
-
-
-def _beside(path: Path, name: str | None) -> str | None:
-    """The member's calibrated baseline (recorded as a file name beside it) as a path, where that file is."""
-    if not name:
-        return None
-    found = Path(name) if Path(name).is_absolute() else path.parent / name
-    return str(found) if found.is_file() else None
 
 
 def check_compatible(records: list[dict], allow_mixed: bool = False) -> None:

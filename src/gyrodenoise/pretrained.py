@@ -278,6 +278,15 @@ def not_causal_warning(meta: dict) -> str | None:
     )
 
 
+def calibrated_beside(model_path: str | Path, name: str | None) -> str | None:
+    """The calibrated baseline a model's metadata names (`calibrated_model`: a file name beside the model file, or a
+    path) as a path, where that file is; None otherwise."""
+    if not name:
+        return None
+    found = Path(name) if Path(name).is_absolute() else Path(model_path).parent / name
+    return str(found) if found.is_file() else None
+
+
 def not_better_warning(meta: dict) -> str | None:
     """The warning for a model whose metadata says it did not beat the calibrated baseline, else None."""
     members = meta.get("members_beat_calibrated") or []
@@ -296,10 +305,8 @@ def not_better_warning(meta: dict) -> str | None:
             "fitted on the same data)"
         )
     instead = meta.get("calibrated_model")
-    if instead and meta.get("path") and not Path(instead).is_absolute():
-        # recorded as a file name beside the model file: say where it is
-        beside = Path(meta["path"]).parent / instead
-        instead = str(beside) if beside.is_file() else instead
+    if instead and meta.get("path"):  # recorded as a file name beside the model file: say where it is
+        instead = calibrated_beside(meta["path"], instead) or instead
     if not instead and all_members_failed:  # the baseline fitted with a member on its data, not a shipped one
         fitted = [r["calibrated_model"] for r in meta.get("members") or [] if r.get("calibrated_model")]
         instead = fitted[0] if fitted else None
