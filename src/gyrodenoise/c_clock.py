@@ -133,11 +133,12 @@ DECLARATION = """\
    - GD_REFUSED_SAMPLE, GD_REFUSED_ORDER, GD_REFUSED_EARLY: refused, nothing is written (drop the
      sample; the next one is compared with the last taken), the state is unchanged but for two counts: of
      GD_REFUSED_ORDER in a row (GD_CLOCK_JUMP_SAMPLES of them restart) and of GD_REFUSED_EARLY (the rate's average
-     counts them);
+     counts them; the next step taken is left out of the time base's mean interval);
    With the model's rate (GD_PERIOD_NS > 0) a sample is judged against its expected time: the stream's time base
    advances one step per sample taken (GD_PERIOD_NS; after GD_RATE_TRACK_MIN intervals the stream's mean interval,
    within GD_STEP_MAX_OFF_NS of it) and follows the stamps by 1/GD_TIME_BASE_GAIN of their deviation, so a driver's
-   jitter passes; a sample a step less the early tolerance late or more is one missing sample, stepped over;
+   jitter passes; a sample a step less the early tolerance late or more, two steps after the last one taken, is one
+   missing sample, stepped over (beyond one in GD_MISSED_SHARE samples taken: a gap, GD_RESTARTED);
    - GD_RESTARTED: after a gap, the sample started a new stream (Python raises there; its caller resets and pushes);
    - GD_RATE_OFF: taken, and the stream's rate is off the model's (Python warns).
    Use one of gd_step / gd_step_t per stream (gd_step on a stamped stream: GD_REFUSED_UNSTAMPED). Each gd_state is
