@@ -51,6 +51,21 @@ def test_a_band_limited_vibration_past_the_output_nyquist_is_refused(traj):
     assert np.isfinite(simulate_imu(traj, [within], duration_s=2).gyro).all()
 
 
+@pytest.mark.parametrize("oversample", [1, 4])
+def test_a_vibration_past_the_output_nyquist_is_refused_without_oversampling_too(traj, oversample):
+    """At oversample=1 the band was silently cut at 0.49 x the rate (a band of another shape than the one given),
+    and a line above the Nyquist frequency aliased; both are refused as they are where the simulator oversamples."""
+    band = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=40.0, amplitude=[0.01, 0, 0])
+    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past the IMU's Nyquist "
+                       r"frequency \(100 Hz at 200 Hz\).*bandwidth_hz at most 20"):  # fmt: skip
+        simulate_imu(traj, [band], duration_s=2, oversample=oversample)
+    line = build_effect("vibration", frequency_hz=120.0, amplitude=[0.01, 0, 0])
+    with pytest.raises(ValueError, match=r"frequency_hz 120 is at or above the IMU's Nyquist frequency"):
+        simulate_imu(traj, [line], duration_s=2, oversample=oversample)
+    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=20.0, amplitude=[0.01, 0, 0])
+    assert np.isfinite(simulate_imu(traj, [within], duration_s=2, oversample=oversample).gyro).all()
+
+
 def test_a_time_offset_delays_the_accelerometer_too(traj):
     """It is the IMU's stamps that are late: both sensors hold the motion of t - delta."""
     delta = 0.005

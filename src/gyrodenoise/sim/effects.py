@@ -414,7 +414,8 @@ class Vibration(Effect):
     The amplitude is the line's as seen in the IMU output, which is what the detector fits and a spectrum of a
     recording shows. The simulator averages each output period of its finer internal grid (an anti-alias mean that
     attenuates a line at f by about sinc(f / rate)), so there the pick-up is applied larger by that mean's gain at
-    the frequency (`output_gain`), and the output carries the amplitude given."""
+    the frequency (`output_gain`), and the output carries the amplitude given. A frequency at or above the output's
+    Nyquist frequency, or a band reaching past it, is refused at every oversampling (1 included)."""
 
     name = "vibration"
     per_sequence = True
@@ -447,23 +448,26 @@ class Vibration(Effect):
     def apply(self, sig, y, rng):
         f, a, bw = float(self.params["frequency_hz"]), self.params["amplitude"], float(self.params["bandwidth_hz"])
         m = int(sig.output_mean_of)
+        # checked at every oversampling, 1 included: there the band past the Nyquist frequency was silently cut
+        # at 0.49 x the rate (`band_edges`), a band of another shape than the one given
+        out_rate = sig.rate_hz / m
+        if f >= out_rate / 2:
+            raise ValueError(
+                f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
+                f"({out_rate / 2:g} Hz at {out_rate:g} Hz): its amplitude is the line's in the IMU output, and no "
+                "line above that frequency can appear there; give the frequency the line has in the recording"
+            )
+        if bw > 0 and f + bw / 2 > out_rate / 2:
+            # the band's part above the output's Nyquist frequency would fold back below it (oversampled) or be
+            # cut off (not oversampled), where the band's amplitude and shape (`band_psd`, what the detector fits)
+            # say nothing of it
+            raise ValueError(
+                f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
+                f"past the IMU's Nyquist frequency ({out_rate / 2:g} Hz at {out_rate:g} Hz), and would "
+                f"{'alias into' if m > 1 else 'be cut from'} the output; give bandwidth_hz at most "
+                f"{2 * (out_rate / 2 - f):g} (the band within the Nyquist frequency) or a higher rate_hz"
+            )
         if m > 1:  # the output is the mean of m internal samples: apply the pick-up that leaves `a` in the output
-            out_rate = sig.rate_hz / m
-            if f >= out_rate / 2:
-                raise ValueError(
-                    f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
-                    f"({out_rate / 2:g} Hz at {out_rate:g} Hz): its amplitude is the line's in the IMU output, and no "
-                    "line above that frequency can appear there; give the frequency the line has in the recording"
-                )
-            if bw > 0 and f + bw / 2 > out_rate / 2:
-                # the band's part above the output's Nyquist frequency would fold back below it, where the band's
-                # amplitude and shape (`band_psd`, what the detector fits) say nothing of it
-                raise ValueError(
-                    f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
-                    f"past the IMU's Nyquist frequency ({out_rate / 2:g} Hz at {out_rate:g} Hz), and would alias "
-                    f"into the output; give bandwidth_hz at most {2 * (out_rate / 2 - f):g} (the band within the "
-                    "Nyquist frequency) or a higher rate_hz"
-                )
             a = a / self.output_gain(f, sig.rate_hz, m)
         if bw <= 0:
             phase = rng.uniform(0, 2 * np.pi, 3)
