@@ -353,3 +353,47 @@ def test_a_rerun_into_the_same_folder_removes_the_earlier_evaluations_outputs(tm
     assert "replacing the outputs of an earlier evaluation" in capsys.readouterr().err
     left = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
     assert left == ["figures", "figures/notes.txt"]
+
+
+def test_a_failed_evaluation_leaves_no_outputs_and_keeps_the_earlier_ones(tmp_path, monkeypatch):
+    """A run that failed after its tables (here: in results.json's summary) left table.md, roe.csv and the
+    trajectories in its folder, which looked like a result; it had also removed the earlier evaluation's outputs
+    when it started. Now the outputs move into place only when the run has finished."""
+    from _asl import write_asl_sequence
+
+    from gyrodenoise import evaluate as evaluate_module
+    from gyrodenoise.models.build import build_model
+    from gyrodenoise.pretrained import save_model
+
+    root = tmp_path / "data"
+    write_asl_sequence(root / "seq", seconds=20.0, seed=4)
+    model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+
+    def broken():
+        raise RuntimeError("failed late")
+
+    with monkeypatch.context() as m:
+        m.setattr(evaluate_module, "machine_description", broken)
+        fresh = tmp_path / "new" / "out"
+        with pytest.raises(RuntimeError, match="failed late"):
+            run_evaluate_asl(root, model, model, fresh, "figures=false")
+        assert not (tmp_path / "new").exists()  # the folders it made go with the outputs
+
+        earlier = tmp_path / "earlier"
+        earlier.mkdir()
+        mine = {"results.json": '{"models": {"proposed": "x"}}', "table.md": "earlier", "notes.txt": "the user's"}
+        mine |= {"trajectories/seq/proposed.txt": "earlier"}
+        for name, text in mine.items():
+            (earlier / name).parent.mkdir(parents=True, exist_ok=True)
+            (earlier / name).write_text(text)
+        with pytest.raises(RuntimeError, match="failed late"):
+            run_evaluate_asl(root, model, model, earlier, "figures=false")
+        assert {str(p.relative_to(earlier)): p.read_text() for p in earlier.rglob("*") if p.is_file()} == mine
+        assert sorted(p.name for p in earlier.iterdir()) == ["notes.txt", "results.json", "table.md", "trajectories"]
+
+    run_evaluate_asl(root, model, model, earlier, "figures=false")  # finished: the earlier outputs are replaced
+    assert (earlier / "notes.txt").read_text() == "the user's" and "calibrated" in (earlier / "table.md").read_text()
+    assert json.loads((earlier / "results.json").read_text())["models"]["proposed"] != "x"
+    assert (earlier / "trajectories" / "seq" / "groundtruth.txt").is_file()
+    assert not [p for p in earlier.iterdir() if p.name.startswith(".")]  # no staging folder left

@@ -9,8 +9,9 @@ import errno
 import json
 import math
 import os
+import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -57,6 +58,42 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+@contextmanager
+def staged_outputs(folder: str | Path, marker: str, before_moving: Callable[[], None] | None = None) -> Iterator[Path]:
+    """Yield a hidden folder inside `folder` to write a command's outputs into. When the block succeeds,
+    `before_moving()` runs (e.g. removing an earlier run's outputs) and the staged files move into `folder`, `marker`
+    (the sign of a finished run) last. When it fails, the staged files go, and so do `folder` and the folders above
+    it that this made and that are left empty: a failed run leaves no outputs that look whole, and what was in
+    `folder` before it (an earlier run's results, the user's files, the command's log) stays as it was."""
+    folder = Path(folder)
+    made = [p for p in (folder, *folder.parents) if not p.exists()]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as e:
+        raise NotADirectoryError(errno.ENOTDIR, output_path_problem(folder, True) or str(e), str(folder)) from None
+    stage = Path(tempfile.mkdtemp(dir=folder, prefix=".unfinished-"))
+    done = False
+    try:
+        yield stage
+        if before_moving is not None:
+            before_moving()
+        files = sorted(
+            (p.relative_to(stage) for p in stage.rglob("*") if p.is_file()), key=lambda p: (p == Path(marker), str(p))
+        )
+        for f in files:
+            (folder / f).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(stage / f, folder / f)
+        done = True
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        if not done:
+            for p in made:  # deepest first
+                try:
+                    p.rmdir()
+                except OSError:  # holds something: the command's log, say
+                    break
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -19,6 +19,8 @@ trajectories/<sequence>/<method>.txt (V1_01 against its original ground truth: V
 rpg_trajectory_evaluation; stamps exact to the ns;
 groundtruth.txt holds positions and only the samples with ground truth, the estimates orientation only, translation
 zero: score them on orientation, e.g. `evo_ape tum groundtruth.txt proposed.txt --pose_relation angle_deg`).
+They are written into a hidden folder in `out_dir` and moved into place when the run has finished (results.json
+last), replacing an earlier evaluation's only then: a failed run leaves none of its own, and what was there stays.
 An ensemble as the proposed model adds its uncertainty: a +-2 sigma band in the correction figures,
 and in results.json / figures/uncertainty_calibration.png the calibration of its spread against the
 actual 1-s increment errors (gyrodenoise.uncertainty). A model whose metadata says it did not beat
@@ -40,7 +42,7 @@ import numpy as np
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from gyrodenoise import plots, uncertainty
-from gyrodenoise.atomic import remove_earlier_outputs, write_json, write_text
+from gyrodenoise.atomic import remove_earlier_outputs, staged_outputs, write_json, write_text
 from gyrodenoise.cli_errors import ConfigError, hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.data.cache import load_sequence
@@ -183,10 +185,18 @@ def clear_earlier_outputs(out: Path) -> None:
 def evaluate(cfg: DictConfig) -> dict:
     """Table 1, the figures and the TUM trajectories of a composed evaluate config (`compose_config("evaluate",
     [...])`; from Python it needs `out_dir=...`). Returns the summary written to `out_dir/results.json`; torch's
-    thread count is left as it was found."""
+    thread count is left as it was found.
+
+    The outputs are written into a hidden folder in `out_dir` and move into place when the evaluation has finished
+    (an earlier evaluation's outputs are replaced only then): a run that fails leaves none of its own, and what was in
+    `out_dir` before stays as it was."""
     out = with_output_dir(cfg, "out_dir")  # from Python there is no Hydra run folder to default to
     with torch_threads(cfg.get("threads")):
-        return _evaluate(cfg, out)
+        with staged_outputs(out, "results.json", lambda: clear_earlier_outputs(out)) as stage:
+            summary, console = _evaluate(cfg, stage)
+    print(console, end="")
+    print(f"outputs in {out}")
+    return summary
 
 
 def roe_distances(value: object) -> list[float]:
@@ -203,9 +213,9 @@ def roe_distances(value: object) -> list[float]:
     return [float(d) for d in items]
 
 
-def _evaluate(cfg: DictConfig, out: Path) -> dict:
+def _evaluate(cfg: DictConfig, out: Path) -> tuple[dict, str]:
+    """The evaluation, its outputs written into `out` (the staging folder); the summary and what to print."""
     start = time.time()
-    clear_earlier_outputs(out)
     split = cfg.get("split", "test")
     if split not in ("test", "val"):
         raise ConfigError(f"split={split!r}: use split=test (the test sequences) or split=val (the validation parts)")
@@ -416,11 +426,11 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
             )
     summary["wall_s"] = round(time.time() - start, 1)  # data reading, models, figures and tables included
     write_json(out / "results.json", summary)
-    print(f"\nAOE 3D/yaw (deg) on {dm.name} {'test sequences' if split == 'test' else 'validation parts'}:\n")
-    print(markdown_table(header, rows))
+    console = [f"\nAOE 3D/yaw (deg) on {dm.name} {'test sequences' if split == 'test' else 'validation parts'}:\n"]
+    console.append(markdown_table(header, rows))
     if calib:
         u = summary["uncertainty"]["pooled"]
-        print(
+        console.append(
             f"ensemble of {len(proposed.members)}: spread vs 1-s increment error, Spearman {u['spearman']:.2f}, "
             f"RMS actual / predicted {u['rms_ratio']:.2f} ({u['windows']} windows; above 1 the spread "
             "underestimates the error). "
@@ -432,10 +442,8 @@ def _evaluate(cfg: DictConfig, out: Path) -> dict:
                 "`python -m gyrodenoise.ensemble scale ENS.pt --by RATIO --fitted-by TEXT --out ENS2.pt`"
             )
         )
-    for w in warned:
-        print(f"WARNING: {w}")
-    print(f"outputs in {out}")
-    return summary
+    console += [f"WARNING: {w}" for w in warned]
+    return summary, "".join(f"{line}\n" for line in console)
 
 
 @hydra_key_hints("evaluate")
