@@ -258,6 +258,45 @@ def test_orientation_figure_keeps_estimates_on_the_ground_truths_branch():
     plt.close(fig)
 
 
+def test_broken_at_wraps_gaps_each_wrap_and_keeps_every_other_sample():
+    from gyrodenoise.plots import broken_at_wraps
+
+    turning = np.degrees((np.linspace(0, 4 * np.pi, 401) + np.pi) % (2 * np.pi) - np.pi)  # two turns, wrapped
+    wraps = np.flatnonzero(np.abs(np.diff(turning)) > 180) + 1
+    drawn = broken_at_wraps(turning)
+    assert len(wraps) == 2 and np.isnan(drawn[wraps]).all()
+    assert np.array_equal(np.delete(drawn, wraps), np.delete(turning, wraps))
+    assert not (np.abs(np.diff(drawn)) > 180).any()  # no line across the panel (a NaN neighbour draws none)
+    swing = np.r_[0.0, 170.0, -10.0, np.nan, 5.0]  # a step of 180 deg or less is drawn, NaN stays NaN
+    assert np.array_equal(broken_at_wraps(swing), swing, equal_nan=True)
+    assert broken_at_wraps(swing) is not swing
+
+
+def test_every_euler_curve_is_broken_at_its_wraps_not_unwrapped():
+    """The ground truth was unwrapped (np.unwrap): a recording that turns was drawn whole turns up the panel (EuRoC's
+    V1_03_difficult: yaw to 2170 deg), squashing every curve. Now each angle of the truth stays in one 360-degree
+    window and, like the estimates, is broken where it wraps; the estimates stay within 180 deg of it."""
+    import matplotlib.pyplot as plt
+
+    from gyrodenoise.plots import orientation_figure
+
+    n = 3000
+    t = np.arange(n) * 0.005
+    euler = np.column_stack([np.pi + 0.1 * np.sin(t), 0.2 * np.sin(t / 3), 2 * np.pi * 3 * t / t[-1]])  # 3 turns
+    R_gt = Rotation.from_euler("ZYX", euler[:, ::-1]).as_matrix()
+    drift = Rotation.from_rotvec(np.outer(t / t[-1], np.radians([40.0, 10.0, 120.0]))).as_matrix()
+    fig = orientation_figure(t, R_gt, {"raw IMU": R_gt @ drift})
+    for ax, name in zip(fig.axes, ("roll", "pitch", "yaw"), strict=True):
+        gt, est = (np.asarray(line.get_ydata()) for line in ax.get_lines()[:2])
+        assert np.nanmax(gt) - np.nanmin(gt) < 360, name
+        for y in (gt, est):
+            assert np.isnan(y).mean() < 0.01 and not (np.abs(np.diff(y)) > 180).any(), name
+        assert np.nanmax(np.abs(est - gt)) <= 180 + 1e-9, name
+    yaw_gt = np.asarray(fig.axes[2].get_lines()[0].get_ydata())
+    assert np.isnan(yaw_gt).sum() in (2, 3)  # broken at each wrap of the three turns
+    plt.close(fig)
+
+
 def test_unknown_model_names_the_weights_options(euroc_root, tmp_path):
     """dataset=asl_folder (or any dataset without shipped models): the error says how to name the models."""
     with pytest.raises(FileNotFoundError, match=r"weights\.proposed=PATH .* weights\.calibrated=PATH"):

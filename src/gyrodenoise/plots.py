@@ -28,11 +28,13 @@ def method_colors(names: list[str]) -> dict[str, str]:
     return {n: METHOD_COLORS.get(n) or next(spare, "0.3") for n in names}
 
 
-def _broken_at_turns(y_deg: np.ndarray) -> np.ndarray:
-    """A copy with NaN where the curve steps by more than 180 deg between samples (an error passing +-180 deg
-    wraps to the other side): drawn as a gap, not as a vertical line across the panel."""
+def broken_at_wraps(y_deg: np.ndarray) -> np.ndarray:
+    """An angle curve (deg, one per sample) to draw: a copy with NaN at each sample that steps by more than 180 deg
+    from the one before (the angle wrapped to the other side of its 360-degree window), so that the line has a gap
+    there instead of a vertical line across the panel. The other samples, and NaN already there, are kept."""
     y = np.array(y_deg, dtype=float)
-    y[1:][np.abs(np.diff(y_deg)) > 180.0] = np.nan
+    with np.errstate(invalid="ignore"):
+        y[1:][np.abs(np.diff(y_deg)) > 180.0] = np.nan
     return y
 
 
@@ -60,19 +62,26 @@ def orientation_figure(
     gt_mask: np.ndarray | None = None,
 ) -> Figure:
     """Roll, pitch, yaw (deg) of ground truth and each estimate over time (Fig. 6); `gt_mask` False: no ground
-    truth there (shaded)."""
+    truth there (shaded).
+
+    Every curve is broken where it wraps (`broken_at_wraps`). The ground truth is drawn in a 360-degree window per
+    angle, centred on its circular mean (EuRoC's roll near +-180 deg sits mid-panel); each estimate on the ground
+    truth's side of it, sample by sample, so that the distance between the curves is the angle's error (at most
+    180 deg)."""
     fig, axs = subplots(3, 1, figsize=(9, 7), sharex=True)
     _shade_gaps(axs, t, gt_mask)
     rpy_gt = rpy_of(R_gt)
-    gt = np.unwrap(rpy_gt, axis=0)
-    # each estimate on the ground truth's 360-degree branch, sample by sample: unwrapped on their own, the
-    # series can end up whole turns apart (near pitch +-90 deg roll and yaw jump), which hides the error
+    # unwrapped instead (np.unwrap), the ground truth drifted by whole turns at each near-180 deg step of roll and
+    # yaw near pitch +-90 deg (V1_03_difficult: yaw to 2170 deg), which squashed the curves
+    centre = np.arctan2(np.sin(rpy_gt).mean(0), np.cos(rpy_gt).mean(0))
+    gt = centre + _wrap(rpy_gt - centre)
+    # estimates unwrapped on their own can end up whole turns away from the ground truth, which hides the error
     on_branch = {name: gt + _wrap(rpy_of(R) - rpy_gt) for name, R in estimates.items()}
     colors = method_colors(list(on_branch))
     for k, ax in enumerate(axs):
-        ax.plot(t, np.degrees(gt[:, k]), "k", lw=1.5, label="ground truth")
+        ax.plot(t, broken_at_wraps(np.degrees(gt[:, k])), "k", lw=1.5, label="ground truth")
         for name, rpy in on_branch.items():
-            ax.plot(t, _broken_at_turns(np.degrees(rpy[:, k])), lw=1, label=name, color=colors[name])
+            ax.plot(t, broken_at_wraps(np.degrees(rpy[:, k])), lw=1, label=name, color=colors[name])
         ax.set_ylabel(f"{AXES[k]} (deg)")
         ax.grid(alpha=0.3)
     axs[0].legend(loc="best", fontsize=8)
