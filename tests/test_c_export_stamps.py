@@ -16,6 +16,7 @@ from _models import random_imu, random_model
 from gyrodenoise import c_clock, c_export
 from gyrodenoise.data.checks import SanityWarning
 from gyrodenoise.models.build import build_model
+from gyrodenoise.models.ensemble import EnsembleCorrection
 from gyrodenoise.stream_clock import StreamTimeError
 from gyrodenoise.streaming import StreamingCorrector
 
@@ -296,6 +297,83 @@ def test_example_reads_stamps_drops_refused_samples_and_restarts_after_a_gap(tmp
     assert (
         run("#timestamp [ns],w_x [rad s^-1],w_y,w_z,a_x [m s^-2],a_y,a_z\n1000000000,0,0,0,0,0,9.8\n").returncode == 0
     )
+
+
+def test_example_output_header_is_a_comment_with_units(tmp_path, compiler):
+    """The header line starts with '#', as the project's other CSV outputs (`correct`'s imu_corrected.csv); it had
+    none. The lines after it are the samples."""
+    for members in (1, 2):
+        model = random_denoiser() if members == 1 else EnsembleCorrection([random_denoiser(), random_denoiser()])
+        c_export.export_c(model, tmp_path / f"c{members}", {"name": "test", "rate_hz": 200.0})
+        exe = c_export.compile_example(tmp_path / f"c{members}", tmp_path / f"gd{members}", compiler, werror=True)
+        imu = random_imu(5, seed=1)
+        done = subprocess.run(
+            [str(exe)], input=c_export.example_input(imu, 1_000_000_000 + 5_000_000 * np.arange(5)),
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        header, *rows = done.stdout.splitlines()
+        std = ",w_std_x [rad s^-1],w_std_y [rad s^-1],w_std_z [rad s^-1]" if members == 2 else ""
+        assert header == "#t,wx [rad s^-1],wy [rad s^-1],wz [rad s^-1]" + std
+        assert len(rows) == 5 and all(not r.startswith("#") for r in rows)
+        gyro, spread = c_export.run_example(exe, imu)  # the project's reader skips it
+        assert gyro.shape == (5, 3) and (spread is None) == (members == 1)
+
+
+def _turning(n: int, p99_rad_s: float, seed: int = 0) -> np.ndarray:
+    """n IMU samples whose gyro norms have the 99th percentile `p99_rad_s` (numpy's), acc about gravity."""
+    rng = np.random.default_rng(seed)
+    norms = rng.uniform(0.1, 0.9, n) * p99_rad_s
+    norms[: max(n // 50, 2)] = p99_rad_s * 1.2  # 2 % above: the 99th percentile in their midst
+    norms *= p99_rad_s / np.percentile(norms, 99)
+    axes = rng.normal(size=(n, 3))
+    gyro = axes / np.linalg.norm(axes, axis=1, keepdims=True) * norms[:, None]
+    return np.concatenate([gyro, rng.normal(0, 0.1, (n, 3)) + [0, 0, 9.81]], axis=1)
+
+
+def test_example_stops_a_gyro_in_deg_s_as_the_streaming_corrector_warns(tmp_path, compiler):
+    """The C example read a gyro in deg/s as rad/s without a word. It now applies the streaming corrector's range
+    rule (99th-percentile |gyro| over the first UNIT_PROBE samples above GYRO_P99_MAX rad/s) and stops at the line of
+    the last of them; a stream of fewer samples, or below the threshold, runs as before, and Python agrees."""
+    from gyrodenoise.data.checks import GYRO_P99_MAX
+    from gyrodenoise.streaming import UNIT_PROBE
+
+    model = random_denoiser()
+    c_export.export_c(model, tmp_path / "c", {"name": "test", "rate_hz": 200.0})
+    exe = c_export.compile_example(tmp_path / "c", tmp_path / "gd", compiler, werror=True)
+    n = UNIT_PROBE + 100
+    t = 1_000_000_000 + 5_000_000 * np.arange(n)
+
+    def run(imu: np.ndarray, *args: str) -> subprocess.CompletedProcess:
+        text = c_export.example_input(imu, None if args else t[: len(imu)])
+        return subprocess.run([str(exe), *args], input=text, capture_output=True, text=True)
+
+    def python_warns(imu: np.ndarray) -> bool:
+        sc = StreamingCorrector(model)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            for x in imu:
+                sc.push(x)
+        return any("looks like deg/s" in str(w.message) for w in seen if issubclass(w.category, SanityWarning))
+
+    in_deg = _turning(n, GYRO_P99_MAX * 1.05)
+    for args in ((), ("--unstamped",)):
+        done = run(in_deg, *args)
+        assert done.returncode == 1, done.stderr
+        line = UNIT_PROBE + 1  # the header is line 1
+        assert f"line {line} (sample {UNIT_PROBE}, t=" in done.stderr
+        assert f"99th-percentile norm over the first {UNIT_PROBE} samples is" in done.stderr
+        assert "it looks like deg/s" in done.stderr and "multiply the gyro by pi/180" in done.stderr
+        assert len(done.stdout.splitlines()) == 1 + UNIT_PROBE - 1  # stopped there: nothing after it
+    assert python_warns(in_deg)
+
+    in_rad = _turning(n, GYRO_P99_MAX * 0.95)
+    done = run(in_rad)
+    assert done.returncode == 0 and "deg/s" not in done.stderr and len(done.stdout.splitlines()) == 1 + n
+    assert not python_warns(in_rad)
+    short = in_deg[: UNIT_PROBE - 1]  # too few samples to judge: neither says anything
+    done = run(short)
+    assert done.returncode == 0 and "deg/s" not in done.stderr
+    assert not python_warns(short)
 
 
 INT64_MAX, INT64_MIN = 2**63 - 1, -(2**63)

@@ -2,12 +2,17 @@
 loop calls it: a refused sample is dropped (said on stderr) and the stream goes on; a gap restarts the stream.
 
 `--unstamped` feeds the samples to `gd_step` instead, as consecutive, without looking at t (the stamps of a recording
-in seconds, or none). Exit status: 0, or 1 when a sample was refused or a line could not be read.
+in seconds, or none). Exit status: 0, or 1 when a sample was refused or a line could not be read, or when the gyro's
+first samples are clearly in deg/s (the streaming corrector's range check, `StreamingCorrector._warn_gyro_range`: the
+99th-percentile |gyro| over the first UNIT_PROBE samples above GYRO_P99_MAX rad/s; it warns, the example stops).
+The output's header line starts with '#', as the project's other CSV outputs do (`correct`'s imu_corrected.csv).
 """
 
 from __future__ import annotations
 
 from gyrodenoise.c_clock import CODES
+from gyrodenoise.data.checks import GYRO_P99_MAX
+from gyrodenoise.streaming import UNIT_PROBE
 
 UNSTAMPED = "--unstamped"
 REFUSALS = {  # what stderr says of a refused sample
@@ -30,13 +35,16 @@ EXAMPLE_CODE = """\
    after the previous one or too soon after it) is dropped, with a line on stderr and no output line; after a gap the
    stream restarts (said on stderr). With {unstamped}, t is not read: the samples are taken as consecutive (gd_step).
    Exit status: 0, or 1 when a sample was refused (said with its line number) or a line was not t,gx,gy,gz,ax,ay,az
-   (the run stops there, and says how many samples before it were read).
+   (the run stops there, and says how many samples before it were read), or when the gyro is clearly in deg/s: the
+   99th-percentile |gyro| over the first UNIT_PROBE samples taken above GYRO_P99_MAX rad/s, a rate no motion keeps up
+   (gyrodenoise's streaming corrector warns on the same rule; the run stops at the line of the last of them).
 
    Compile: {compile}
    Run:     ./gyrodenoise < imu.csv > corrected.csv
 */
 #include <ctype.h>
 #include <errno.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -45,6 +53,25 @@ EXAMPLE_CODE = """\
 #include "gyrodenoise_model.h"
 
 static gd_state state; /* static: zeroed (a reset state), and off the stack (sizeof(gd_state) may be large) */
+
+#define UNIT_PROBE {unit_probe}         /* samples taken before the gyro's unit is judged, once */
+#define GYRO_P99_MAX {gyro_p99_max} /* rad/s: a 99th-percentile |gyro| above it is a gyro in deg/s */
+static double probe[UNIT_PROBE]; /* |gyro| of the first samples taken */
+
+static int ascending(const void *a, const void *b)
+{{
+    const double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}}
+
+/* the q-th percentile of v[0..n-1] (sorted in place), linear between the order statistics as numpy's default */
+static double percentile(double *v, int n, double q)
+{{
+    qsort(v, (size_t)n, sizeof *v, ascending);
+    const double pos = q / 100.0 * (n - 1);
+    const int lo = (int)pos, hi = lo + 1 < n ? lo + 1 : lo;
+    return v[lo] + (pos - lo) * (v[hi] - v[lo]);
+}}
 
 static const char *refusal(int code)
 {{
@@ -102,8 +129,8 @@ int main(int argc, char **argv)
         return 2;
     }}
     char line[1024];
-    long n = 0, lineno = 0, refused = 0;
-    printf("t,wx,wy,wz{std_cols}\\n");
+    long n = 0, lineno = 0, refused = 0, taken = 0;
+    printf("#t,wx [rad s^-1],wy [rad s^-1],wz [rad s^-1]{std_cols}\\n");
     while (fgets(line, sizeof line, stdin)) {{
         lineno++;
         if (!strchr(line, '\\n') && !feof(stdin))
@@ -145,6 +172,19 @@ int main(int argc, char **argv)
             refused++;
             continue;
         }}
+        if (taken < UNIT_PROBE) {{
+            const double gx = (double)imu[0], gy = (double)imu[1], gz = (double)imu[2];
+            probe[taken++] = sqrt(gx * gx + gy * gy + gz * gz);
+            const double p99 = taken == UNIT_PROBE ? percentile(probe, UNIT_PROBE, 99.0) : 0.0;
+            if (p99 > GYRO_P99_MAX) {{
+                fprintf(stderr, "line %ld (sample %ld, t=%s): the gyro's 99th-percentile norm over the first %d "
+                                "samples is %.3g rad/s (%.0f deg/s); real motion stays below ~%g rad/s: it looks like "
+                                "deg/s. The model needs rad/s: multiply the gyro by pi/180 (0.0174533); stopped there: "
+                                "the lines after it were not read, and the %ld output lines before it are wrong\\n",
+                        lineno, n, t, UNIT_PROBE, p99, p99 * 57.29577951308232, GYRO_P99_MAX, taken - 1);
+                return 1;
+            }}
+        }}
         if (code == GD_RESTARTED)
             fprintf(stderr, "line %ld (sample %ld, t=%s): a gap before it, or the clock went back: the stream "
                             "restarted (the next %d outputs are less accurate)\\n", lineno, n, t, GD_RECEPTIVE_FIELD);
@@ -168,8 +208,10 @@ def example_source(ensemble: bool, compile_command: str) -> str:
     return EXAMPLE_CODE.format(
         compile=compile_command,
         unstamped=UNSTAMPED,
+        unit_probe=UNIT_PROBE,
+        gyro_p99_max=f"{float(GYRO_P99_MAX)!r}",
         refusals=refusals,
-        std_cols=",w_std_x,w_std_y,w_std_z" if ensemble else "",
+        std_cols=",w_std_x [rad s^-1],w_std_y [rad s^-1],w_std_z [rad s^-1]" if ensemble else "",
         std_cols_doc=", then the members' spread w_std_x,w_std_y,w_std_z" if ensemble else "",
         std_print=std_print,
     )
