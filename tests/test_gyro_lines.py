@@ -129,3 +129,19 @@ def test_the_written_width_is_a_fixed_point(width):
     (line,) = gyro_lines([fc])
     written = simulator_vibration(line, [fc])["bandwidth_hz"]
     assert written == pytest.approx(width, abs=0.26)
+
+
+def test_a_wide_line_near_nyquist_gets_a_band_the_simulator_accepts():
+    """A line wider than its distance to the Nyquist frequency: the model's band stops there (the simulator refuses a
+    band past it, at every oversampling), and the held-out check runs; a line at the Nyquist frequency gets none."""
+    from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model, simulator_vibration
+
+    fit, holdout = _fit_and_holdout()
+    report = {"gyro_lines_above_band": gyro_lines(fit + holdout), "base_params": WHITE}
+    (line,) = report["gyro_lines_above_band"]
+    near = {**line, "frequency_hz": RATE / 2 - 2.0, "width_hz": 12.0}
+    report["gyro_lines_above_band"] = [near]
+    add_lines_to_model(report, fit, holdout)  # raised ValueError from the simulator's Nyquist check
+    sim = near["simulator_vibration"]
+    assert sim["frequency_hz"] + sim["bandwidth_hz"] / 2 == pytest.approx(RATE / 2)
+    assert simulator_vibration({**line, "frequency_hz": RATE / 2}, fit) is None

@@ -109,17 +109,19 @@ def simulator_vibration(line: dict, fit: list) -> dict | None:
     `gyro_lines`): None unless the line is in every fitted stretch. Amplitude A = sqrt(2) x the fitted stretches'
     mean RMS per axis (the effect's band RMS is A / sqrt(2)); width: the line's flagged bins less the Hann window's
     own spread (MAIN_LOBE_BINS), so that simulating the model and reading it again gives the same width (it grew by
-    0.5 Hz a round); a line no wider than one bin after that is a sinusoid (width 0)."""
+    0.5 Hz a round); a line no wider than one bin after that is a sinusoid (width 0). The band stops at the
+    recordings' Nyquist frequency (the simulator refuses one past it: it would fold back or be cut), and a line at
+    that frequency gets no model."""
     names = [fc.name for fc in fit]
     if not names or any(n not in line["per_stretch"] for n in names):
         return None
     rms = np.mean([line["per_stretch"][n] for n in names], axis=0)
     df = 1.0 / SEGMENT_S
-    return {
-        "frequency_hz": line["frequency_hz"],
-        "amplitude": (np.sqrt(2.0) * rms).tolist(),
-        "bandwidth_hz": width if (width := line["width_hz"] - MAIN_LOBE_BINS * df) > df else 0.0,
-    }
+    f, nyquist = float(line["frequency_hz"]), min(float(fc.rate_hz) for fc in fit) / 2
+    if f >= nyquist:
+        return None
+    width = min(line["width_hz"] - MAIN_LOBE_BINS * df, 2 * (nyquist - f))
+    return {"frequency_hz": f, "amplitude": (np.sqrt(2.0) * rms).tolist(), "bandwidth_hz": width if width > df else 0.0}
 
 
 def held_out_check(line: dict, params: dict, holdout: list, noise_density: np.ndarray, seed: int = 0) -> dict:
