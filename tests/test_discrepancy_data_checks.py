@@ -131,6 +131,31 @@ def test_a_rerun_into_the_same_folder_leaves_none_of_the_earlier_files(world, tm
     assert not (out / "drift.png").is_file() or (out / "drift.png").read_bytes() != b"earlier"
 
 
+def test_a_failed_rerun_leaves_the_earlier_outputs_as_they_were(world, tmp_path, monkeypatch):
+    """The earlier run's outputs were removed when a rerun started, so one that failed (or was stopped) lost them."""
+    import gyrodenoise.discrepancy.__main__ as cli
+
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = {"report.json": '{"command": "earlier"}', "drift.png": "earlier", "report.md": "earlier"}
+    for name, text in earlier.items():
+        (out / name).write_text(text)
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("stopped while writing")
+
+    monkeypatch.setattr(cli, "write_simulator_model", fail)  # after the report and figures were written
+    with pytest.raises(RuntimeError, match="stopped while writing"):
+        main(argv(world, out))
+    assert {p.name: p.read_text() for p in out.iterdir()} == earlier  # no staging folder left either
+    monkeypatch.undo()
+    fresh = tmp_path / "fresh" / "out"
+    with pytest.raises(RuntimeError):
+        monkeypatch.setattr(cli, "write_simulator_model", fail)
+        main(argv(world, fresh))
+    assert not (tmp_path / "fresh").exists()  # the folders the failed run made are gone
+
+
 def test_splits_stop_at_a_failed_split(world, tmp_path, capsys):
     """A split that failed was followed by the next one and a summary built from whatever report.json was there."""
     import shutil

@@ -10,6 +10,7 @@ Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import re
@@ -17,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from gyrodenoise.atomic import output_path_problem, remove_earlier_outputs, write_json
+from gyrodenoise.atomic import output_path_problem, remove_earlier_outputs, staged_outputs
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
@@ -46,7 +47,7 @@ def _effects(s: str) -> list[str]:
     return names
 
 
-EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 554 s, 2 cores):
+EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 322 s, 2 cores):
   python -m gyrodenoise.discrepancy --root ../shared/data/euroc \\
       --fit V1_02_medium V2_01_easy V2_03_difficult --holdout V1_03_difficult V2_02_medium \\
       --network euroc --gyro-noise-density 1.6968e-4 --out outputs/discrepancy_euroc
@@ -249,6 +250,17 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
     return out
 
 
+def earlier_run(marker: Path) -> str | None:
+    """The command of the earlier run whose finished-run marker is `marker` ("?" if unreadable), None if none."""
+    if not marker.is_file():
+        return None
+    try:
+        earlier = json.loads(marker.read_text())
+    except ValueError:
+        return "?"
+    return str(earlier.get("command", "?")) if isinstance(earlier, dict) else "?"
+
+
 OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES))
 
 
@@ -256,9 +268,8 @@ OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
-    if (earlier := remove_earlier_outputs(args.out, "report.json", OWN_OUTPUTS)) is not None:
-        said = earlier.get("command", "?")  # an earlier run's figures would otherwise stay beside this run's report
-        print(f"note: replacing the outputs of an earlier run in {args.out} ({said})", file=sys.stderr)
+    if (earlier := earlier_run(args.out / "report.json")) is not None:  # replaced when this run has finished
+        print(f"note: replacing the outputs of an earlier run in {args.out} ({earlier})", file=sys.stderr)
     code = code_version_text()  # now: a run takes minutes, in which the checkout may move
 
     left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
@@ -313,9 +324,13 @@ def main(argv: list[str] | None = None) -> int:
     report["machine"] = machine_description()
     report["code"] = code
     report["simulator_model"] = "error_model.yaml"  # the fitted model, for the simulator (`sim_model`)
-    out = write_report(args.out, report, arrays)
-    write_json(out / "report.json", report)
-    write_simulator_model(out / "error_model.yaml", report)
+    # written into a hidden folder and moved into place, report.json last: an interrupted or failed run leaves the
+    # earlier run's outputs as they were (an earlier run's figures would otherwise stay beside this run's report)
+    clear = lambda: remove_earlier_outputs(args.out, "report.json", OWN_OUTPUTS)  # noqa: E731
+    with staged_outputs(args.out, "report.json", clear) as stage:
+        write_report(stage, report, arrays)
+        write_simulator_model(stage / "error_model.yaml", report)
+    out = args.out
     print(f"{report['verdict']}; not identifiable: {', '.join(report['not_identifiable']) or 'none'}")
     if said := lines_sentence(report["gyro_lines_above_band"], compared_band_hz(fit + holdout)):
         print(f"note: {said}")
