@@ -311,3 +311,29 @@ def test_the_seed_and_fold_split_of_the_rounds_reads_the_runs_the_screens_read(m
     tracked, plain = cv_power.tracker_pairs()
     round8 = json.loads((REPO / "benchmarks/results/cv_tracker_confirm.json").read_text())["decision"]
     assert fold_seed_spread(tracked - plain).mean == pytest.approx(round8["diff_mean"], abs=1e-9)
+
+
+@pytest.mark.parametrize("fold", [0, 3])
+def test_a_fold_of_a_single_training_flight_is_refused_in_one_line(fold):
+    """One training flight held out leaves none to train on: dataset.cv_fold=0 stopped in Lightning's setup with numpy's
+    'need at least one array to concatenate', and cv_fold=3's message advised cv_fold=0."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    with pytest.raises(ConfigError, match=r"needs two training flights or more.*\['walk'\].*dataset.cv_fold=null"):
+        ImuDataModule("x", "/nowhere", ["walk"], [], cv_fold=fold)
+
+
+def test_a_fold_sweep_over_a_single_flight_stops_before_training():
+    """One training flight: the sweep's own check said 'give dataset.cv_fold=0', a fold that cannot train."""
+    from omegaconf import OmegaConf
+
+    config = OmegaConf.create(
+        {
+            "dataset": {"name": "mine", "train_seqs": ["walk"]},
+            "hydra": {"overrides": {"task": ["dataset.cv_fold=0"]}, "sweeper": {"params": {}}},
+        }
+    )
+    problem = cv.fold_list_problem(config)
+    assert "has 1 training flight(s) (walk)" in problem and "two or more" in problem
+    assert "give dataset.cv_fold=0" not in problem

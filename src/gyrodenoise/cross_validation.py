@@ -445,6 +445,12 @@ def fold_list_problem(config: DictConfig) -> str | None:
     except Exception:  # noqa: BLE001 - an unusual sweep: the jobs themselves will say what is wrong
         return None
     n = len(flights)
+    if n < 2:  # its one flight held out leaves none to train on: each job would stop on it
+        return (
+            f"{FOLD_KEY} sweeps {value}, but {config.dataset.get('name', 'the dataset')} has {n} training flight(s) "
+            f"({', '.join(map(str, flights))}): cross-validation holds one out and trains on the others, so it needs "
+            "two or more in dataset.train_seqs"
+        )
     if all(isinstance(k, int) and 0 <= k < n for k in folds):
         return None
     return (

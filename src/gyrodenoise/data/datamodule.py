@@ -151,6 +151,11 @@ class ImuDataModule(L.LightningDataModule):
                     "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
                     f"give one fold, 0..{len(self.train_names) - 1}"
                 )
+            if len(self.train_names) < 2:  # its one flight held out leaves nothing to train on (a bare numpy error)
+                raise ConfigError(
+                    f"dataset.cv_fold={cv_fold} needs two training flights or more (it holds one out and trains on "
+                    f"the others), got {self.train_names}: name more in dataset.train_seqs, or set dataset.cv_fold=null"
+                )
             if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
                 n = len(self.train_names)
                 raise ConfigError(
