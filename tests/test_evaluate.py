@@ -436,3 +436,20 @@ def test_a_failed_evaluation_leaves_no_outputs_and_keeps_the_earlier_ones(tmp_pa
     assert json.loads((earlier / "results.json").read_text())["models"]["proposed"] != "x"
     assert (earlier / "trajectories" / "seq" / "groundtruth.txt").is_file()
     assert not [p for p in earlier.iterdir() if p.name.startswith(".")]  # no staging folder left
+
+
+@pytest.mark.parametrize("key", ["proposed", "calibrated"])
+def test_a_model_left_out_with_null_is_one_line_before_the_data_are_read(tmp_path, key):
+    """weights.calibrated=null (to score one's own model alone) ended in pathlib's 'expected str, bytes or
+    os.PathLike object, not NoneType' after the data were read; the folder here holds none."""
+    from gyrodenoise.cli_errors import ConfigError
+
+    with pytest.raises(ConfigError, match=rf"weights\.{key}=None: .*give weights\.{key}= a shipped model's name"):
+        run_evaluate(
+            "dataset=asl_folder",
+            f"dataset.root={tmp_path / 'none'}",
+            "dataset.test_seqs=[walk]",
+            f"weights.{key}=null",
+            "threads=1",
+            f"out_dir={tmp_path / 'out'}",
+        )

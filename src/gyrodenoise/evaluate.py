@@ -62,6 +62,7 @@ from gyrodenoise.models.ensemble import CorrectionModel, predict_with_spread
 from gyrodenoise.paths import portable_path, portable_tree, recorded_command
 from gyrodenoise.pretrained import (
     ModelQualityWarning,
+    available_models,
     is_shipped,
     load_model,
     model_quality_warning,
@@ -223,6 +224,13 @@ def _evaluate(cfg: DictConfig, out: Path) -> tuple[dict, str]:
     for key in ("figures", "trajectories"):  # 'figures=fals' is a non-empty string, true to Python
         if not isinstance(value := cfg.get(key, True), bool):
             raise ConfigError(f"{key}={value!r}: give {key}=true or {key}=false")
+    for key in ("proposed", "calibrated"):  # null: pathlib's TypeError deep in load_model, after the data were read
+        if not isinstance(value := cfg.weights.get(key), str) or not value.strip():
+            raise ConfigError(
+                f"weights.{key}={value!r}: the table scores a denoiser and a calibrated model side by side; give "
+                f"weights.{key}= a shipped model's name ({', '.join(available_models())}), a training run's folder "
+                "or model file (a run's calibrated.pt lies beside its model.pt); the same file in both is allowed"
+            )
     if split == "test" and OmegaConf.is_missing(cfg.dataset, "train_seqs"):  # asl_folder's '???': not read to test
         cfg = cfg.copy()
         with open_dict(cfg):
