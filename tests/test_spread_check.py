@@ -98,6 +98,25 @@ def test_reference_cli_reads_the_members_training_recordings(tmp_path, monkeypat
     assert "single model has no spread" in capsys.readouterr().err
 
 
+def test_reference_of_an_own_data_ensemble_needs_only_the_folder(tmp_path, monkeypatch, capsys):
+    """Members trained with dataset=asl_folder: `reference FILE --out OUT` ended in omegaconf's MissingMandatoryValue
+    traceback (dataset.root '???'), and with dataset.root given in another one (dataset.train_seqs '???', which the
+    reference does not read: it takes the members' recorded training sequences)."""
+    root = tmp_path / "data"
+    for k, name in enumerate(("walk", "run")):
+        write_asl_sequence(root / name, seconds=8.0, seed=k)
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+    meta = {"rate_hz": 200.0, "dataset": "asl_folder", "train_seqs": ["walk", "run"], "name": "ens"}
+    ens = save_model(two_members(), CFG, tmp_path / "ens.pt", meta)
+    out = tmp_path / "ens_ref.pt"
+    assert ensemble_cli.main(["reference", str(ens), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: dataset.root has no value") and "(walk, run)" in err and "dataset.root=FOLDER" in err
+    overrides = ["dataset=asl_folder", f"dataset.root={root}"]  # as docs/deployment.md gives them
+    assert ensemble_cli.main(["reference", str(ens), "--out", str(out), *overrides]) == 0
+    assert list(load_model(out)[1]["spread_reference"]["per_recording_rad_s"]) == ["walk", "run"]
+
+
 def test_evaluate_writes_the_spread_warning_into_its_outputs(tmp_path, monkeypatch):
     from test_evaluate import run_evaluate_asl
 

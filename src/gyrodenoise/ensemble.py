@@ -236,7 +236,9 @@ def add_spread_reference(
     """Write a copy of the ensemble file `model_path` with its `spread_reference`, taken on the members' training
     recordings read through the training config's dataset (`overrides`; default: dataset=<the members' dataset>)."""
     import hydra
+    from omegaconf import OmegaConf, open_dict
 
+    from gyrodenoise.cli_errors import ConfigError
     from gyrodenoise.config import compose_config
 
     model, meta = load_model(model_path, warn=False)
@@ -248,9 +250,21 @@ def add_spread_reference(
             "`python -m gyrodenoise.ensemble reference FILE --out OUT dataset=euroc`"
         )
     overrides = list(overrides or [f"dataset={meta['dataset']}"])
-    return _save_with_reference(
-        model, meta, hydra.utils.instantiate(compose_config("train", overrides).dataset), out, command
-    )
+    dataset = compose_config("train", overrides).dataset
+    # the reference reads the members' recorded training sequences, not the config's lists: dataset=asl_folder's
+    # '???' lists are not needed (they ended in omegaconf's MissingMandatoryValue traceback), its '???' root is
+    with open_dict(dataset):
+        for key in ("train_seqs", "test_seqs"):
+            if OmegaConf.is_missing(dataset, key):
+                dataset[key] = list(meta.get("train_seqs") or [])
+    if OmegaConf.is_missing(dataset, "root"):
+        raise ConfigError(
+            f"dataset.root has no value ({dataset.get('name')} names no data folder of its own): give the folder that "
+            f"holds the members' training recordings ({', '.join(meta.get('train_seqs') or []) or 'not recorded'}), "
+            f"e.g. `python -m gyrodenoise.ensemble reference {model_path} --out {out} "
+            f"dataset={meta.get('dataset') or 'asl_folder'} dataset.root=FOLDER`"
+        )
+    return _save_with_reference(model, meta, hydra.utils.instantiate(dataset), out, command)
 
 
 def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | Path, command: str | None) -> Path:
