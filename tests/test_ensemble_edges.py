@@ -98,3 +98,31 @@ def test_a_bad_stretch_at_the_very_end_is_judged():
     std[2090:] *= 60
     ratio, start = worst_window(std, meta, 100.0)
     assert ratio > SPREAD_RATIO_LIMIT and start == pytest.approx(19.9)
+
+
+def test_the_sweeps_ensemble_says_its_members_warnings_in_one_line(tmp_path, monkeypatch):
+    """experiment=ensemble's callback printed a member that did not beat the calibrated baseline as Python's
+    '<file>:<line>: ModelQualityWarning: ...' plus the source line, where `ensemble build` says 'warning: ...'.
+    (pytest records warnings instead of printing them: the format in force during the build is what is checked.)"""
+    import warnings
+
+    from omegaconf import OmegaConf
+
+    from gyrodenoise.pretrained import ModelQualityWarning
+
+    sweep = tmp_path / "sweep"
+    for k in (0, 1):
+        (sweep / str(k) / ".hydra").mkdir(parents=True)
+        save_model(random_model(seed=k + 1, **TINY), {"name": "denoiser", **TINY}, sweep / str(k) / "model.pt",
+                   {"dataset": "euroc", "rate_hz": 200.0, "beats_calibrated": False})  # fmt: skip
+    said = []
+    build = ensemble_cli.build_ensemble
+
+    def build_and_format(*args, **kwargs):
+        said.append(warnings.formatwarning("members did not beat it", ModelQualityWarning, "/site/ensemble.py", 1))
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(ensemble_cli, "build_ensemble", build_and_format)
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}, "dataset": {"_target_": "builtins.dict"}})
+    ensemble_cli.BuildEnsembleCallback().on_multirun_end(config)
+    assert said == ["warning: members did not beat it\n"] and (sweep / "ensemble.pt").is_file()

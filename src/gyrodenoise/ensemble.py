@@ -343,7 +343,8 @@ class BuildEnsembleCallback(_HydraCallback):
         except FileNotFoundError as e:
             print(f"ensemble not built: {e}", file=sys.stderr)
             return
-        out = build_ensemble(paths, sweep / self.filename, command=f"BuildEnsembleCallback on {sweep}")
+        with plain_project_warnings():  # the members' warnings as `warning: ...` lines, as `ensemble build` says them
+            out = build_ensemble(paths, sweep / self.filename, command=f"BuildEnsembleCallback on {sweep}")
         print(f"ensemble of {len(paths)} models: {out}")
         try:  # the members' training data are the sweep's dataset
             import hydra
