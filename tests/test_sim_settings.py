@@ -144,6 +144,27 @@ def test_the_sim_datasets_noise_augmentation_follows_its_error_model(tmp_path):
 
 
 @pytest.mark.parametrize(
+    ("setting", "said"),
+    [
+        ({"rate_hz": -5}, r"^dataset\.generation\.rate_hz=-5\.0: the IMU rate in Hz"),
+        ({"duration_s": "abc"}, r"^dataset\.generation\.duration_s='abc': give a number"),
+        ({"acc_bias": [0, 0]}, r"^dataset\.generation\.acc_bias=\[0, 0\]: three finite numbers"),
+        ({"acc_bias": "abc"}, r"^dataset\.generation\.acc_bias='abc': three numbers"),
+        ({"error_model": [{"name": "bias", "units": "datasheet", "params": {"bias": [1, 2]}}]}, r"params\.bias"),
+    ],
+)
+def test_sim_dataset_settings_are_config_errors_before_anything_is_simulated(tmp_path, setting, said):
+    """A ConfigError is the commands' one 'error:' line; a plain ValueError reached the user inside Hydra's 'Error in
+    call to target ... full_key: dataset' block, and rate_hz=-5 only after 'simulating 16 sequence(s) into ...'."""
+    from gyrodenoise.cli_errors import ConfigError
+
+    generation = {"seed": 0, "duration_s": 5, "error_model": [], **setting}
+    with pytest.raises(ConfigError, match=said):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"], test_seqs=[])
+    assert not (tmp_path / "sim").exists()
+
+
+@pytest.mark.parametrize(
     ("kwargs", "said"),
     [
         ({"imu_rate_hz": 0.0}, "--imu-rate 0"),

@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from gyrodenoise.atomic import write_text
+from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data.cache import default_cache_dir
 from gyrodenoise.data.datamodule import ImuDataModule
 from gyrodenoise.sim.accel import acc_effects_from_config
 from gyrodenoise.sim.effects import Bias, Effect, WhiteNoise, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
-from gyrodenoise.sim.imu import asl_written, simulate_imu, write_asl
+from gyrodenoise.sim.imu import _check_settings, asl_written, simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
 
 # 2: sequences last duration_s (they ran 1 s longer), the accelerometer follows a time offset, vibration
@@ -45,14 +46,9 @@ def _sequence_seed(base_seed: int, name: str) -> int:
     return int.from_bytes(hashlib.sha1(f"{base_seed}:{name}".encode()).digest()[:4], "little")
 
 
-def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
-    kind = name.split("_")[0]
-    if kind not in KINDS:
-        raise ValueError(f"simulated sequence {name!r}: the name must start with one of {sorted(KINDS)} + '_'")
-    seed = _sequence_seed(int(generation.get("seed", 0)), name)
-    rng = np.random.default_rng(seed)
-    duration = float(generation.get("duration_s", 120.0))
-    traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
+def _error_models(generation: Mapping) -> tuple[list[Effect], list, float]:
+    """The gyro's and the accelerometer's error effects and the turn-on bias spread of `generation` (ValueError
+    naming the setting when one is not valid)."""
     entries = [dict(c) if hasattr(c, "keys") else c for c in generation.get("error_model", [])]  # DictConfig -> dict
     effects: list[Effect] = effects_from_config(entries, "dataset.generation.error_model")
     acc_entries = generation.get("acc_error_model") or []
@@ -65,6 +61,40 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
     if not jitter >= 0:  # NaN included
         raise ValueError(f"dataset.generation.bias_jitter_rad_s={jitter!r}: the turn-on bias spread in rad/s, >= 0")
+    return effects, acc_effects, jitter
+
+
+def check_generation(generation: Mapping) -> None:
+    """The generation settings, checked before anything is simulated or a cache folder made: a ConfigError (one line
+    from the commands, not Hydra's 'Error in call to target' block) naming the dataset.generation setting."""
+    values = {}
+    for key, default in (("rate_hz", 200.0), ("duration_s", 120.0), ("acc_noise_density", 2.0e-3)):
+        try:
+            values[key] = float(generation.get(key, default))
+        except (ValueError, TypeError):
+            raise ConfigError(f"dataset.generation.{key}={generation.get(key)!r}: give a number") from None
+    acc_bias = generation.get("acc_bias", (0.0, 0.0, 0.0))
+    try:
+        np.asarray(acc_bias, dtype=np.float64)
+    except (ValueError, TypeError):
+        raise ConfigError(f"dataset.generation.acc_bias={acc_bias!r}: three numbers in m/s^2") from None
+    try:
+        _error_models(generation)
+        _check_settings(values["rate_hz"], values["duration_s"], 1, values["acc_noise_density"], acc_bias)
+    except (ValueError, TypeError) as e:
+        message = str(e)  # simulate_imu's own names (rate_hz=..., acc_bias=...) are settings of dataset.generation
+        raise ConfigError(message if message.startswith("dataset.") else f"dataset.generation.{message}") from None
+
+
+def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
+    kind = name.split("_")[0]
+    if kind not in KINDS:
+        raise ValueError(f"simulated sequence {name!r}: the name must start with one of {sorted(KINDS)} + '_'")
+    seed = _sequence_seed(int(generation.get("seed", 0)), name)
+    rng = np.random.default_rng(seed)
+    duration = float(generation.get("duration_s", 120.0))
+    traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
+    effects, acc_effects, jitter = _error_models(generation)
     if jitter > 0:
         effects.append(Bias(bias=rng.normal(0.0, jitter, 3)))
     sim = simulate_imu(
@@ -123,6 +153,7 @@ class SimDataModule(ImuDataModule):
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
         gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
+        check_generation(gen)
         sensor = dict(kwargs.get("sensor") or {})
         if sensor.get("gyro_noise_density") is None:  # the simulated gyro's own, for the training's noise augmentation
             sensor["gyro_noise_density"] = white_noise_density(gen.get("error_model", []))
