@@ -337,3 +337,18 @@ def test_a_fold_sweep_over_a_single_flight_stops_before_training():
     problem = cv.fold_list_problem(config)
     assert "has 1 training flight(s) (walk)" in problem and "two or more" in problem
     assert "give dataset.cv_fold=0" not in problem
+
+
+def test_a_search_folder_is_named_as_all_its_runs_not_the_first_recipes(tmp_path, capsys):
+    """An hparams_search sweep (two trials, other settings each) given to the collector: it said 'none of the 1 runs',
+    the first recipe's count, of a folder of 2."""
+    for k, dropout in enumerate(("0.1", "0.2")):
+        (tmp_path / str(k)).mkdir()
+        path = _summary(tmp_path / str(k) / "summary.json", None, 5.0, 3.0)
+        data = json.loads(path.read_text())
+        data["overrides"].append(f"model.dropout={dropout}")
+        path.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="none of the 2 runs is a cross-validation run"):
+        cv.load([tmp_path])
+    assert cv.main([str(tmp_path), "--out", str(tmp_path / "cv")]) == 2
+    assert "none of the 2 runs" in capsys.readouterr().err

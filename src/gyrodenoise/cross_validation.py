@@ -371,6 +371,11 @@ def load_recipes(
     if not runs:
         matches = f" matches {list(where)}" if where else ""
         raise ValueError(f"no finished run under {[str(d) for d in dirs]}{matches}")
+    if not any(_data_of(r) for r in runs):  # said of all the runs, not of the first recipe's ('none of the 1 runs')
+        raise ValueError(
+            f"none of the {len(runs)} runs is a cross-validation run (dataset.cv_fold): "
+            "train them with experiment=cross_validation or dataset.cv_fold=K"
+        )
     found = [(label, collect(rs)) for label, rs in recipes(runs)]
     for _, cv in found:
         cv.skipped += [f"{p}: unfinished or failed (no summary.json; its train.log says which)" for p in unfinished]
