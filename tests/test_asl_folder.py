@@ -183,6 +183,18 @@ def test_missing_sequences_fail_before_training(asl_root):
         too_high.check_sequences(test=False)
 
 
+def test_an_empty_training_list_is_one_line_before_any_data_are_read(asl_root):
+    """dataset.train_seqs=[] trained nothing and stopped in Lightning's setup with numpy's 'need at least one array to
+    concatenate'; evaluate's test split (train_seqs [] for asl_folder) reads no training sequence and is not refused."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    dm = ImuDataModule(name="my_imu", root=str(asl_root), train_seqs=[], test_seqs=["walk_1"], window=256)
+    with pytest.raises(ConfigError, match=r"dataset.train_seqs is empty: name the training sequences"):
+        dm.check_sequences(test=False)
+    dm.check_sequences(train=False, test=True)
+
+
 def test_fit_calibrated_alone(asl_root, tmp_path):
     """python -m gyrodenoise.fit_calibrated: the safety net's L-BFGS fit as a model file; it learns the
     synthetic gyro bias, so it beats the raw IMU on a sequence it did not see, and its file reproduces it."""

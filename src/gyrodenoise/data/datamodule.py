@@ -227,6 +227,11 @@ class ImuDataModule(L.LightningDataModule):
         and then stop at the test without writing its model. `test_hint` is what to do when only test
         sequences are missing.
         """
+        if train and not self.train_names and not self.cv_holdout:  # else numpy's 'need at least one array' later
+            raise ConfigError(
+                "dataset.train_seqs is empty: name the training sequences (their ends validate unless "
+                "dataset.val_seqs names others), e.g. 'dataset.train_seqs=[walk_1,walk_2]'"
+            )
         names = [*self.train_names, *([self.cv_holdout] if self.cv_holdout else [])] if train else []
         names += [*(self.val_names if self.val_explicit and train else []), *(self.test_names if test else [])]
         missing = [n for n in dict.fromkeys(names) if not (Path(self.root) / n / "mav0").is_dir()]
