@@ -75,6 +75,14 @@ def test_export_refuses_an_opset_it_cannot_write(model_file, tmp_path, capsys):
     assert "--opset 3: the exporter could not convert the graph to ONNX opset 3" in err
     assert "nothing was written; give --opset 18 or higher" in err
     assert not out.exists()
+    # one above the newest the installed onnx knows was told 'give --opset 18 or higher' too: 99 is higher
+    import onnx
+
+    newest = onnx.defs.onnx_opset_version()
+    assert main([str(model_file), "--onnx", str(out), "--opset", str(newest + 1), "--no-check"]) == 2
+    err = capsys.readouterr().err
+    assert f"give --opset from 18 to {newest}, the installed onnx's newest" in err and "or higher" not in err
+    assert not out.exists()
 
 
 def test_cross_validation_refuses_an_output_prefix_under_a_file(a_file, capsys):

@@ -208,10 +208,16 @@ def export_onnx(
             verbose=False,
         )
     written = program.model.opset_imports.get("", opset)
-    if written != opset:  # the exporter falls back to its own lowest opset when it cannot convert down: say so
+    if written != opset:  # the exporter falls back to its own opset when it cannot convert: say so
+        import onnx
+
+        newest = onnx.defs.onnx_opset_version()  # above it the converter refuses (--opset 99 was told "or higher")
+        allowed = (
+            f"from {written} to {newest}, the installed onnx's newest" if opset > written else f"{written} or higher"
+        )
         raise ValueError(
             f"--opset {opset}: the exporter could not convert the graph to ONNX opset {opset} (it can write opset "
-            f"{written}), so nothing was written; give --opset {written} or higher (default {OPSET})"
+            f"{written}), so nothing was written; give --opset {allowed} (default {OPSET})"
         )
     program.model.metadata_props.update(onnx_metadata(model, meta, stateful))
     with atomic_path(path, ".onnx") as tmp:
