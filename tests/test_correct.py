@@ -150,6 +150,16 @@ def test_a_ground_truth_file_is_refused_by_its_header(tmp_path, model_file, caps
         expect_error(capsys, [f, "-m", model_file, "-o", tmp_path / "o", *extra], "pose (ground-truth) file", "imu0")
 
 
+def test_a_datasets_folder_names_its_sequence_folders(tmp_path, model_file, capsys):
+    """dataset.root given instead of one of its sequences: the error said only which files the folder lacks."""
+    for name in ("walk_2", "walk_1"):
+        (tmp_path / "root" / name / "mav0" / "imu0").mkdir(parents=True)
+        write_asl(tmp_path / "root" / name / "mav0" / "imu0" / "data.csv", *synth(n=50))
+    (tmp_path / "root" / "notes").mkdir()
+    expect_error(capsys, [tmp_path / "root", "-m", model_file, "-o", tmp_path / "o"],
+                 "It holds the sequence folders walk_1, walk_2: give one of them")  # fmt: skip
+
+
 def test_a_file_that_is_not_a_model_is_refused_in_one_line(tmp_path, capsys):
     f = bad_file(tmp_path)
     summary = tmp_path / "summary.json"

@@ -85,7 +85,11 @@ def find_imu_file(path: str | Path) -> Path:
         for sub in ("mav0/imu0/data.csv", "imu0/data.csv", "data.csv"):
             if (p / sub).is_file():
                 return p / sub
-        raise FileNotFoundError(f"{p}: folder without mav0/imu0/data.csv, imu0/data.csv or data.csv.")
+        # a dataset's folder (dataset.root), which holds sequence folders: name them, one recording per command
+        held = sorted(d.name for d in p.iterdir() if (d / "mav0" / "imu0" / "data.csv").is_file())
+        shown = ", ".join(held[:8]) + (f" and {len(held) - 8} more" if len(held) > 8 else "")
+        hint = f" It holds the sequence folders {shown}: give one of them (one recording per command)." if held else ""
+        raise FileNotFoundError(f"{p}: folder without mav0/imu0/data.csv, imu0/data.csv or data.csv.{hint}")
     return p
 
 
