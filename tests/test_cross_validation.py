@@ -352,3 +352,15 @@ def test_a_search_folder_is_named_as_all_its_runs_not_the_first_recipes(tmp_path
         cv.load([tmp_path])
     assert cv.main([str(tmp_path), "--out", str(tmp_path / "cv")]) == 2
     assert "none of the 2 runs" in capsys.readouterr().err
+
+
+def test_a_sequence_named_twice_is_refused():
+    """train_seqs=[a,a,b] with cv_fold=0 held out one 'a' and trained on the other: the held-out flight was trained on
+    and validated nothing (NaN), without a word."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    with pytest.raises(ConfigError, match="dataset.train_seqs names a more than once: give each sequence once"):
+        ImuDataModule("x", "/nowhere", ["a", "a", "b"], [], cv_fold=0)
+    with pytest.raises(ConfigError, match="dataset.test_seqs names c more than once"):
+        ImuDataModule("x", "/nowhere", ["a", "b"], ["c", "c"])

@@ -139,6 +139,9 @@ class ImuDataModule(L.LightningDataModule):
                     f"dataset.{key}={names!r} is one name, not a list: give 'dataset.{key}=[{names}]' (quoted for "
                     f"the shell), or several: 'dataset.{key}=[a,b]'"
                 )
+            if names is not None and (twice := sorted({str(n) for n in names if list(names).count(n) > 1})):
+                # a set of sequences: a repeat trains no more on it, and with cv_fold its holdout stayed in training
+                raise ConfigError(f"dataset.{key} names {', '.join(twice)} more than once: give each sequence once")
         self.train_names = list(train_seqs)
         self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
         self.val_explicit = val_seqs is not None  # named validation sequences must have data to validate on
