@@ -117,6 +117,17 @@ def test_reference_of_an_own_data_ensemble_needs_only_the_folder(tmp_path, monke
     assert list(load_model(out)[1]["spread_reference"]["per_recording_rad_s"]) == ["walk", "run"]
 
 
+@pytest.mark.parametrize(
+    ("typo", "said"), [("dataset.rot=x", "did you mean dataset.root?"), ("dataset=asl_foldr", "Could not find")]
+)
+def test_a_misspelt_reference_override_is_an_error_line_not_a_traceback(tmp_path, capsys, typo, said):
+    meta = {"rate_hz": 200.0, "dataset": "asl_folder", "train_seqs": ["walk"], "name": "ens"}
+    ens = save_model(two_members(), CFG, tmp_path / "ens.pt", meta)
+    assert ensemble_cli.main(["reference", str(ens), "--out", str(tmp_path / "o.pt"), "dataset=asl_folder", typo]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and said in err
+
+
 def test_evaluate_writes_the_spread_warning_into_its_outputs(tmp_path, monkeypatch):
     from test_evaluate import run_evaluate_asl
 

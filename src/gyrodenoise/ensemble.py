@@ -395,11 +395,13 @@ def main(argv: list[str] | None = None) -> int:
         args.overrides += extra
     command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
     if args.cmd == "reference":
+        from hydra.errors import ConfigCompositionException
+
         from gyrodenoise.cli_errors import USER_ERRORS
 
         try:
             out = add_spread_reference(args.model, args.out, args.overrides, command)
-        except (*USER_ERRORS, ValueError, TypeError) as e:
+        except (*USER_ERRORS, ValueError, TypeError, ConfigCompositionException) as e:  # a misspelt override too
             print(f"error: {e}", file=sys.stderr)
             return 2
         ref = load_model(out, warn=False)[1]["spread_reference"]
