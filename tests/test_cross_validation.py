@@ -364,3 +364,13 @@ def test_a_sequence_named_twice_is_refused():
         ImuDataModule("x", "/nowhere", ["a", "a", "b"], [], cv_fold=0)
     with pytest.raises(ConfigError, match="dataset.test_seqs names c more than once"):
         ImuDataModule("x", "/nowhere", ["a", "b"], ["c", "c"])
+
+
+def test_a_fold_beyond_the_flights_names_the_ablations_too():
+    """-m experiment=ablation_activation on three own flights: its seed 3 is fold 3, and the error spoke of
+    experiment=cross_validation alone, which the user had not run."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.data.datamodule import ImuDataModule
+
+    with pytest.raises(ConfigError, match=r"choose 0\.\.2 .*the ablations hold out fold = seed.*dataset.cv_fold=0,1,2"):
+        ImuDataModule("x", "/nowhere", ["a", "b", "c"], [], cv_fold=3)

@@ -163,8 +163,9 @@ class ImuDataModule(L.LightningDataModule):
                 n = len(self.train_names)
                 raise ConfigError(
                     f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {self.train_names}); "
-                    f"experiment=cross_validation sweeps EuRoC's six folds: for these give "
-                    f"dataset.cv_fold={','.join(map(str, range(n)))} on its command line, or dataset.cv_fold=all"
+                    "the experiments' folds are EuRoC's six (experiment=cross_validation sweeps 0-5, the ablations "
+                    f"hold out fold = seed): for these give dataset.cv_fold={','.join(map(str, range(n)))} on the "
+                    "command line, or dataset.cv_fold=all"
                 )
             self.cv_holdout = self.train_names.pop(cv_fold)
         self.test_names = list(test_seqs)
