@@ -8,7 +8,7 @@ Methods: raw IMU (integrated gyro), zero motion (initial orientation held), cali
 12-parameter baseline), proposed (the denoiser, or an ensemble of them). Every estimate is aligned
 on ground truth at the first instant with ground truth; a part (e.g. split=val's [50s:]) is scored as a stream that
 starts there: the network gets no IMU history from before it (its first ~2.5 s see copies of the first sample, as
-in training's validation; room1's denoiser: 0.926 deg, 0.897 with the history).
+in training's validation; room1's denoiser: 0.926 deg, 0.897 with the history: benchmarks/network_history.py).
 Other methods' orientation estimates join the table as columns: `+estimates.NAME=FOLDER` (FOLDER/<sequence>.txt)
 or `'+estimates.NAME=PATH/*.txt'` (* = the sequence's name), TUM trajectories on the IMU's clock
 (gyrodenoise.external_estimates).
