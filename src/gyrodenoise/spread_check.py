@@ -9,8 +9,9 @@ recording's median spread is more than SPREAD_RATIO_LIMIT times that reference.
 The limit comes from `python benchmarks/spread_ood.py` (benchmarks/results/spread_ood.md): the shipped `euroc`
 ensemble's unseen EuRoC test flights sit at 0.6-1.1 times its reference, TUM-VI's BMI160 (another IMU, real
 data this project did not make) at ~39 times, a gyro in deg/s at 45-115 and a mounting turned 90 deg at 14-15. It
-does not see an accelerometer in g (2.2-2.5; the data checks of `correct` refuse that), a halved rate (0.9-1.6) or
-another gyro bias (unchanged): a quiet spread is no proof that a recording suits the model.
+does not see an accelerometer in g (2.2-2.5; its worst 10-s stretch 2.3-3.1 fires on 1 of 5 flights; the data
+checks of `correct` refuse that), a halved rate (0.9-1.6) or another gyro bias (unchanged): a quiet spread is no
+proof that a recording suits the model.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def worst_window(std: np.ndarray | None, meta: dict, rate_hz: float) -> tuple[fl
     """(ratio, start in s since the first sample) of the WINDOW_S stretch whose median spread is the largest against
     the reference (windows overlapping by half), or None (no std or no reference). The whole recording's median
     misses a bad stretch shorter than about half of it (an audit's 20 s of deg/s in a 2-min flight: 0.69 whole,
-    63.8 in its window); on EuRoC's 11 flights the largest window is 0.73-1.56."""
+    63.8 in its window); on EuRoC's 11 flights the largest window is 0.73-1.59 (benchmarks/results/spread_ood.md)."""
     if std is None or (found := _reference(meta)) is None or not np.isfinite(rate_hz) or rate_hz <= 0:
         return None
     ref, scale = found
