@@ -117,6 +117,26 @@ def test_reference_of_an_own_data_ensemble_needs_only_the_folder(tmp_path, monke
     assert list(load_model(out)[1]["spread_reference"]["per_recording_rad_s"]) == ["walk", "run"]
 
 
+def test_reference_of_a_fold_ensemble_is_taken_on_the_union_of_its_members_flights(tmp_path, monkeypatch, capsys):
+    """Members trained on different flights (a cross-validation's folds) record no common training list: the
+    reference stopped with 'names no training sequences'. It is now taken on the union of the members' flights, in
+    the members' order, and the file says so."""
+    root = tmp_path / "data"
+    for k, name in enumerate(("walk", "run", "jog")):
+        write_asl_sequence(root / name, seconds=8.0, seed=k)
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+    members = [{"train_seqs": ["walk", "run"]}, {"train_seqs": ["run", "jog"]}]
+    meta = {"rate_hz": 200.0, "dataset": "asl_folder", "train_seqs": None, "members": members, "name": "ens"}
+    ens = save_model(two_members(), CFG, tmp_path / "ens.pt", meta)
+    out = tmp_path / "ens_ref.pt"
+    assert (
+        ensemble_cli.main(["reference", str(ens), "--out", str(out), "dataset=asl_folder", f"dataset.root={root}"]) == 0
+    )
+    ref = load_model(out)[1]["spread_reference"]
+    assert list(ref["per_recording_rad_s"]) == ["walk", "run", "jog"]
+    assert ref["recordings"].startswith("the union of the members' training recordings")
+
+
 @pytest.mark.parametrize(
     ("typo", "said"), [("dataset.rot=x", "did you mean dataset.root?"), ("dataset=asl_foldr", "Could not find")]
 )

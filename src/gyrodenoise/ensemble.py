@@ -253,24 +253,38 @@ def add_spread_reference(
     dataset = compose_config("train", overrides).dataset
     # the reference reads the members' recorded training sequences, not the config's lists: dataset=asl_folder's
     # '???' lists are not needed (they ended in omegaconf's MissingMandatoryValue traceback), its '???' root is
+    names, _ = reference_recordings(meta)
     with open_dict(dataset):
         for key in ("train_seqs", "test_seqs"):
             if OmegaConf.is_missing(dataset, key):
-                dataset[key] = list(meta.get("train_seqs") or [])
+                dataset[key] = list(names)
     if OmegaConf.is_missing(dataset, "root"):
         raise ConfigError(
             f"dataset.root has no value ({dataset.get('name')} names no data folder of its own): give the folder that "
-            f"holds the members' training recordings ({', '.join(meta.get('train_seqs') or []) or 'not recorded'}), "
+            f"holds the members' training recordings ({', '.join(names) or 'not recorded'}), "
             f"e.g. `python -m gyrodenoise.ensemble reference {model_path} --out {out} "
             f"dataset={meta.get('dataset') or 'asl_folder'} dataset.root=FOLDER`"
         )
     return _save_with_reference(model, meta, hydra.utils.instantiate(dataset), out, command)
 
 
+def reference_recordings(meta: dict) -> tuple[list[str], str]:
+    """The recordings an ensemble's spread reference is taken on, and what they are: the members' common training
+    recordings, else (members trained on different flights: the folds of a cross-validation) the union of theirs.
+    On the union each flight was held out by some member, whose disagreement there is its held-out one: the reference
+    comes out higher than a seed ensemble's would, and the check warns later, not sooner."""
+    if common := list(meta.get("train_seqs") or []):
+        return common, "the members' training recordings"
+    union: list[str] = []
+    for rec in meta.get("members") or []:
+        union += [n for n in rec.get("train_seqs") or [] if n not in union]
+    return union, "the union of the members' training recordings (each held out by some member)"
+
+
 def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | Path, command: str | None) -> Path:
     from gyrodenoise.spread_check import spread_reference
 
-    names = meta.get("train_seqs") or []
+    names, taken_on = reference_recordings(meta)
     if not names:
         raise ValueError("the ensemble's metadata names no training sequences to take the spread reference on")
     if not Path(dm.root).is_dir():
@@ -282,7 +296,8 @@ def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | P
     reference = spread_reference(model, ((n, dm.load(n).imu) for n in names))
     cfg = dict(meta["model"])
     meta = {k: v for k, v in meta.items() if k not in ("model", "path")}
-    meta["spread_reference"] = {**reference, "data_root": portable_path(dm.root), "command": command}
+    meta["spread_reference"] = {**reference, "recordings": taken_on, "data_root": portable_path(dm.root)}
+    meta["spread_reference"]["command"] = command
     return save_model(model, cfg, out, meta)
 
 
