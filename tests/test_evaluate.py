@@ -453,3 +453,30 @@ def test_a_model_left_out_with_null_is_one_line_before_the_data_are_read(tmp_pat
             "threads=1",
             f"out_dir={tmp_path / 'out'}",
         )
+
+
+def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_path, monkeypatch):
+    """evaluate split=val with dataset.val_seqs naming its own sequences and dataset.train_seqs=[] (asl_folder's
+    lists are '???') scores them; the empty-training-list refusal meant for train and fit_calibrated stopped it."""
+    from _asl import write_asl_sequence
+
+    from gyrodenoise.models.build import build_model
+    from gyrodenoise.pretrained import save_model
+
+    write_asl_sequence(tmp_path / "data" / "walk", seconds=20.0, seed=1)
+    model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+    summary = run_evaluate(
+        "dataset=asl_folder",
+        f"dataset.root={tmp_path / 'data'}",
+        "dataset.train_seqs=[]",
+        "dataset.val_seqs=[walk]",
+        "split=val",
+        f"weights.proposed={model}",
+        f"weights.calibrated={model}",
+        "threads=1",
+        "figures=false",
+        "trajectories=false",
+        f"out_dir={tmp_path / 'out'}",
+    )
+    assert "walk" in summary["aoe_deg"]

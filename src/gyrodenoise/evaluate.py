@@ -240,7 +240,10 @@ def _evaluate(cfg: DictConfig, out: Path) -> tuple[dict, str]:
         dm.inconsistent_truth = "warn"
     with noting_data_warnings() as data_warnings:  # the sequences are read and checked here
         dm.check_sequences(
-            train=split == "val", test=split == "test", test_hint="evaluate on the validation parts with split=val"
+            train=split == "val",
+            test=split == "test",
+            test_hint="evaluate on the validation parts with split=val",
+            fits=False,
         )
         dm.setup("test" if split == "test" else "fit")
     try:

@@ -223,15 +223,21 @@ class ImuDataModule(L.LightningDataModule):
         return AugmentConfig(**aug)
 
     def check_sequences(
-        self, train: bool = True, test: bool = True, test_hint: str = "pass test=false to train without them"
+        self,
+        train: bool = True,
+        test: bool = True,
+        test_hint: str = "pass test=false to train without them",
+        fits: bool = True,
     ) -> None:
         """Fail before the work, not in the middle of it: every sequence the command will read has its folder.
 
         A training whose test sequences are missing (TUM-VI's withheld rooms) would otherwise run for minutes
         and then stop at the test without writing its model. `test_hint` is what to do when only test
-        sequences are missing.
+        sequences are missing. `fits` False: the caller reads the validation data but fits nothing (evaluate
+        split=val), and needs no training sequence where dataset.val_seqs names the validation ones.
         """
-        if train and not self.train_names and not self.cv_holdout:  # else numpy's 'need at least one array' later
+        nothing_to_fit = not self.train_names and not self.cv_holdout
+        if train and nothing_to_fit and (fits or not self.val_explicit):  # else numpy's 'need at least one array'
             raise ConfigError(
                 "dataset.train_seqs is empty: name the training sequences (their ends validate unless "
                 "dataset.val_seqs names others), e.g. 'dataset.train_seqs=[walk_1,walk_2]'"
