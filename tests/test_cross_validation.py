@@ -372,5 +372,9 @@ def test_a_fold_beyond_the_flights_names_the_ablations_too():
     from gyrodenoise.cli_errors import ConfigError
     from gyrodenoise.data.datamodule import ImuDataModule
 
-    with pytest.raises(ConfigError, match=r"choose 0\.\.2 .*the ablations hold out fold = seed.*dataset.cv_fold=0,1,2"):
+    said = r"choose 0\.\.2 .*cross_validation .*dataset.cv_fold=0,1,2 .*an ablation holds out fold = seed, so give "
+    said += "it seed=0,1,2"
+    with pytest.raises(ConfigError, match=said):  # the fold swept beside the ablation's seeds crossed them (review)
         ImuDataModule("x", "/nowhere", ["a", "b", "c"], [], cv_fold=3)
+    with pytest.raises(ConfigError, match=r"needs two training flights or more"):  # not 'give one fold, 0..0'
+        ImuDataModule("x", "/nowhere", ["a"], [], cv_fold="all")

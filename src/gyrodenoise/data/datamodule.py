@@ -149,23 +149,24 @@ class ImuDataModule(L.LightningDataModule):
         if cv_fold is not None:
             if val_seqs is not None:
                 raise ConfigError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
-            if isinstance(cv_fold, str) and cv_fold.lower() == "all":
-                raise ConfigError(
-                    "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
-                    f"give one fold, 0..{len(self.train_names) - 1}"
-                )
             if len(self.train_names) < 2:  # its one flight held out leaves nothing to train on (a bare numpy error)
                 raise ConfigError(
                     f"dataset.cv_fold={cv_fold} needs two training flights or more (it holds one out and trains on "
                     f"the others), got {self.train_names}: name more in dataset.train_seqs, or set dataset.cv_fold=null"
                 )
+            if isinstance(cv_fold, str) and cv_fold.lower() == "all":
+                raise ConfigError(
+                    "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
+                    f"give one fold, 0..{len(self.train_names) - 1}"
+                )
             if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
                 n = len(self.train_names)
+                folds = ",".join(map(str, range(n)))
                 raise ConfigError(
                     f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {self.train_names}); "
-                    "the experiments' folds are EuRoC's six (experiment=cross_validation sweeps 0-5, the ablations "
-                    f"hold out fold = seed): for these give dataset.cv_fold={','.join(map(str, range(n)))} on the "
-                    "command line, or dataset.cv_fold=all"
+                    "the experiments' folds are EuRoC's six: for experiment=cross_validation (it sweeps 0-5) give "
+                    f"dataset.cv_fold={folds} on the command line, or dataset.cv_fold=all; an ablation holds out "
+                    f"fold = seed, so give it seed={folds}"
                 )
             self.cv_holdout = self.train_names.pop(cv_fold)
         self.test_names = list(test_seqs)
