@@ -212,12 +212,10 @@ def export_onnx(
         import onnx
 
         newest = onnx.defs.onnx_opset_version()  # above it the converter refuses (--opset 99 was told "or higher")
-        allowed = (
-            f"from {written} to {newest}, the installed onnx's newest" if opset > written else f"{written} or higher"
-        )
         raise ValueError(
             f"--opset {opset}: the exporter could not convert the graph to ONNX opset {opset} (it can write opset "
-            f"{written}), so nothing was written; give --opset {allowed} (default {OPSET})"
+            f"{written}), so nothing was written; give --opset from {min(written, newest)} to {newest}, the "
+            f"installed onnx's newest (default {OPSET})"
         )
     program.model.metadata_props.update(onnx_metadata(model, meta, stateful))
     with atomic_path(path, ".onnx") as tmp:
