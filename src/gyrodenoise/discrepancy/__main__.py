@@ -269,7 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
     if (earlier := earlier_run(args.out / "report.json")) is not None:  # replaced when this run has finished
-        print(f"note: replacing the outputs of an earlier run in {args.out} ({earlier})", file=sys.stderr)
+        said = f"note: the outputs of an earlier run in {args.out} ({earlier}) are replaced when this run has finished"
+        print(said, file=sys.stderr)
     code = code_version_text()  # now: a run takes minutes, in which the checkout may move
 
     left_out: list[dict] = []  # stretches between ground-truth gaps too short to compare
