@@ -160,6 +160,26 @@ def test_a_datasets_folder_names_its_sequence_folders(tmp_path, model_file, caps
                  "It holds the sequence folders walk_1, walk_2: give one of them")  # fmt: skip
 
 
+def test_an_unreadable_folder_beside_the_sequences_keeps_the_hint(tmp_path, model_file, capsys, monkeypatch):
+    """A drive's lost+found beside the sequences: on Python 3.11 is_file() raises PermissionError there (root here
+    reads everything, so the refusal is played), which replaced the folder's one-line message with a traceback."""
+    import pathlib
+
+    (tmp_path / "root" / "walk_1" / "mav0" / "imu0").mkdir(parents=True)
+    write_asl(tmp_path / "root" / "walk_1" / "mav0" / "imu0" / "data.csv", *synth(n=50))
+    (tmp_path / "root" / "lost+found").mkdir()
+    is_file = pathlib.Path.is_file
+
+    def refusing(self, *args, **kwargs):
+        if "lost+found" in self.parts:
+            raise PermissionError(13, "Permission denied", str(self))
+        return is_file(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "is_file", refusing)
+    expect_error(capsys, [tmp_path / "root", "-m", model_file, "-o", tmp_path / "o"],
+                 "It holds the sequence folders walk_1: give one of them")  # fmt: skip
+
+
 def test_a_file_that_is_not_a_model_is_refused_in_one_line(tmp_path, capsys):
     f = bad_file(tmp_path)
     summary = tmp_path / "summary.json"

@@ -78,6 +78,15 @@ class Correction:
     resampled_to_hz: float | None
 
 
+def _holds_imu_file(folder: Path) -> bool:
+    """Whether `folder` is an ASL sequence; False where it cannot be read (a drive's lost+found: on Python 3.11
+    is_file() raises PermissionError there, which would replace the message it serves)."""
+    try:
+        return (folder / "mav0" / "imu0" / "data.csv").is_file()
+    except OSError:
+        return False
+
+
 def find_imu_file(path: str | Path) -> Path:
     """A file as is; a folder: its mav0/imu0/data.csv or imu0/data.csv (ASL layout)."""
     p = Path(path)
@@ -86,7 +95,7 @@ def find_imu_file(path: str | Path) -> Path:
             if (p / sub).is_file():
                 return p / sub
         # a dataset's folder (dataset.root), which holds sequence folders: name them, one recording per command
-        held = sorted(d.name for d in p.iterdir() if (d / "mav0" / "imu0" / "data.csv").is_file())
+        held = sorted(d.name for d in p.iterdir() if _holds_imu_file(d))
         shown = ", ".join(held[:8]) + (f" and {len(held) - 8} more" if len(held) > 8 else "")
         hint = f" It holds the sequence folders {shown}: give one of them (one recording per command)." if held else ""
         raise FileNotFoundError(f"{p}: folder without mav0/imu0/data.csv, imu0/data.csv or data.csv.{hint}")
