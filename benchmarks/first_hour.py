@@ -55,6 +55,7 @@ def main() -> int:
         ap.error(f"--data {data}: no euroc/MH_01_easy in it")
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
     commit = commit.stdout.strip()
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     work.mkdir(parents=True, exist_ok=True)
     clone = work / "clone"
     subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
@@ -71,6 +72,7 @@ def main() -> int:
         p = subprocess.run(cmd, cwd=clone, env=env, capture_output=True, text=True)
         wall = time.monotonic() - t0
         last = next((ln for ln in reversed((p.stdout + p.stderr).splitlines()) if ln.strip()), "")
+        last = last.replace(str(work), "WORK")
         shown = " ".join(c.replace(str(work), "WORK").replace(str(Path(cmd[0]).parent), "venv/bin") for c in cmd)
         results.append({"what": what, "command": shown, "wall_s": round(wall, 1), "rc": p.returncode, "last": last})
         print(f"{what}: {wall:.1f} s, rc {p.returncode}", flush=True)
@@ -80,7 +82,7 @@ def main() -> int:
         "# The first hour, timed (benchmarks/first_hour.py)",
         "",
         f"Command: `python benchmarks/first_hour.py --work WORK --data DATA --out {args.out.name}`  ",
-        f"Code: {commit}; machine: {machine}; started {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.  ",
+        f"Code: {commit}; machine: {machine}; started {started}.  ",
         "A fresh clone, a fresh virtual environment (pip from the package registries), an empty data cache; each "
         "command as the README's table gives it, one after the other, Python's start included.",
         "",
