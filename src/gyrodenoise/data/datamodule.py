@@ -108,6 +108,46 @@ class RandomCrops(Dataset):
 TAIL_NAME_NOTE = "NAME[Ns:] is the part of a training sequence after its first N seconds (the seconds trained on)."
 
 
+def check_sequence_lists(
+    train_seqs: list[str], test_seqs: list[str], val_seqs: list[str] | None, cv_fold: int | str | None
+) -> None:
+    """The dataset's sequence lists and fold, checked before any data are read or simulated: a ConfigError naming
+    the setting (`SimDataModule` calls it before it generates its sequences)."""
+    for key, names in (("train_seqs", train_seqs), ("test_seqs", test_seqs), ("val_seqs", val_seqs)):
+        if isinstance(names, str):  # list('walk_1') would look for the sequences w, a, l, k, _, 1
+            raise ConfigError(
+                f"dataset.{key}={names!r} is one name, not a list: give 'dataset.{key}=[{names}]' (quoted for "
+                f"the shell), or several: 'dataset.{key}=[a,b]'"
+            )
+        if names is not None and (twice := sorted({str(n) for n in names if list(names).count(n) > 1})):
+            # a set of sequences: a repeat trains no more on it, and with cv_fold its holdout stayed in training
+            raise ConfigError(f"dataset.{key} names {', '.join(twice)} more than once: give each sequence once")
+    if cv_fold is None:
+        return
+    train = list(train_seqs)
+    if val_seqs is not None:
+        raise ConfigError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
+    if len(train) < 2:  # its one flight held out leaves nothing to train on (a bare numpy error)
+        raise ConfigError(
+            f"dataset.cv_fold={cv_fold} needs two training flights or more (it holds one out and trains on "
+            f"the others), got {train}: name more in dataset.train_seqs, or set dataset.cv_fold=null"
+        )
+    if isinstance(cv_fold, str) and cv_fold.lower() == "all":
+        raise ConfigError(
+            "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
+            f"give one fold, 0..{len(train) - 1}"
+        )
+    if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(train):
+        n = len(train)
+        folds = ",".join(map(str, range(n)))
+        raise ConfigError(
+            f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {train}); "
+            "the experiments' folds are EuRoC's six: for experiment=cross_validation (it sweeps 0-5) give "
+            f"dataset.cv_fold={folds} on the command line, or dataset.cv_fold=all; an ablation holds out "
+            f"fold = seed, so give it seed={folds}"
+        )
+
+
 class ImuDataModule(L.LightningDataModule):
     """Splits by sequence name and time, as in the paper (Section IV-A)."""
 
@@ -133,41 +173,12 @@ class ImuDataModule(L.LightningDataModule):
     ) -> None:
         super().__init__()
         self.name, self.root = name, str(root)
-        for key, names in (("train_seqs", train_seqs), ("test_seqs", test_seqs), ("val_seqs", val_seqs)):
-            if isinstance(names, str):  # list('walk_1') would look for the sequences w, a, l, k, _, 1
-                raise ConfigError(
-                    f"dataset.{key}={names!r} is one name, not a list: give 'dataset.{key}=[{names}]' (quoted for "
-                    f"the shell), or several: 'dataset.{key}=[a,b]'"
-                )
-            if names is not None and (twice := sorted({str(n) for n in names if list(names).count(n) > 1})):
-                # a set of sequences: a repeat trains no more on it, and with cv_fold its holdout stayed in training
-                raise ConfigError(f"dataset.{key} names {', '.join(twice)} more than once: give each sequence once")
+        check_sequence_lists(train_seqs, test_seqs, val_seqs, cv_fold)
         self.train_names = list(train_seqs)
         self.val_names = list(val_seqs if val_seqs is not None else train_seqs)
         self.val_explicit = val_seqs is not None  # named validation sequences must have data to validate on
         self.cv_fold, self.cv_holdout = cv_fold, None
         if cv_fold is not None:
-            if val_seqs is not None:
-                raise ConfigError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
-            if len(self.train_names) < 2:  # its one flight held out leaves nothing to train on (a bare numpy error)
-                raise ConfigError(
-                    f"dataset.cv_fold={cv_fold} needs two training flights or more (it holds one out and trains on "
-                    f"the others), got {self.train_names}: name more in dataset.train_seqs, or set dataset.cv_fold=null"
-                )
-            if isinstance(cv_fold, str) and cv_fold.lower() == "all":
-                raise ConfigError(
-                    "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
-                    f"give one fold, 0..{len(self.train_names) - 1}"
-                )
-            if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(self.train_names):
-                n = len(self.train_names)
-                folds = ",".join(map(str, range(n)))
-                raise ConfigError(
-                    f"dataset.cv_fold={cv_fold}: choose 0..{n - 1} (one per training sequence {self.train_names}); "
-                    "the experiments' folds are EuRoC's six: for experiment=cross_validation (it sweeps 0-5) give "
-                    f"dataset.cv_fold={folds} on the command line, or dataset.cv_fold=all; an ablation holds out "
-                    f"fold = seed, so give it seed={folds}"
-                )
             self.cv_holdout = self.train_names.pop(cv_fold)
         self.test_names = list(test_seqs)
         self.train_duration_s = train_duration_s

@@ -18,9 +18,9 @@ import numpy as np
 from gyrodenoise.atomic import write_text
 from gyrodenoise.cli_errors import ConfigError
 from gyrodenoise.data.cache import default_cache_dir
-from gyrodenoise.data.datamodule import ImuDataModule
+from gyrodenoise.data.datamodule import ImuDataModule, check_sequence_lists
 from gyrodenoise.sim.accel import acc_effects_from_config
-from gyrodenoise.sim.effects import Bias, Effect, WhiteNoise, effects_from_config
+from gyrodenoise.sim.effects import Bias, Effect, Vibration, WhiteNoise, effects_from_config
 from gyrodenoise.sim.error_model_file import load_error_model
 from gyrodenoise.sim.imu import _check_settings, asl_written, simulate_imu, write_asl
 from gyrodenoise.sim.trajectory import drone_trajectory, handheld_trajectory
@@ -79,8 +79,12 @@ def check_generation(generation: Mapping) -> None:
     except (ValueError, TypeError):
         raise ConfigError(f"dataset.generation.acc_bias={acc_bias!r}: three numbers in m/s^2") from None
     try:
-        _error_models(generation)
+        effects = _error_models(generation)[0]
         _check_settings(values["rate_hz"], values["duration_s"], 1, values["acc_noise_density"], acc_bias)
+        for i, e in enumerate(effects):  # one per entry (error_model_file's included): else refused mid-simulation
+            band = (float(e.params["frequency_hz"]), float(e.params["bandwidth_hz"])) if e.name == "vibration" else None
+            if band and (problem := Vibration.rate_problem(*band, values["rate_hz"])):
+                raise ValueError(f"dataset.generation.error_model[{i}]: {problem}")
     except (ValueError, TypeError) as e:
         message = str(e)  # simulate_imu's own names (rate_hz=..., acc_bias=...) are settings of dataset.generation
         raise ConfigError(message if message.startswith("dataset.") else f"dataset.generation.{message}") from None
@@ -150,6 +154,8 @@ class SimDataModule(ImuDataModule):
     """ImuDataModule over simulated sequences generated on first use (see module docstring)."""
 
     def __init__(self, generation: Mapping, root: str | None = None, cache_dir: str | None = None, **kwargs) -> None:
+        lists = [kwargs.get(k) for k in ("train_seqs", "test_seqs", "val_seqs", "cv_fold")]
+        check_sequence_lists(*lists)  # before minutes of simulation, not after them
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
         gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing

@@ -415,7 +415,8 @@ class Vibration(Effect):
     recording shows. The simulator averages each output period of its finer internal grid (an anti-alias mean that
     attenuates a line at f by about sinc(f / rate)), so there the pick-up is applied larger by that mean's gain at
     the frequency (`output_gain`), and the output carries the amplitude given. A frequency at or above the output's
-    Nyquist frequency, or a band reaching past it, is refused at every oversampling (1 included)."""
+    Nyquist frequency, or a band reaching past BAND_EDGE x the output rate, is refused at every oversampling
+    (`rate_problem`)."""
 
     name = "vibration"
     per_sequence = True
@@ -424,6 +425,7 @@ class Vibration(Effect):
     DEFAULTS = {"frequency_hz": 30.0, "amplitude": np.zeros(3), "bandwidth_hz": 0.0}
     REFERENCE = 1e-3 / np.sqrt(2)  # amplitude 1e-3 rad/s (0.057 deg/s) as sin and cos parts
     BUTTER_ORDER = 4
+    BAND_EDGE = 0.49  # x the rate: the band filter's highest edge, just under the Nyquist frequency
 
     @property
     def stochastic(self) -> bool:  # type: ignore[override]
@@ -432,9 +434,10 @@ class Vibration(Effect):
     def magnitude(self) -> float:
         return float(np.max(np.abs(self.params["amplitude"])))
 
-    @staticmethod
-    def band_edges(frequency_hz: float, bandwidth_hz: float, rate_hz: float) -> tuple[float, float]:
-        return max(frequency_hz - bandwidth_hz / 2, 1e-3), min(frequency_hz + bandwidth_hz / 2, 0.49 * rate_hz)
+    @classmethod
+    def band_edges(cls, frequency_hz: float, bandwidth_hz: float, rate_hz: float) -> tuple[float, float]:
+        lo, hi = frequency_hz - bandwidth_hz / 2, frequency_hz + bandwidth_hz / 2
+        return max(lo, 1e-3), min(hi, cls.BAND_EDGE * rate_hz)
 
     @staticmethod
     def output_gain(frequency_hz: float, rate_hz: float, mean_of: int) -> float:
@@ -445,28 +448,38 @@ class Vibration(Effect):
         x = np.pi * frequency_hz / rate_hz
         return float(abs(np.sin(mean_of * x) / (mean_of * np.sin(x))))
 
+    @classmethod
+    def rate_problem(
+        cls, frequency_hz: float, bandwidth_hz: float, rate_hz: float, oversampled: bool = True
+    ) -> str | None:
+        """Why this vibration cannot be simulated in an IMU output at `rate_hz` (None: it can), at every oversampling:
+        a line at or above the Nyquist frequency cannot appear in the output; a band must end at or below
+        BAND_EDGE x the rate, the highest edge of the band filter and of `band_psd`, the shape the detector fits (at
+        oversample=1 a band past it was cut there without a word, or crashed in scipy near the Nyquist frequency;
+        oversampled, its part past the Nyquist frequency folded back)."""
+        f, bw = float(frequency_hz), float(bandwidth_hz)
+        if f >= rate_hz / 2:
+            return (
+                f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
+                f"({rate_hz / 2:g} Hz at {rate_hz:g} Hz): its amplitude is the line's in the IMU output, and no "
+                "line above that frequency can appear there; give the frequency the line has in the recording"
+            )
+        edge = cls.BAND_EDGE * rate_hz
+        if bw > 0 and f + bw / 2 > edge:
+            fate = "alias into" if oversampled else "be cut from"
+            return (
+                f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
+                f"past {cls.BAND_EDGE:g} x the IMU's rate ({edge:g} Hz at {rate_hz:g} Hz, just under its Nyquist "
+                f"frequency: the band filter's highest edge), and would {fate} the output; give bandwidth_hz at most "
+                f"{max(2 * (edge - f), 0.0):g}, 0 (a line), or a higher rate_hz"
+            )
+        return None
+
     def apply(self, sig, y, rng):
         f, a, bw = float(self.params["frequency_hz"]), self.params["amplitude"], float(self.params["bandwidth_hz"])
         m = int(sig.output_mean_of)
-        # checked at every oversampling, 1 included: there the band past the Nyquist frequency was silently cut
-        # at 0.49 x the rate (`band_edges`), a band of another shape than the one given
-        out_rate = sig.rate_hz / m
-        if f >= out_rate / 2:
-            raise ValueError(
-                f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
-                f"({out_rate / 2:g} Hz at {out_rate:g} Hz): its amplitude is the line's in the IMU output, and no "
-                "line above that frequency can appear there; give the frequency the line has in the recording"
-            )
-        if bw > 0 and f + bw / 2 > out_rate / 2:
-            # the band's part above the output's Nyquist frequency would fold back below it (oversampled) or be
-            # cut off (not oversampled), where the band's amplitude and shape (`band_psd`, what the detector fits)
-            # say nothing of it
-            raise ValueError(
-                f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
-                f"past the IMU's Nyquist frequency ({out_rate / 2:g} Hz at {out_rate:g} Hz), and would "
-                f"{'alias into' if m > 1 else 'be cut from'} the output; give bandwidth_hz at most "
-                f"{2 * (out_rate / 2 - f):g} (the band within the Nyquist frequency) or a higher rate_hz"
-            )
+        if problem := self.rate_problem(f, bw, sig.rate_hz / m, oversampled=m > 1):
+            raise ValueError(problem)
         if m > 1:  # the output is the mean of m internal samples: apply the pick-up that leaves `a` in the output
             a = a / self.output_gain(f, sig.rate_hz, m)
         if bw <= 0:
