@@ -44,10 +44,10 @@ def test_a_band_limited_vibration_past_the_output_nyquist_is_refused(traj):
     """Only the band's centre was checked: a band from 80 to 120 Hz at 200 Hz folded its upper half back into the
     output, which its amplitude and spectral shape do not describe."""
     band = build_effect("vibration", frequency_hz=100.0 - 10.0, bandwidth_hz=40.0, amplitude=[0.01, 0, 0])
-    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past 0.49 x the IMU's "
-                       r"rate \(98 Hz at 200 Hz, .*bandwidth_hz at most 16"):  # fmt: skip
+    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past the IMU's Nyquist "
+                       r"frequency \(100 Hz at 200 Hz\).*bandwidth_hz at most 20"):  # fmt: skip
         simulate_imu(traj, [band], duration_s=2)
-    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=16.0, amplitude=[0.01, 0, 0])
+    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=20.0, amplitude=[0.01, 0, 0])
     assert np.isfinite(simulate_imu(traj, [within], duration_s=2).gyro).all()
 
 
@@ -56,19 +56,36 @@ def test_a_vibration_past_the_output_nyquist_is_refused_without_oversampling_too
     """At oversample=1 the band was silently cut at 0.49 x the rate (a band of another shape than the one given),
     and a line above the Nyquist frequency aliased; both are refused as they are where the simulator oversamples."""
     band = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=40.0, amplitude=[0.01, 0, 0])
-    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past 0.49 x the IMU's "
-                       r"rate \(98 Hz at 200 Hz, .*bandwidth_hz at most 16"):  # fmt: skip
+    with pytest.raises(ValueError, match=r"'vibration': bandwidth_hz 40 .* reaches 110 Hz, past the IMU's Nyquist "
+                       r"frequency \(100 Hz at 200 Hz\).*bandwidth_hz at most 20"):  # fmt: skip
         simulate_imu(traj, [band], duration_s=2, oversample=oversample)
-    # a band ending between 0.49 x the rate and the Nyquist frequency was cut at 0.49 (96-100 Hz simulated as
-    # 96-98), or crashed in scipy's filter design (review 63)
-    edge = build_effect("vibration", frequency_hz=98.0, bandwidth_hz=3.0, amplitude=[0.01, 0, 0])
-    with pytest.raises(ValueError, match=r"reaches 99.5 Hz, past 0.49 x the IMU's rate"):
-        simulate_imu(traj, [edge], duration_s=2, oversample=oversample)
     line = build_effect("vibration", frequency_hz=120.0, amplitude=[0.01, 0, 0])
     with pytest.raises(ValueError, match=r"frequency_hz 120 is at or above the IMU's Nyquist frequency"):
         simulate_imu(traj, [line], duration_s=2, oversample=oversample)
-    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=16.0, amplitude=[0.01, 0, 0])
+    within = build_effect("vibration", frequency_hz=90.0, bandwidth_hz=20.0, amplitude=[0.01, 0, 0])
     assert np.isfinite(simulate_imu(traj, [within], duration_s=2, oversample=oversample).gyro).all()
+
+
+def test_a_band_ending_just_under_the_nyquist_frequency_keeps_its_top_at_oversample_1(traj):
+    """A band ending between 0.49 x the rate and the Nyquist frequency was cut at 0.49 x the rate without a word
+    (96-100 Hz simulated as 96-98 Hz), and one starting above it crashed in scipy's filter design (review 63)."""
+    band = build_effect("vibration", frequency_hz=97.0, bandwidth_hz=5.0, amplitude=[0.01, 0, 0])
+    g = simulate_imu(traj, [band], duration_s=20, oversample=1).gyro[:, 0]
+    f, p = welch(g - g.mean(), fs=200.0, nperseg=1024)
+    assert p[(f > 98.3) & (f < 99.4)].mean() > 0.2 * p[(f > 95.0) & (f < 98.0)].mean()  # was 4e-4 x
+    high = build_effect("vibration", frequency_hz=99.9, bandwidth_hz=0.1, amplitude=[0.01, 0, 0])
+    with pytest.raises(ValueError, match=r"starts above 0.499 x the IMU's rate"):
+        simulate_imu(traj, [high], duration_s=2, oversample=1)
+
+
+def test_the_sim_dataset_checks_its_lists_before_it_simulates(tmp_path):
+    """A sequence named twice was refused only after every sequence had been simulated and written (review 63)."""
+    from gyrodenoise.cli_errors import ConfigError
+
+    generation = {"seed": 0, "duration_s": 5, "error_model": []}
+    with pytest.raises(ConfigError, match="dataset.train_seqs names drone_00 more than once"):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"] * 2, test_seqs=[])
+    assert not (tmp_path / "sim").exists()
 
 
 def test_a_time_offset_delays_the_accelerometer_too(traj):
@@ -148,6 +165,10 @@ def test_the_sim_datasets_noise_augmentation_follows_its_error_model(tmp_path):
     assert kept.sensor["gyro_noise_density"] == 1e-4
 
 
+VIBRATION_120HZ = {"name": "vibration", "units": "si", "params": {"frequency_hz": 120.0, "amplitude": [0.01, 0, 0],
+                                                                   "bandwidth_hz": 0.0}}  # fmt: skip
+
+
 @pytest.mark.parametrize(
     ("setting", "said"),
     [
@@ -157,16 +178,7 @@ def test_the_sim_datasets_noise_augmentation_follows_its_error_model(tmp_path):
         ({"acc_bias": "abc"}, r"^dataset\.generation\.acc_bias='abc': three numbers"),
         ({"error_model": [{"name": "bias", "units": "datasheet", "params": {"bias": [1, 2]}}]}, r"params\.bias"),
         (  # refused by the simulator only after 'simulating N sequence(s)', without the setting's name (review 63)
-            {
-                "error_model": [
-                    {"name": "white_noise", "units": "si", "params": {"density": 1e-4}},
-                    {
-                        "name": "vibration",
-                        "units": "si",
-                        "params": {"frequency_hz": 120.0, "amplitude": [0.01, 0, 0], "bandwidth_hz": 0.0},
-                    },
-                ]
-            },
+            {"error_model": [{"name": "white_noise", "units": "si", "params": {"density": 1e-4}}, VIBRATION_120HZ]},
             r"^dataset\.generation\.error_model\[1\]: effect 'vibration': frequency_hz 120 is at or above",
         ),
     ],

@@ -415,8 +415,7 @@ class Vibration(Effect):
     recording shows. The simulator averages each output period of its finer internal grid (an anti-alias mean that
     attenuates a line at f by about sinc(f / rate)), so there the pick-up is applied larger by that mean's gain at
     the frequency (`output_gain`), and the output carries the amplitude given. A frequency at or above the output's
-    Nyquist frequency, or a band reaching past BAND_EDGE x the output rate, is refused at every oversampling
-    (`rate_problem`)."""
+    Nyquist frequency, or a band reaching past it, is refused at every oversampling (`rate_problem`)."""
 
     name = "vibration"
     per_sequence = True
@@ -425,7 +424,7 @@ class Vibration(Effect):
     DEFAULTS = {"frequency_hz": 30.0, "amplitude": np.zeros(3), "bandwidth_hz": 0.0}
     REFERENCE = 1e-3 / np.sqrt(2)  # amplitude 1e-3 rad/s (0.057 deg/s) as sin and cos parts
     BUTTER_ORDER = 4
-    BAND_EDGE = 0.49  # x the rate: the band filter's highest edge, just under the Nyquist frequency
+    BAND_EDGE = 0.499  # x the rate: the band filter's top edge (a Butterworth design needs it under the Nyquist)
 
     @property
     def stochastic(self) -> bool:  # type: ignore[override]
@@ -453,25 +452,28 @@ class Vibration(Effect):
         cls, frequency_hz: float, bandwidth_hz: float, rate_hz: float, oversampled: bool = True
     ) -> str | None:
         """Why this vibration cannot be simulated in an IMU output at `rate_hz` (None: it can), at every oversampling:
-        a line at or above the Nyquist frequency cannot appear in the output; a band must end at or below
-        BAND_EDGE x the rate, the highest edge of the band filter and of `band_psd`, the shape the detector fits (at
-        oversample=1 a band past it was cut there without a word, or crashed in scipy near the Nyquist frequency;
-        oversampled, its part past the Nyquist frequency folded back)."""
-        f, bw = float(frequency_hz), float(bandwidth_hz)
-        if f >= rate_hz / 2:
+        a line at or above the Nyquist frequency cannot appear in the output, and a band reaching past it would fold
+        back (oversampled) or be cut (not oversampled: the band filter runs at the output rate, its top edge at
+        BAND_EDGE x the rate, where a band that starts above it has no pass band)."""
+        f, bw, nyquist = float(frequency_hz), float(bandwidth_hz), rate_hz / 2
+        if f >= nyquist:
             return (
                 f"effect 'vibration': frequency_hz {f:g} is at or above the IMU's Nyquist frequency "
-                f"({rate_hz / 2:g} Hz at {rate_hz:g} Hz): its amplitude is the line's in the IMU output, and no "
+                f"({nyquist:g} Hz at {rate_hz:g} Hz): its amplitude is the line's in the IMU output, and no "
                 "line above that frequency can appear there; give the frequency the line has in the recording"
             )
-        edge = cls.BAND_EDGE * rate_hz
-        if bw > 0 and f + bw / 2 > edge:
-            fate = "alias into" if oversampled else "be cut from"
+        if bw > 0 and f + bw / 2 > nyquist * (1 + 1e-9):  # a band fitted up to it: its edge, rounded
             return (
                 f"effect 'vibration': bandwidth_hz {bw:g} around frequency_hz {f:g} reaches {f + bw / 2:g} Hz, "
-                f"past {cls.BAND_EDGE:g} x the IMU's rate ({edge:g} Hz at {rate_hz:g} Hz, just under its Nyquist "
-                f"frequency: the band filter's highest edge), and would {fate} the output; give bandwidth_hz at most "
-                f"{max(2 * (edge - f), 0.0):g}, 0 (a line), or a higher rate_hz"
+                f"past the IMU's Nyquist frequency ({nyquist:g} Hz at {rate_hz:g} Hz), and would "
+                f"{'alias into' if oversampled else 'be cut from'} the output; give bandwidth_hz at most "
+                f"{2 * (nyquist - f):g} (the band within the Nyquist frequency), 0 (a line), or a higher rate_hz"
+            )
+        if bw > 0 and f - bw / 2 >= cls.BAND_EDGE * rate_hz:
+            return (
+                f"effect 'vibration': the band of bandwidth_hz {bw:g} around frequency_hz {f:g} starts above "
+                f"{cls.BAND_EDGE:g} x the IMU's rate ({cls.BAND_EDGE * rate_hz:g} Hz), the band filter's top edge: "
+                "give bandwidth_hz 0 (a line) or a lower frequency_hz"
             )
         return None
 
