@@ -26,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def rows(py: str, data: Path, work: Path) -> list[tuple[str, list[str]]]:
+def rows(py: str, work: Path) -> list[tuple[str, list[str]]]:
     """(what, command) in the README's order; `py` is the fresh environment's python."""
     own = work / "my_imu.csv"
     return [
@@ -67,13 +67,13 @@ def main() -> int:
     env |= {"GYRODENOISE_DATA": str(data), "GYRODENOISE_CACHE": str(work / "cache")}
     env["PATH"] = f"{work / 'venv' / 'bin'}:{env.get('PATH', '')}"
     results = []
-    for what, cmd in rows(str(work / "venv" / "bin" / "python"), data, work):
+    for what, cmd in rows(str(work / "venv" / "bin" / "python"), work):
         t0 = time.monotonic()
         p = subprocess.run(cmd, cwd=clone, env=env, capture_output=True, text=True)
         wall = time.monotonic() - t0
         last = next((ln for ln in reversed((p.stdout + p.stderr).splitlines()) if ln.strip()), "")
         last = last.replace(str(work), "WORK")
-        shown = " ".join(c.replace(str(work), "WORK").replace(str(Path(cmd[0]).parent), "venv/bin") for c in cmd)
+        shown = " ".join(c.replace(str(work), "WORK") for c in cmd)
         results.append({"what": what, "command": shown, "wall_s": round(wall, 1), "rc": p.returncode, "last": last})
         print(f"{what}: {wall:.1f} s, rc {p.returncode}", flush=True)
         (work / f"{len(results):02d}.log").write_text(p.stdout + p.stderr)

@@ -378,3 +378,11 @@ def test_a_fold_beyond_the_flights_names_the_ablations_too():
         ImuDataModule("x", "/nowhere", ["a", "b", "c"], [], cv_fold=3)
     with pytest.raises(ConfigError, match=r"needs two training flights or more"):  # not 'give one fold, 0..0'
         ImuDataModule("x", "/nowhere", ["a"], [], cv_fold="all")
+    with pytest.raises(ConfigError, match=r"dataset.cv_fold=True: choose 0\.\.1"):  # held out flight 1 (review 63)
+        ImuDataModule("x", "/nowhere", ["a", "b"], [], cv_fold=True)
+    from gyrodenoise.data.datamodule import check_sequence_lists
+
+    with pytest.raises(ConfigError, match=r"needs two training flights or more"):  # a bare TypeError on None
+        check_sequence_lists(None, [], None, 0)
+    with pytest.raises(ConfigError, match=r"dataset.val_seqs=\[\] names no validation sequence"):  # crashed later
+        ImuDataModule("x", "/nowhere", ["a", "b"], [], val_seqs=[])

@@ -139,12 +139,16 @@ def test_a_wide_line_near_nyquist_gets_a_band_the_simulator_accepts():
     fit, holdout = _fit_and_holdout()
     report = {"gyro_lines_above_band": gyro_lines(fit + holdout), "base_params": WHITE}
     (line,) = report["gyro_lines_above_band"]
-    near = {**line, "frequency_hz": 0.48 * RATE - 2.0, "width_hz": 12.0}
+    near = {**line, "frequency_hz": 0.495 * RATE - 2.0, "width_hz": 12.0}
     report["gyro_lines_above_band"] = [near]
     add_lines_to_model(report, fit, holdout)  # raised ValueError from the simulator's Nyquist check
     sim = near["simulator_vibration"]
-    assert sim["frequency_hz"] + sim["bandwidth_hz"] / 2 == pytest.approx(0.48 * RATE)
+    assert sim["frequency_hz"] + sim["bandwidth_hz"] / 2 == pytest.approx(0.495 * RATE)
     assert simulator_vibration({**line, "frequency_hz": 0.5 * RATE}, fit) is None
+    assert simulator_vibration({**line, "frequency_hz": 0.497 * RATE, "width_hz": 12.0}, fit)["bandwidth_hz"] == 0
+    # under the cap a band keeps its own width (a 0.48 cap made a 3-Hz band at 0.4875 x the rate a sinusoid)
+    kept = simulator_vibration({**line, "frequency_hz": 0.4875 * RATE, "width_hz": 2.0}, fit)["bandwidth_hz"]
+    assert kept == pytest.approx(2.0 - 2 * 0.25)
     # the model is simulated at the nominal rate, a little under the measured one (review 63: refused at 200 Hz)
     from gyrodenoise.sim.effects import Vibration
 

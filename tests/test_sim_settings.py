@@ -206,3 +206,24 @@ def test_sim_dataset_settings_are_config_errors_before_anything_is_simulated(tmp
 def test_testworld_settings_no_imu_has_are_one_line(tmp_path, kwargs, said):
     with pytest.raises(ValueError, match=said):
         make_sequence(tmp_path, duration=2.0, **kwargs)
+
+
+def test_a_vibration_read_from_an_error_model_file_is_named_by_the_file(tmp_path):
+    """The early check blamed dataset.generation.error_model[i], a setting the user had not given (review 63)."""
+    import yaml
+
+    from gyrodenoise.cli_errors import ConfigError
+
+    path = tmp_path / "error_model.yaml"
+    path.write_text(yaml.safe_dump({"error_model": [VIBRATION_120HZ]}))
+    generation = {"seed": 0, "duration_s": 5, "error_model": [], "error_model_file": str(path)}
+    with pytest.raises(ConfigError, match=rf"^dataset\.generation\.error_model_file {path}, entry 0: effect 'vib"):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"], test_seqs=[])
+    assert not (tmp_path / "sim").exists()
+
+
+def test_an_oversampled_band_just_under_the_nyquist_frequency_is_simulated(traj):
+    """The band filter's top edge (0.499 x the rate) binds only at oversample=1: oversampled, a band starting above
+    it was accepted before the review's change and must still be (review 63)."""
+    band = build_effect("vibration", frequency_hz=99.9, bandwidth_hz=0.1, amplitude=[0.01, 0, 0])
+    assert np.isfinite(simulate_imu(traj, [band], duration_s=2).gyro).all()

@@ -135,6 +135,11 @@ def test_reference_of_a_fold_ensemble_is_taken_on_the_union_of_its_members_fligh
     ref = load_model(out)[1]["spread_reference"]
     assert list(ref["per_recording_rad_s"]) == ["walk", "run", "jog"]
     assert ref["recordings"].startswith("the union of the members' training recordings")
+    from gyrodenoise.ensemble import reference_recordings
+
+    same = [{"train_seqs": ["walk", "run"]}, {"train_seqs": ["run", "walk"]}]  # a seed ensemble, listed otherwise
+    assert reference_recordings({"members": same}) == (["walk", "run"], "the members' training recordings")
+    assert reference_recordings({"members": [*members, {"train_seqs": None}]})[0] == []  # one records none
 
 
 @pytest.mark.parametrize(

@@ -270,14 +270,19 @@ def add_spread_reference(
 
 def reference_recordings(meta: dict) -> tuple[list[str], str]:
     """The recordings an ensemble's spread reference is taken on, and what they are: the members' common training
-    recordings, else (members trained on different flights: the folds of a cross-validation) the union of theirs.
+    recordings, else (members trained on different flights: the folds of a cross-validation) the union of theirs;
+    none where a member records none.
     On the union each flight was held out by some member, whose disagreement there is its held-out one: the reference
     comes out higher than a seed ensemble's would, and the check warns later, not sooner."""
+    plain = "the members' training recordings"
     if common := list(meta.get("train_seqs") or []):
-        return common, "the members' training recordings"
-    union: list[str] = []
-    for rec in meta.get("members") or []:
-        union += [n for n in rec.get("train_seqs") or [] if n not in union]
+        return common, plain
+    lists = [list(rec.get("train_seqs") or []) for rec in meta.get("members") or []]
+    if not lists or not all(lists):  # a member that records none: its recordings are unknown, none is guessed
+        return [], plain
+    if all(set(seqs) == set(lists[0]) for seqs in lists):  # the same flights, listed in another order
+        return lists[0], plain
+    union = list(dict.fromkeys(n for seqs in lists for n in seqs))
     return union, "the union of the members' training recordings (each held out by some member)"
 
 

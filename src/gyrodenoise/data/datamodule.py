@@ -122,9 +122,14 @@ def check_sequence_lists(
         if names is not None and (twice := sorted({str(n) for n in names if list(names).count(n) > 1})):
             # a set of sequences: a repeat trains no more on it, and with cv_fold its holdout stayed in training
             raise ConfigError(f"dataset.{key} names {', '.join(twice)} more than once: give each sequence once")
+    if val_seqs is not None and not list(val_seqs):  # "named" but none: nothing validates, and scoring crashed
+        raise ConfigError(
+            "dataset.val_seqs=[] names no validation sequence: name some, or leave it null (the training sequences' "
+            "ends validate)"
+        )
     if cv_fold is None:
         return
-    train = list(train_seqs)
+    train = list(train_seqs or [])
     if val_seqs is not None:
         raise ConfigError("dataset.cv_fold and dataset.val_seqs exclude each other: set one of them to null")
     if len(train) < 2:  # its one flight held out leaves nothing to train on (a bare numpy error)
@@ -137,7 +142,7 @@ def check_sequence_lists(
             "dataset.cv_fold=all trains every fold in turn inside `python -m gyrodenoise.train`; anywhere else "
             f"give one fold, 0..{len(train) - 1}"
         )
-    if not isinstance(cv_fold, int) or not 0 <= cv_fold < len(train):
+    if isinstance(cv_fold, bool) or not isinstance(cv_fold, int) or not 0 <= cv_fold < len(train):
         n = len(train)
         folds = ",".join(map(str, range(n)))
         raise ConfigError(

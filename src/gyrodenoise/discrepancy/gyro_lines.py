@@ -28,7 +28,7 @@ SEGMENT_S = 4.0  # Welch segment: 0.25 Hz bins
 MAIN_LOBE_BINS = 2  # a sinusoid flags ~3 bins of the Hann window over LINE_RATIO, a band ~2 bins more than its width
 MIN_SEGMENTS = 8  # a stretch shorter than this many segments (half overlap) gives no spectrum worth reading
 MERGE_HZ = 2.0  # lines of different stretches this close are one line (a band-limited line wanders ~1 Hz)
-BAND_TOP = 0.48  # x the fitted rate: where a modelled band stops, 2 % of the rate under the Nyquist frequency
+BAND_TOP = 0.495  # x the fitted rate: where a modelled band stops, 0.5 % of the rate under the Nyquist frequency
 
 
 def stretch_lines(gyro: np.ndarray, rate_hz: float, above_hz: float, ratio: float = LINE_RATIO) -> list[dict]:
@@ -113,7 +113,8 @@ def simulator_vibration(line: dict, fit: list) -> dict | None:
     0.5 Hz a round); a line no wider than one bin after that is a sinusoid (width 0). The band stops at BAND_TOP x
     the fitted recordings' rate, under the Nyquist frequency (the simulator refuses a band past it:
     `Vibration.rate_problem`) by a margin for recordings and simulations a little slower (measured rates differ in
-    the 5th digit, and the model is simulated at the nominal one); a line at the Nyquist frequency gets no model."""
+    the 5th digit, and the model is simulated at the nominal one); a line above that is a sinusoid, and one at the
+    Nyquist frequency gets no model."""
     names = [fc.name for fc in fit]
     if not names or any(n not in line["per_stretch"] for n in names):
         return None
@@ -122,7 +123,11 @@ def simulator_vibration(line: dict, fit: list) -> dict | None:
     f, rate = float(line["frequency_hz"]), min(float(fc.rate_hz) for fc in fit)
     if f >= rate / 2:
         return None
-    width = min(line["width_hz"] - MAIN_LOBE_BINS * df, 2 * (BAND_TOP * rate - f))
+    width = line["width_hz"] - MAIN_LOBE_BINS * df
+    if f < BAND_TOP * rate:  # the band kept centred on the line: both its edges move in
+        width = min(width, 2 * (BAND_TOP * rate - f))
+    else:  # a line this close to the Nyquist frequency: a sinusoid
+        width = 0.0
     return {"frequency_hz": f, "amplitude": (np.sqrt(2.0) * rms).tolist(), "bandwidth_hz": width if width > df else 0.0}
 
 

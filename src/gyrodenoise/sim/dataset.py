@@ -64,9 +64,10 @@ def _error_models(generation: Mapping) -> tuple[list[Effect], list, float]:
     return effects, acc_effects, jitter
 
 
-def check_generation(generation: Mapping) -> None:
+def check_generation(generation: Mapping, model_file: str | None = None) -> None:
     """The generation settings, checked before anything is simulated or a cache folder made: a ConfigError (one line
-    from the commands, not Hydra's 'Error in call to target' block) naming the dataset.generation setting."""
+    from the commands, not Hydra's 'Error in call to target' block) naming the dataset.generation setting
+    (`model_file`: the error_model_file its error model was read from)."""
     values = {}
     for key, default in (("rate_hz", 200.0), ("duration_s", 120.0), ("acc_noise_density", 2.0e-3)):
         try:
@@ -84,7 +85,8 @@ def check_generation(generation: Mapping) -> None:
         for i, e in enumerate(effects):  # one per entry (error_model_file's included): else refused mid-simulation
             band = (float(e.params["frequency_hz"]), float(e.params["bandwidth_hz"])) if e.name == "vibration" else None
             if band and (problem := Vibration.rate_problem(*band, values["rate_hz"])):
-                raise ValueError(f"dataset.generation.error_model[{i}]: {problem}")
+                where = f"error_model_file {model_file}, entry {i}" if model_file else f"error_model[{i}]"
+                raise ValueError(f"dataset.generation.{where}: {problem}")
     except (ValueError, TypeError) as e:
         message = str(e)  # simulate_imu's own names (rate_hz=..., acc_bias=...) are settings of dataset.generation
         raise ConfigError(message if message.startswith("dataset.") else f"dataset.generation.{message}") from None
@@ -159,7 +161,7 @@ class SimDataModule(ImuDataModule):
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
         gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
-        check_generation(gen)
+        check_generation(gen, generation.get("error_model_file"))
         sensor = dict(kwargs.get("sensor") or {})
         if sensor.get("gyro_noise_density") is None:  # the simulated gyro's own, for the training's noise augmentation
             sensor["gyro_noise_density"] = white_noise_density(gen.get("error_model", []))

@@ -469,7 +469,7 @@ class Vibration(Effect):
                 f"{'alias into' if oversampled else 'be cut from'} the output; give bandwidth_hz at most "
                 f"{2 * (nyquist - f):g} (the band within the Nyquist frequency), 0 (a line), or a higher rate_hz"
             )
-        if bw > 0 and f - bw / 2 >= cls.BAND_EDGE * rate_hz:
+        if bw > 0 and not oversampled and f - bw / 2 >= cls.BAND_EDGE * rate_hz:  # oversampled: no such edge
             return (
                 f"effect 'vibration': the band of bandwidth_hz {bw:g} around frequency_hz {f:g} starts above "
                 f"{cls.BAND_EDGE:g} x the IMU's rate ({cls.BAND_EDGE * rate_hz:g} Hz), the band filter's top edge: "
