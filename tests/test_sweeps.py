@@ -273,12 +273,17 @@ def test_optuna_search_end_to_end(tiny_root, tmp_path):
             "hydra.sweeper.sampler.n_startup_trials=1",
             f"hydra.sweeper.storage=sqlite:///{tmp_path / 'optuna.db'}",
             *tiny_overrides(tiny_root),
+            "dataset.name=mine",  # own data: the study is named after it, not 'euroc_denoiser' (audit 63)
             "logger=none",
             f"hydra.sweep.dir={sweep_dir}",
         ],
         cwd=tmp_path,
     )
     assert (tmp_path / "optuna.db").stat().st_size > 0
+    import optuna
+
+    studies = optuna.get_all_study_summaries(f"sqlite:///{tmp_path / 'optuna.db'}")
+    assert [st.study_name for st in studies] == ["mine_denoiser"]
     import yaml
 
     result = yaml.safe_load((sweep_dir / "optimization_results.yaml").read_text())
