@@ -215,7 +215,32 @@ def test_a_fold_list_beyond_the_flights_stops_the_sweep_before_training(tmp_path
     assert cv.fold_list_problem(config(["dataset.cv_fold=range(0,3)"])) is None
     assert "sweeps range(0,4)" in cv.fold_list_problem(config(["dataset.cv_fold=range(0,4)"]))
     with pytest.raises(SystemExit):
-        cv.CrossValidationCallback().on_multirun_start(config(["dataset=tumvi"]))
+        cv.FoldSweepCheck().on_multirun_start(config(["dataset=tumvi"]))
+
+
+def test_an_ablation_whose_seeds_exceed_the_flights_stops_before_training():
+    """An ablation holds out fold = seed (dataset.cv_fold=${seed}, seeds 0,2,3,5): on three own flights its seeds 3
+    and 5 failed after the others had trained (audit 63); the sweep now ends first, advising seeds, not folds."""
+    from omegaconf import OmegaConf
+
+    def config(task: list[str]) -> object:
+        return OmegaConf.create(
+            {
+                "seed": 0,
+                "dataset": {"name": "mine", "train_seqs": ["a", "b", "c"], "cv_fold": "${seed}"},
+                "hydra": {
+                    "overrides": {"task": task},
+                    "sweeper": {"params": {"model.act": "gelu,relu", "seed": "0,2,3,5"}},
+                },
+            }
+        )
+
+    problem = cv.fold_list_problem(config([]))
+    assert problem.startswith("seed sweeps 0,2,3,5 (the held-out flight is the seed: dataset.cv_fold=${seed})")
+    assert "give seed=0,1,2 (the ablations sweep EuRoC's seeds 0,2,3,5)" in problem
+    assert cv.fold_list_problem(config(["seed=0,1,2"])) is None
+    with pytest.raises(SystemExit):
+        cv.FoldSweepCheck().on_multirun_start(config([]))
 
 
 def test_a_reference_of_another_dataset_or_not_a_summary_is_refused(tmp_path, capsys):

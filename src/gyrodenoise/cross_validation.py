@@ -440,40 +440,58 @@ def fold_list_problem(config: DictConfig) -> str | None:
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     swept = {o.split("=", 1)[0].lstrip("+"): o.split("=", 1)[1] for o in config.hydra.overrides.task if "=" in o}
-    value = swept.get(FOLD_KEY, (config.hydra.sweeper.get("params") or {}).get(FOLD_KEY))
+    params = config.hydra.sweeper.get("params") or {}
+    key = FOLD_KEY
+    value = swept.get(key, params.get(key))
+    raw = OmegaConf.to_container(config.dataset, resolve=False).get("cv_fold") if "dataset" in config else None
+    if value is None and isinstance(raw, str) and raw.replace(" ", "") == "${seed}":  # the ablations: fold = seed
+        key = "seed"
+        value = swept.get(key, params.get(key))
     flights = OmegaConf.select(config, "dataset.train_seqs", throw_on_missing=False, default=None)
     if value is None or not isinstance(flights, Sequence) or isinstance(flights, str):
         return None
     try:
-        override = OverridesParser.create().parse_override(f"{FOLD_KEY}={value}")
+        override = OverridesParser.create().parse_override(f"{key}={value}")
         folds = list(override.sweep_iterator()) if override.is_sweep_override() else [override.value()]
     except Exception:  # noqa: BLE001 - an unusual sweep: the jobs themselves will say what is wrong
         return None
-    n = len(flights)
+    n, name = len(flights), config.dataset.get("name", "the dataset")
+    what = f"{key} sweeps {value}" + (
+        " (the held-out flight is the seed: dataset.cv_fold=${seed})" if key == "seed" else ""
+    )
     if n < 2:  # its one flight held out leaves none to train on: each job would stop on it
         return (
-            f"{FOLD_KEY} sweeps {value}, but {config.dataset.get('name', 'the dataset')} has {n} training flight(s) "
-            f"({', '.join(map(str, flights))}): cross-validation holds one out and trains on the others, so it needs "
-            "two or more in dataset.train_seqs"
+            f"{what}, but {name} has {n} training flight(s) ({', '.join(map(str, flights))}): cross-validation holds "
+            "one out and trains on the others, so it needs two or more in dataset.train_seqs"
         )
-    if all(isinstance(k, int) and 0 <= k < n for k in folds):
+    if all(isinstance(k, int) and not isinstance(k, bool) and 0 <= k < n for k in folds):
         return None
+    hint = (
+        "the ablations sweep EuRoC's seeds 0,2,3,5"
+        if key == "seed"
+        else "experiment=cross_validation sweeps EuRoC's six"
+    )
     return (
-        f"{FOLD_KEY} sweeps {value}, but {config.dataset.get('name', 'the dataset')} has {n} training flights "
-        f"({', '.join(map(str, flights))}): give {FOLD_KEY}={','.join(map(str, range(n)))} (experiment="
-        "cross_validation sweeps EuRoC's six), or run the folds in turn without -m"
+        f"{what}, but {name} has {n} training flights ({', '.join(map(str, flights))}): give "
+        f"{key}={','.join(map(str, range(n)))} ({hint})"
+        + ("" if key == "seed" else ", or run the folds in turn without -m")
     )
 
 
-class CrossValidationCallback(Callback):
-    """Hydra callback: after a multirun over folds, `<sweep dir>/cross_validation.{md,json}`."""
+class FoldSweepCheck(Callback):
+    """Hydra callback of every training multirun (conf/train.yaml): folds beyond the dataset's training flights, swept
+    as dataset.cv_fold (experiment=cross_validation) or as the seed an ablation holds out (dataset.cv_fold=${seed}),
+    end the sweep before any training, not after the valid folds have trained."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        """Folds beyond the dataset's training flights end the sweep before any training (experiment=cross_validation
-        sweeps EuRoC's six; TUM-VI has three rooms), not after the valid folds have trained."""
         if message := fold_list_problem(config):
             print(f"error: {message}", file=sys.stderr)
             raise SystemExit(2)  # Hydra turns a callback's exceptions into warnings and goes on
+
+
+class CrossValidationCallback(Callback):
+    """Hydra callback: after a multirun over folds, `<sweep dir>/cross_validation.{md,json}` (the folds are checked
+    before the sweep by `FoldSweepCheck`, which every training multirun has)."""
 
     def on_job_end(self, config: DictConfig, **kwargs: Any) -> None:
         """After each job of the sweep, finished or failed: the table of the folds finished so far, so that a sweep
