@@ -216,6 +216,16 @@ def test_a_fold_list_beyond_the_flights_stops_the_sweep_before_training(tmp_path
     assert "sweeps range(0,4)" in cv.fold_list_problem(config(["dataset.cv_fold=range(0,4)"]))
     with pytest.raises(SystemExit):
         cv.FoldSweepCheck().on_multirun_start(config(["dataset=tumvi"]))
+    # every training multirun has the check: a search whose trials each train all folds, or none, passes it
+    search = OmegaConf.create(
+        {
+            "dataset": {"name": "euroc", "train_seqs": ["a", "b", "c"], "cv_fold": None},
+            "hydra": {"overrides": {"task": ["dataset.cv_fold=all"]}, "sweeper": {"params": {"optim.lr": "0.1,0.2"}}},
+        }
+    )
+    assert cv.fold_list_problem(search) is None  # hparams_search=euroc_optuna dataset.cv_fold=all (docs/training.md)
+    search.hydra.overrides.task = ["dataset.cv_fold=null"]
+    assert cv.fold_list_problem(search) is None
 
 
 def test_an_ablation_whose_seeds_exceed_the_flights_stops_before_training():

@@ -455,6 +455,9 @@ def fold_list_problem(config: DictConfig) -> str | None:
         folds = list(override.sweep_iterator()) if override.is_sweep_override() else [override.value()]
     except Exception:  # noqa: BLE001 - an unusual sweep: the jobs themselves will say what is wrong
         return None
+    folds = [k for k in folds if k is not None]  # null: a job without cross-validation
+    if not folds:
+        return None
     n, name = len(flights), config.dataset.get("name", "the dataset")
     what = f"{key} sweeps {value}" + (
         " (the held-out flight is the seed: dataset.cv_fold=${seed})" if key == "seed" else ""
@@ -464,7 +467,12 @@ def fold_list_problem(config: DictConfig) -> str | None:
             f"{what}, but {name} has {n} training flight(s) ({', '.join(map(str, flights))}): cross-validation holds "
             "one out and trains on the others, so it needs two or more in dataset.train_seqs"
         )
-    if all(isinstance(k, int) and not isinstance(k, bool) and 0 <= k < n for k in folds):
+
+    def fits(k: object) -> bool:  # 'all': each job trains every fold in turn (hparams_search's figure)
+        every = isinstance(k, str) and k.lower() == "all" and key == FOLD_KEY
+        return every or (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < n)
+
+    if all(fits(k) for k in folds):
         return None
     hint = (
         "the ablations sweep EuRoC's seeds 0,2,3,5"
