@@ -53,3 +53,21 @@ def test_a_known_spread_is_recovered(flights):
     truth = float(np.sqrt(offsets.var(0, ddof=1).mean()))
     spread, jitter = _spread(moved)
     assert jitter == pytest.approx(truth, rel=0.25)
+
+
+def test_held_out_sequences_are_left_out_where_a_named_constant_did_not_transfer(flights):
+    """TUM-VI with room 3 held out: its stretches, each refitted with a nonlinearity that did not transfer (p 4.8e-7),
+    spread the biases to 0.52 deg/s where the same stretches fitted with the bias alone agree with the rest. Where a
+    named constant's held-out agreement is under TRANSFER_P_MIN the fit sequences count alone, and the report says
+    why."""
+    from gyrodenoise.discrepancy.report import _simulator_model_md
+
+    _, sel, _ = decide(flights[:3], flights[3:], candidates=[], null_draws=0)
+    assert bias_spread(sel, flights[3:])["sequences"] == 5
+    sel.transfer = {"nonlinearity": {"p_value": 4.8e-7}}
+    spread = bias_spread(sel, flights[3:])
+    assert spread["sequences"] == 3 and spread["held_out_left_out_for"] == ["nonlinearity"]
+    said = " ".join(_simulator_model_md({"simulator_model": "error_model.yaml", "bias_spread": spread}))
+    assert "between the 3 sequences (fit sequences alone: the held-out ones refit nonlinearity, which did not" in said
+    sel.transfer = {"nonlinearity": {"p_value": 0.3}}
+    assert bias_spread(sel, flights[3:])["sequences"] == 5

@@ -324,8 +324,15 @@ def _simulator_model_md(report: dict) -> list[str]:
     if b:
         tau, own = np.degrees(b["between_sequence_rad_s"]), np.degrees(b["estimation_std_rad_s"])
         seen = b.get("observed_std_rad_s")
+        left = b.get("held_out_left_out_for") or []
+        which = (
+            f"fit sequences alone: the held-out ones refit {', '.join(left)}, which did not transfer, and it trades "
+            "with their bias"
+            if left
+            else "fit and held-out"
+        )
         lines += [
-            f"The turn-on bias's spread between the {b['sequences']} sequences (fit and held-out): {tau:.2g} deg/s "
+            f"The turn-on bias's spread between the {b['sequences']} sequences ({which}): {tau:.2g} deg/s "
             f"(`bias_jitter_rad_s`): their estimates' spread less what the estimates' own errors account for, "
             f"{_fmt(own)} deg/s (x, y, z; the fit's standard errors x{b['se_inflation']:.2f}, the factor the "
             "sequences' halves show they fall short by), by the method of moments, at least 0"
