@@ -127,19 +127,26 @@ def write_json(path: str | Path, data: dict) -> Path:
     return write_text(path, json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
 
 
+def read_marker(path: str | Path) -> dict | None:
+    """An earlier run's finished-run marker (its JSON summary): None where there is none, {} where it is not a JSON
+    object (another program's file: it is replaced all the same)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        earlier = json.loads(path.read_text())
+    except ValueError:
+        return {}
+    return earlier if isinstance(earlier, dict) else {}
+
+
 def remove_earlier_outputs(folder: str | Path, marker: str, patterns: tuple[str, ...]) -> dict | None:
     """Before a command writes into `folder`: remove what an earlier run of it wrote there, so that a rerun (other
     inputs, fewer figures) leaves none of the earlier files beside its own. `marker` (written last, the sign of a
     finished run) goes first, then every file matching `patterns` (globs relative to `folder`); files of the
     user's and folders that still hold them stay. Returns the earlier marker's JSON (for a note), else None."""
     folder = Path(folder)
-    earlier: dict | None = None
-    if (folder / marker).is_file():
-        try:
-            earlier = json.loads((folder / marker).read_text())
-        except ValueError:
-            earlier = {}
-        earlier = earlier if isinstance(earlier, dict) else {}
+    earlier = read_marker(folder / marker)
     (folder / marker).unlink(missing_ok=True)
     stale = [f for pattern in patterns for f in folder.glob(pattern) if f.is_file()]
     for f in stale:

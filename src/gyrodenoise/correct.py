@@ -20,7 +20,6 @@ at identity unless --initial-orientation says otherwise; `correct_summary.json` 
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 import warnings
@@ -32,7 +31,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from gyrodenoise.arrays import as_rows
-from gyrodenoise.atomic import output_path_problem, write_json, write_text
+from gyrodenoise.atomic import output_path_problem, read_marker, write_json, write_text
 from gyrodenoise.data.checks import GYRO_ABS_MAX, CheckReport, SanityCheckError, SanityWarning, run_checks
 from gyrodenoise.data.imu_csv import (
     ACC_UNITS,
@@ -402,12 +401,9 @@ def _main(argv: list[str] | None) -> int:
         said = ", ".join(f"{k} in {rec.units[k]}" for k in rec.units_from_header)
         print(f"note: read {said}, as the header declares (--{rec.units_from_header[0]}-unit ... overrides)")
     summary_file = out_csv.parent / "correct_summary.json"
-    if summary_file.is_file():  # say so: the earlier outputs (maybe of another model) are about to be replaced
-        try:
-            earlier = json.loads(summary_file.read_text()).get("model", "?")
-        except (ValueError, AttributeError):  # not our summary: it is replaced all the same
-            earlier = "?"
-        print(f"note: replacing the outputs of an earlier run in {out_csv.parent} (model {earlier})", file=sys.stderr)
+    if (earlier := read_marker(summary_file)) is not None:  # say so: the earlier outputs (maybe of another model)
+        said = f"(model {earlier.get('model', '?')})"
+        print(f"note: replacing the outputs of an earlier run in {out_csv.parent} {said}", file=sys.stderr)
     for stale in (summary_file, out_tum, out_csv):  # an interrupted rerun must not leave an earlier run's outputs
         stale.unlink(missing_ok=True)
     write_text(out_csv, corrected_csv_text(res.rec.t_ns, res.gyro, res.rec.acc, res.std))

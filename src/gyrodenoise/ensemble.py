@@ -301,8 +301,8 @@ def _save_with_reference(model: EnsembleCorrection, meta: dict, dm, out: str | P
     reference = spread_reference(model, ((n, dm.load(n).imu) for n in names))
     cfg = dict(meta["model"])
     meta = {k: v for k, v in meta.items() if k not in ("model", "path")}
-    meta["spread_reference"] = {**reference, "recordings": taken_on, "data_root": portable_path(dm.root)}
-    meta["spread_reference"]["command"] = command
+    where = {"recordings": taken_on, "data_root": portable_path(dm.root), "command": command}
+    meta["spread_reference"] = {**reference, **where}
     return save_model(model, cfg, out, meta)
 
 

@@ -10,7 +10,6 @@ Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import re
@@ -18,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from gyrodenoise.atomic import output_path_problem, remove_earlier_outputs, staged_outputs
+from gyrodenoise.atomic import output_path_problem, read_marker, remove_earlier_outputs, staged_outputs
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
@@ -250,17 +249,6 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
     return out
 
 
-def earlier_run(marker: Path) -> str | None:
-    """The command of the earlier run whose finished-run marker is `marker` ("?" if unreadable), None if none."""
-    if not marker.is_file():
-        return None
-    try:
-        earlier = json.loads(marker.read_text())
-    except ValueError:
-        return "?"
-    return str(earlier.get("command", "?")) if isinstance(earlier, dict) else "?"
-
-
 OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES))
 
 
@@ -268,8 +256,9 @@ OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     t0 = time.time()
-    if (earlier := earlier_run(args.out / "report.json")) is not None:  # replaced when this run has finished
-        said = f"note: the outputs of an earlier run in {args.out} ({earlier}) are replaced when this run has finished"
+    if (earlier := read_marker(args.out / "report.json")) is not None:  # replaced when this run has finished
+        said = earlier.get("command", "?")
+        said = f"note: the outputs of an earlier run in {args.out} ({said}) are replaced when this run has finished"
         print(said, file=sys.stderr)
     code = code_version_text()  # now: a run takes minutes, in which the checkout may move
 
