@@ -21,6 +21,7 @@ from gyrodenoise.atomic import output_path_problem, read_marker, remove_earlier_
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
+from gyrodenoise.discrepancy.bias_instability import NAME as INSTABILITY
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
 from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model, compared_band_hz, gyro_lines
 from gyrodenoise.discrepancy.gyro_lines import sentence as lines_sentence
@@ -38,12 +39,17 @@ from gyrodenoise.provenance import code_version_text, machine_description
 from gyrodenoise.sim.effects import EFFECTS
 
 
-def _effects(s: str) -> list[str]:
+def _effects(s: str, vocabulary: tuple[str, ...] = tuple(EFFECTS)) -> list[str]:
     names = [n.strip() for n in s.split(",") if n.strip()]
-    bad = [n for n in names if n not in EFFECTS]
+    bad = [n for n in names if n not in vocabulary]
     if bad:
-        raise argparse.ArgumentTypeError(f"unknown effect(s) {bad}; the vocabulary is {', '.join(sorted(EFFECTS))}")
+        raise argparse.ArgumentTypeError(f"unknown effect(s) {bad}; the vocabulary is {', '.join(sorted(vocabulary))}")
     return names
+
+
+def _candidates(s: str) -> list[str]:
+    """The regression vocabulary and the flicker floor, judged after the selection (`bias_instability`)."""
+    return _effects(s, (*EFFECTS, INSTABILITY))
 
 
 EXAMPLE = """example (EuRoC, the run behind the committed reports/discrepancy_euroc, written elsewhere; 322 s, 2 cores):
@@ -95,10 +101,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--candidates",
-        type=_effects,
+        type=_candidates,
         default=None,
         metavar="EFFECTS",
-        help=f"comma-separated effects to try (default: the whole vocabulary: {vocabulary})",
+        help=f"comma-separated effects to try (default: the whole vocabulary: {vocabulary}; and {INSTABILITY}, a "
+        "flicker floor judged after the selection against re-simulations)",
     )
     p.add_argument(
         "--gt-file",

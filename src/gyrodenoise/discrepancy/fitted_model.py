@@ -67,6 +67,8 @@ class Selection:
     # the reconstruction error's level of the first pass and the model whose residual moved it (`rank.select_effects`
     # then selected again with the refitted level); None: no second pass
     nuisance_refit: dict | None = None
+    # the flicker floor's check after the selection (`bias_instability.check`); None: not run
+    instability: dict | None = None
 
     @property
     def equivalences(self) -> list[str]:

@@ -85,6 +85,49 @@ def _raw_sample_evidence_md(report: dict) -> list[str]:
     return [*lines, ""] if lines else []
 
 
+def _instability_md(report: dict) -> list[str]:
+    """The flicker floor's check after the selection (`bias_instability`), named or not."""
+    c = report.get("bias_instability_check")
+    if not c:
+        return []
+    deg_h = 3600 * 180 / np.pi
+    z = ", ".join(f"{v:.1f}" for v in c["floor_z"])
+    words = (
+        f"Bias instability (a flicker floor, the flat part of the Allan deviation) was judged after the selection: "
+        f"the floor of a weighted fit of the Allan variance (white noise, floor, random walk) to what the model "
+        f"leaves with the bias's wander kept, against {c['draws']} re-simulations of the selected model. Its z per "
+        f"axis on the fit sequences: {z} (named at >= {c['min_z']:g}, with a share of at least the practical minimum "
+        f"of the Allan variance at {c['longest_tau_s']:.3g} s"
+    )
+    if "holdout_floor_z" in c:
+        words += (
+            ", and z >= "
+            + f"{c['min_z_holdout']:g} on the held-out sequences: "
+            + ", ".join(f"{v:.1f}" for v in c["holdout_floor_z"])
+        )
+    words += "). "
+    if not c["named"]:
+        return [words + "Not named.", ""]
+    words += f"Named: floor {_fmt(np.asarray(c['floor_rad_s']) * deg_h)} deg/h beyond what the other terms make."
+    rw, vib = c.get("random_walk"), c.get("vibration")
+    if rw is not None:
+        zk = ", ".join(f"{v:.1f}" for v in rw["walk_z"])
+        words += (
+            f" The random walk the selection named {'stays' if rw['kept'] else 'is replaced by it'}: its K^2 against "
+            f"re-simulations with the floor and no walk, z {zk}."
+        )
+    if vib is not None:
+        words += (
+            f" The band-limited vibration at {vib['band_hz'][0]:.3g} Hz {'stays' if vib['kept'] else 'is replaced'}"
+            f": its band's likelihood gain against re-simulations with the floor and no band, z {vib['z']:.1f}."
+        )
+    return [
+        words + " The floor's band (1 to 1000 s) is the simulator's default: flights of minutes cannot say "
+        "where it ends.",
+        "",
+    ]
+
+
 def _gap_words(gb: dict, ga: dict) -> list[str]:
     """The held-out gap table in words: which way each measure moved, and how to read a small RMS change."""
 
@@ -668,6 +711,7 @@ def markdown(report: dict) -> str:
     else:
         lines += [f"{NO_EFFECT[0].upper() + NO_EFFECT[1:]}: no candidate clears the threshold.", ""]
     lines += _below_practical_md(report)
+    lines += _instability_md(report)
     if report["not_identifiable"]:
         lines += [
             f"Not identifiable from this motion: {', '.join(report['not_identifiable'])} "

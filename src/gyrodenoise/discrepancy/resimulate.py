@@ -13,7 +13,7 @@ from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
 from gyrodenoise.discrepancy.rank import Selection
 from gyrodenoise.discrepancy.reconstruction import draw_error
 from gyrodenoise.sim.context import FitContext, SignalContext
-from gyrodenoise.sim.effects import EFFECTS, Quantization, SensorBandwidth, Vibration
+from gyrodenoise.sim.effects import EFFECTS, BiasInstability, Quantization, SensorBandwidth, Vibration
 
 
 def simulate_like(
@@ -41,6 +41,8 @@ def simulate_like(
             if name == "white_noise" and sel.corner_hz is not None:  # the floor through the low-pass
                 noise = shape_noise(noise, fc.rate_hz, sel.corner_hz)
             y = y + noise
+    if "bias_instability" in sel.params:  # a named flicker floor (`bias_instability`)
+        y = y + BiasInstability(**sel.params["bias_instability"]).apply(sig, np.zeros_like(y), rng)
     if truth_error:  # the reconstruction error, as the measured residual carries it
         err = draw_error(fc, rng)
         if err is not None:

@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from gyrodenoise.atomic import write_text
-from gyrodenoise.sim.effects import EFFECTS, effect_from_config
+from gyrodenoise.sim.effects import SIM_EFFECTS, effect_from_config
 
 
 def simulator_model(report: dict) -> dict:
@@ -58,7 +58,7 @@ def simulator_model(report: dict) -> dict:
 
 
 def _entry(name: str, params: dict) -> dict:
-    keep = {k: v for k, v in params.items() if k in EFFECTS[name].DEFAULTS}  # fit-only keys (errors) left out
+    keep = {k: v for k, v in params.items() if k in SIM_EFFECTS[name].DEFAULTS}  # fit-only keys (errors) left out
     entry = {"name": name, "units": "si", "params": keep}
     effect_from_config(entry)  # raises on anything the simulator would not accept
     return entry

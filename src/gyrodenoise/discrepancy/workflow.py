@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.discrepancy import bias_instability
 from gyrodenoise.discrepancy.bias_spread import bias_spread
 from gyrodenoise.discrepancy.compare import cross_correlations, drift_vs_truth_deg, spectrum, window_drift_deg
 from gyrodenoise.discrepancy.design import band_power
@@ -27,7 +28,7 @@ from gyrodenoise.discrepancy.resimulate import simulate_like
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.discrepancy.transfer import apply_transfer_check
 from gyrodenoise.sim.context import FitContext
-from gyrodenoise.sim.effects import EFFECTS
+from gyrodenoise.sim.effects import EFFECTS, SIM_EFFECTS
 
 DRIFT_WINDOWS_S = (1.0, 10.0, 60.0)
 SIM_DRAWS = 4  # re-simulations per held-out sequence for the Allan and spectral gaps
@@ -168,6 +169,7 @@ def decide(
     ones; the null distribution depends on the fit sequences only, so it is computed once per candidate list.
     Returns (base selection, final selection, null distribution)."""
     base = list(base)
+    candidates, judge_floor = bias_instability.split_candidates(candidates)
     sel_base = select_effects(fit, base, candidates=[], bic_threshold=bic_threshold, holdout=holdout)
     cache = null_cache if null_cache is not None else {}
 
@@ -187,6 +189,8 @@ def decide(
         thresholds = null.thresholds(bic_threshold)
         sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
     apply_transfer_check(sel, holdout)
+    if judge_floor and "white_noise" in base + (candidates or list(EFFECTS)):  # the floor is a noise term
+        sel.instability = bias_instability.check(sel, fit, holdout, min_gain, seed)
     return sel_base, sel, null
 
 
@@ -219,7 +223,7 @@ def run(
     gap_after = gap(sel, holdout, seed)
     named = []
     for name in sel.named:
-        e = EFFECTS[name]
+        e = SIM_EFFECTS[name]
         params = {k: np.asarray(v).tolist() for k, v in sel.params[name].items()}
         se = {k: np.asarray(v).tolist() for k, v in sel.se.get(name, {}).items()}
         ds = {}
@@ -255,6 +259,8 @@ def run(
             entry["saturation_check"] = sel.saturation
         if name in sel.transfer:
             entry["held_out_agreement"] = sel.transfer[name]
+        if name == bias_instability.NAME:
+            entry["check"] = sel.instability
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = verdict_text(sel.named, sel.equivalences, cautions)
@@ -289,6 +295,7 @@ def run(
         "equivalences": sel.equivalences,
         "cautions": cautions,
         "lack_of_fit": unexplained,
+        "bias_instability_check": sel.instability,
         "reconstruction": {
             "fit": [fc.extra["band"].summary() for fc in fit if "band" in fc.extra],
             "holdout": [fc.extra["band"].summary() for fc in holdout if "band" in fc.extra],

@@ -2,9 +2,10 @@
 sampling at the output rate, quantisation and time stamps.
 
 Gyro model on the internal grid (body frame, SI):
-    y(t) = M w(t) + G f(t) + N(w(t)) + b + b_rw(t) + v(t) + n(t),   then clipped at +-saturation,
+    y(t) = M w(t) + G f(t) + N(w(t)) + b + b_rw(t) + b_f(t) + v(t) + n(t),   then clipped at +-saturation,
 with M = I + scale factor + misalignment, G the g-sensitivity, N the quadratic non-linearity, b_rw a
-Wiener process, v the vibration and n white noise of the given density. The bandwidth then turns y(t)
+Wiener process, b_f a flicker (1/f) bias (`flicker_bias`), v the vibration and n white noise of the given
+density. The bandwidth then turns y(t)
 into samples:
   - "integrate": each sample is the mean of y over its period (midpoint rule on the internal grid;
     response sin(pi f T) / (pi f T)), window centred on the sample time (no delay);
@@ -201,6 +202,9 @@ def _gyro_continuous(
     walk = np.asarray(effects.get("bias_random_walk"))
     if (walk > 0).any():
         y += np.cumsum(walk * np.sqrt(1.0 / fs) * rng["walk"].normal(size=y.shape), axis=0)
+    if effects.has("bias_instability"):
+        floor = np.asarray(effects.get("bias_instability"))
+        y += flicker_bias(len(t), fs, floor, float(effects.get("bias_instability", "tau_max")), rng["flicker"])
     if effects.has("vibration"):
         y += band_noise(
             len(t),
@@ -217,6 +221,34 @@ def _gyro_continuous(
         lim = float(effects.get("saturation"))
         y = np.clip(y, -lim, lim)
     return y
+
+
+FLICKER_GRID_HZ = 20.0  # the flicker is drawn on this grid and interpolated: above it, white noise swamps it
+
+
+def flicker_bias(n: int, fs: float, floor: np.ndarray, tau_max: float, rng: np.random.Generator) -> np.ndarray:
+    """(n, 3) flicker bias on a grid of rate `fs` whose Allan deviation is flat at `floor` (rad/s per axis).
+
+    Frequency-domain synthesis: one-sided PSD h / f with h = floor^2 / (2 ln 2) (the Allan variance of a 1/f
+    process is 2 ln 2 h at every cluster time), held flat at h / f_lo below f_lo = 1 / tau_max so the process is
+    stationary (the floor falls off for cluster times beyond ~tau_max / 3). Drawn on a coarse grid over a record of at
+    least 8 tau_max, so that the slow components are those of a long run, a random stretch of it kept and
+    interpolated linearly onto the output grid."""
+    if not tau_max > 0:
+        raise ValueError(f"bias_instability.tau_max = {tau_max:g} s must be positive")
+    grid_hz = min(FLICKER_GRID_HZ, fs)
+    need = int(np.ceil(n / fs * grid_hz)) + 2
+    m = max(need, int(np.ceil(8 * tau_max * grid_hz)))
+    f = np.fft.rfftfreq(m, 1.0 / grid_hz)
+    h = np.asarray(floor, dtype=np.float64) ** 2 / (2 * np.log(2))
+    psd = h[None, :] / np.maximum(f, 1.0 / tau_max)[:, None]
+    psd[0] = 0.0  # zero mean: a constant is the turn-on bias's part
+    # unit white noise has a one-sided PSD of 2 / grid_hz: the gain turns it into psd
+    x = np.fft.irfft(np.fft.rfft(rng.normal(size=(m, 3)), axis=0) * np.sqrt(psd * grid_hz / 2), m, axis=0)
+    start = int(rng.integers(0, m - need + 1))
+    coarse_t = (start + np.arange(need)) / grid_hz
+    t = start / grid_hz + np.arange(n) / fs
+    return np.stack([np.interp(t, coarse_t, x[start : start + need, i]) for i in range(3)], axis=1)
 
 
 def band_noise(

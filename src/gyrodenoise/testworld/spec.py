@@ -36,6 +36,11 @@ VOCABULARY: dict[str, tuple[str, dict[str, Param]]] = {
     "bias": ("value", {"value": Param("rate", "deg/s", 3, signed=True)}),
     "white_noise": ("density", {"density": Param("rate_density", "deg/s/sqrt(Hz)", 3)}),
     "bias_random_walk": ("density", {"density": Param("rate_walk", "deg/h/sqrt(h)", 3)}),
+    # flicker bias: the flat floor of the Allan deviation (a datasheet's "bias instability"), out to tau_max
+    "bias_instability": (
+        "value",
+        {"value": Param("rate", "deg/h", 3), "tau_max": Param("time", "s", 1, default="1000s")},
+    ),
     "scale_factor": ("value", {"value": Param("ratio", "ppm", 3, signed=True)}),
     # off-diagonal entries of the sensor matrix: (xy, xz, yx, yz, zx, zy), i.e. M[0,1], M[0,2], M[1,0] ...
     "misalignment": ("value", {"value": Param("angle", "mrad", 6, signed=True)}),

@@ -26,7 +26,7 @@ from gyrodenoise.testworld.units import to_si
 FORMAT = "gyrodenoise.testworld/1"
 MAX_JITTER_PERIODS = 0.1  # IMU stamp jitter (std) at most this many periods: the 0.4-period clip is then 4 sigma
 PROCEDURAL_T0_NS = 1_500_000_000_000_000_000
-_STREAMS = ("noise", "walk", "vibration", "acc", "stamps", "mocap", "phase")
+_STREAMS = ("noise", "walk", "vibration", "acc", "stamps", "mocap", "phase", "flicker")  # new streams last
 
 
 @dataclass

@@ -1,0 +1,210 @@
+"""Bias instability: is the bias's slow wander a flicker floor (a flat Allan deviation) the model lacks?
+
+The greedy selection names a wandering bias a random walk (its knots absorb any slow wander). What tells a
+flicker bias (a datasheet's "bias instability", one-sided PSD h / f) from a random walk (h / f^2) is the shape
+of the Allan variance of what the deterministic model leaves, the bias's wander kept:
+
+    AVAR(tau) = N^2 / tau + F^2 + K^2 tau / 3  (+ 3 Q^2 / tau^2 behind a reconstructed truth),
+
+white noise N, flicker floor F, rate random walk K and the truth's angle noise Q. F^2 is fitted by weighted least
+squares over the cluster times the flights offer, and judged against its own distribution under the selected
+model (a parametric bootstrap: `DRAWS` re-simulations of the fit sequences through `simulate_like`, the same
+refit, the same fit), not against the least-squares standard errors: the cluster times' variances are correlated
+and a reconstructed truth's error is not exactly 3 Q^2 / tau^2. Named when the floor lies `MIN_Z` of the null's
+standard deviations above the null's mean on an axis. A random walk the selection named is then judged the same
+way against re-simulations with the floor in its place: kept when its K^2 lies `MIN_Z` above theirs, else
+replaced by the floor (the knots had stood in for the flicker).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.discrepancy.design import band_edges, nuisance_of, row_masks
+from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
+from gyrodenoise.discrepancy.rank import Selection
+from gyrodenoise.discrepancy.reconstruction import band_limit
+from gyrodenoise.discrepancy.resimulate import simulate_like
+from gyrodenoise.discrepancy.spectral import fit_band
+from gyrodenoise.sim.context import FitContext
+from gyrodenoise.sim.effects import BiasInstability
+
+NAME = "bias_instability"
+DRAWS = 40  # re-simulations per null distribution (each: every fit sequence once)
+MIN_Z = 3.5  # the floor (or the walk, the band) this many null standard deviations above the null's mean
+MIN_Z_HOLDOUT = 2.0  # and the floor on the held-out sequences, against their own re-simulations
+TAU_MIN_S, TAU_MAX_S = 1.0, 1000.0  # the simulated floor's band: flights of minutes cannot say where it ends
+
+
+def split_candidates(candidates: list[str] | None) -> tuple[list[str] | None, bool]:
+    """(the regression selection's candidates, whether the floor is judged): None (the whole vocabulary) judges it,
+    a list only when it names `NAME`."""
+    if candidates is None:
+        return None, True
+    return [c for c in candidates if c != NAME], NAME in candidates
+
+
+def wander_residuals(sel: Selection, fcs: list[FitContext]) -> list[np.ndarray]:
+    """What the deterministic model leaves on each sequence with the bias's wander kept: its constants and
+    per-sequence nuisances refitted as on a held-out sequence, the random walk's knots left out."""
+    names = [n for n in sel.selected if n != "bias_random_walk"]
+    return [fc.residual - per_sequence_refit(sel, fc, names) for fc in fcs]
+
+
+def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise: bool) -> dict:
+    """Weighted least-squares fit of N^2, F^2, K^2 (and Q^2) per axis to the pooled Allan variance of `residuals`,
+    in the compared band (cluster times >= 1 / band edge). Returns {'white2', 'floor2', 'walk2'} each (3,)."""
+    rate = fcs[0].rate_hz
+    f_max = min(fc.extra.get("band_hz") or rate / 2 for fc in fcs)
+    if f_max < rate / 2:
+        residuals = [band_limit(r, rate, f_max) for r in residuals]
+    taus = allan_taus(min(len(r) for r in residuals), rate, per_octave=2)
+    taus = taus[taus >= 1.0 / f_max]
+    av = pooled_allan(residuals, rate, taus) ** 2
+    span = sum(len(r) for r in residuals) / rate
+    rel = np.sqrt(2 * taus / span + 2.0 / (span * rate))  # relative std of each cluster time's variance
+    cols = [1 / taus, np.ones_like(taus), taus / 3] + ([3 / taus**2] if angle_noise else [])
+    A = np.stack(cols, 1)
+    coef = np.full((3, A.shape[1]), np.nan)
+    for i in range(3):
+        ok = np.isfinite(av[:, i]) & (av[:, i] > 0)
+        w = 1.0 / (rel[ok] * av[ok, i])
+        coef[i], *_ = np.linalg.lstsq(A[ok] * w[:, None], av[ok, i] * w, rcond=None)
+    last = int(np.flatnonzero(np.isfinite(av).all(1))[-1])
+    return {
+        "white2": coef[:, 0],
+        "floor2": coef[:, 1],
+        "walk2": coef[:, 2],
+        "longest": av[last],  # the Allan variance at the longest cluster time: the floor's share is read there
+        "longest_tau_s": float(taus[last]),
+    }
+
+
+def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, tag: int) -> dict:
+    """The Allan terms of DRAWS re-simulations of the fit sequences under `sel` (each term (DRAWS, 3))."""
+    names = [n for n in sel.selected if n != "bias_random_walk"]
+    pred = [per_sequence_refit(sel, fc, names) for fc in fcs]
+    terms: dict[str, list] = {"floor2": [], "walk2": []}
+    for d in range(DRAWS):
+        sims = []
+        for s, fc in enumerate(fcs):
+            y, _ = simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])
+            sims.append(dataclasses.replace(fc, gyro=y))
+        t = allan_terms(wander_residuals(sel, sims), sims, angle_noise)
+        for k in terms:
+            terms[k].append(t[k])
+    return {k: np.asarray(v) for k, v in terms.items()}
+
+
+def _z(value: np.ndarray, null: np.ndarray) -> np.ndarray:
+    return (value - null.mean(0)) / np.maximum(null.std(0, ddof=1), 1e-300)
+
+
+def _without(sel: Selection, *names: str) -> Selection:
+    """A shallow copy of `sel` without the effects `names` (selected and parameters)."""
+    out = dataclasses.replace(sel, selected=[n for n in sel.selected if n not in names])
+    out.params = {k: v for k, v in sel.params.items() if k not in names}
+    return out
+
+
+def _drop(sel: Selection, name: str) -> None:
+    sel.selected = [n for n in sel.selected if n != name]
+    sel.named = [n for n in sel.named if n != name]
+    for d in (sel.params, sel.se, sel.fitted):
+        d.pop(name, None)
+
+
+def _band_stat(sel: Selection, residuals: list[np.ndarray], fcs: list[FitContext], band: tuple[float, float]) -> float:
+    """Log-likelihood gain of a band of fixed centre and width (levels fitted) over the floor alone."""
+    fit = fit_band(
+        residuals,
+        fcs[0].rate_hz,
+        row_masks(fcs),
+        starts=[band],
+        bands=band_edges(fcs),
+        floor_corner_hz=sel.corner_hz,
+        nuisance=nuisance_of(fcs, sel.corner_hz),
+        fixed_band=True,
+    )
+    return -np.inf if fit is None else float(fit.loglik - fit.loglik_floor)
+
+
+def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
+    """Is a named band-limited vibration more than the flicker floor's colour? Its band's likelihood gain on the
+    fit sequences against re-simulations with the floor and without the band."""
+    v = sel.params["vibration"]
+    band = (float(v["frequency_hz"]), float(v["bandwidth_hz"]))
+    measured = _band_stat(sel, wander_residuals(sel, fcs), fcs, band)
+    alt = _without(sel, "vibration")
+    names = [n for n in alt.selected if n != "bias_random_walk"]
+    pred = [per_sequence_refit(alt, fc, names) for fc in fcs]
+    null = []
+    for d in range(DRAWS):
+        sims = [
+            dataclasses.replace(fc, gyro=simulate_like(alt, fc, np.random.default_rng([seed, 13, d, s]), pred[s])[0])
+            for s, fc in enumerate(fcs)
+        ]
+        null.append(_band_stat(alt, wander_residuals(alt, sims), sims, band))
+    null = np.asarray(null)
+    z = float((measured - null.mean()) / max(null.std(ddof=1), 1e-300))
+    return {"band_hz": list(band), "loglik_gain": measured, "z": z, "kept": bool(z >= MIN_Z)}
+
+
+def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_gain: float, seed: int = 0) -> dict:
+    """Judge a flicker floor on the fit sequences and on the held-out ones (`MIN_Z`, `MIN_Z_HOLDOUT`), with a
+    practical share of the Allan variance at the longest compared cluster time (at least `min_gain`). When it is
+    named, put it into `sel` (params, standard errors, named) and judge again what it may have stood in for: a
+    random walk and a band-limited vibration the selection named are kept only when they still stand out against
+    re-simulations with the floor in their place. Returns the record the report keeps."""
+    angle_noise = nuisance_of(fit) is not None
+    measured = allan_terms(wander_residuals(sel, fit), fit, angle_noise)
+    null = _null(sel, fit, angle_noise, seed, 11)
+    z = _z(measured["floor2"], null["floor2"])
+    floor2 = np.clip(measured["floor2"] - null["floor2"].mean(0), 0.0, None)  # beyond what the model already makes
+    share = floor2 / measured["longest"]
+    out: dict = {
+        "method": f"weighted fit of the Allan variance (white, floor, walk) against {DRAWS} re-simulations each",
+        "draws": DRAWS,
+        "min_z": MIN_Z,
+        "min_z_holdout": MIN_Z_HOLDOUT,
+        "floor_z": z.tolist(),
+        "floor_rad_s": np.sqrt(floor2).tolist(),
+        "share_at_longest_tau": share.tolist(),
+        "longest_tau_s": measured["longest_tau_s"],
+        "named": False,
+    }
+    axis = int(np.nanargmax(z))
+    if not (z[axis] >= MIN_Z and share[axis] >= min_gain):
+        return out
+    if holdout:
+        held = allan_terms(wander_residuals(sel, holdout), holdout, angle_noise)
+        zh = _z(held["floor2"], _null(sel, holdout, angle_noise, seed, 14)["floor2"])
+        out["holdout_floor_z"] = zh.tolist()
+        if not np.nanmax(zh) >= MIN_Z_HOLDOUT:
+            return out
+    out["named"] = True
+    band = {"tau_min": np.asarray(TAU_MIN_S), "tau_max": np.asarray(TAU_MAX_S)}
+    sel.params[NAME] = {"instability": np.sqrt(floor2), **band}
+    if "bias_random_walk" in sel.selected:
+        # the walk beside the floor: its K^2 against re-simulations with the floor and no walk
+        zk = _z(measured["walk2"], _null(_without(sel, "bias_random_walk"), fit, angle_noise, seed, 12)["walk2"])
+        out["random_walk"] = {"walk_z": zk.tolist(), "kept": bool(np.nanmax(zk) >= MIN_Z)}
+        if not out["random_walk"]["kept"]:
+            _drop(sel, "bias_random_walk")
+    if sel.band_vibration:
+        out["vibration"] = _vibration_holds(sel, fit, seed)
+        if not out["vibration"]["kept"]:
+            _drop(sel, "vibration")
+    # the floor beyond what the final model's other terms make, with the null's spread as its standard error
+    rest = _null(_without(sel, NAME), fit, angle_noise, seed, 15)["floor2"]
+    floor2 = np.clip(measured["floor2"] - rest.mean(0), 0.0, None)
+    floor, floor2_se = np.sqrt(floor2), rest.std(0, ddof=1)
+    sel.params[NAME]["instability"] = floor
+    sel.se[NAME] = {"instability": np.where(floor > 0, floor2_se / (2 * np.maximum(floor, 1e-300)), np.sqrt(floor2_se))}
+    out["floor_rad_s"] = floor.tolist()
+    sel.named.append(NAME)
+    sel.fitted[NAME] = BiasInstability(**sel.params[NAME])
+    return out
