@@ -71,3 +71,39 @@ def test_held_out_sequences_are_left_out_where_a_named_constant_did_not_transfer
     assert "between the 3 sequences (fit sequences alone: the held-out ones refit nonlinearity, which did not" in said
     sel.transfer = {"nonlinearity": {"p_value": 0.3}}
     assert bias_spread(sel, flights[3:])["sequences"] == 5
+
+
+def test_no_spread_says_why_in_the_json_the_simulator_file_and_the_report(flights, tmp_path):
+    """One fit sequence, and the held-out ones left out because a named constant did not transfer: one sequence
+    counts, no spread. The report's JSON kept a bare null and its text said nothing; it records the reason now (how
+    many sequences counted, which held-out ones were left out and for which constants), error_model.yaml beside its
+    null (which the simulator still reads as unset), and the report says it in one sentence."""
+    import json
+
+    from gyrodenoise.discrepancy.report import _simulator_model_md
+    from gyrodenoise.discrepancy.sim_model import write_simulator_model
+    from gyrodenoise.sim.dataset import with_error_model_file
+
+    _, sel, _ = decide(flights[:1], flights[3:], candidates=[], null_draws=0)
+    sel.transfer = {"nonlinearity": {"p_value": 4.8e-7}}
+    spread = json.loads(json.dumps(bias_spread(sel, flights[3:])))  # as the report's JSON holds it
+    assert spread["between_sequence_rad_s"] is None and spread["sequences"] == 1
+    assert spread["held_out_left_out"] == ["s4", "s5"] and spread["held_out_left_out_for"] == ["nonlinearity"]
+    assert "only 1 fit sequence counted" in spread["reason"]
+    assert "s4, s5 left out because nonlinearity did not transfer" in spread["reason"]
+    said = _simulator_model_md({"simulator_model": "error_model.yaml", "bias_spread": spread})
+    (sentence,) = [line for line in said if "estimated" in line]
+    assert sentence.startswith("No turn-on bias spread between sequences was estimated")
+    assert spread["reason"] in sentence and sentence.count(". ") == 0  # one sentence
+    bias = {k: np.asarray(v).tolist() for k, v in sel.params["bias"].items()}
+    report = {"base_params": {"bias": bias}, "bias_spread": spread}
+    model = simulator_model(report)
+    assert model["bias_jitter_rad_s"] is None and model["bias_jitter_unset_because"] == spread["reason"]
+    path = write_simulator_model(tmp_path / "error_model.yaml", report)
+    gen = with_error_model_file({"bias_jitter_rad_s": 0.005, "error_model": [], "error_model_file": str(path)})
+    assert gen["bias_jitter_rad_s"] == 0.005  # null: the simulated dataset keeps its own setting
+    # no held-out sequence at all
+    _, sel, _ = decide(flights[:1], [], candidates=[], null_draws=0)
+    spread = bias_spread(sel, [])
+    assert spread["between_sequence_rad_s"] is None and spread["held_out_left_out"] == []
+    assert spread["reason"].startswith("only 1 fit sequence counted, and no held-out sequence was given")

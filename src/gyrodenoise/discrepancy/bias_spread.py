@@ -27,7 +27,7 @@ from gyrodenoise.sim.context import FitContext
 TRANSFER_P_MIN = 0.01  # a named constant's held-out agreement below this: it did not transfer
 
 
-def bias_spread(sel: Selection, holdout: list[FitContext]) -> dict | None:
+def bias_spread(sel: Selection, holdout: list[FitContext]) -> dict:
     """{'between_sequence_rad_s': the turn-on bias's spread (tau, the axes pooled), 'per_axis_rad_s' (each axis on its
     own, for the record), 'observed_std_rad_s' (the fit sequences' estimates' plain standard deviation, mean over
     axes, as written before), 'estimation_std_rad_s' (what the estimates' own errors account for, per axis),
@@ -35,19 +35,38 @@ def bias_spread(sel: Selection, holdout: list[FitContext]) -> dict | None:
     separates the bias in both halves, e.g. beside a named random walk, whose knots take a half's bias: the
     regression's covariance is then taken as it is), 'sequences'}. The held-out sequences count too, each bias
     refitted there alone (`replicates.Replicates`): the same sensor's turn-on, and two more degrees of freedom per
-    axis than the fit sequences' alone; not where a named constant did not transfer ('held_out_left_out_for'). None:
-    fewer than two sequences, or no per-sequence bias."""
+    axis than the fit sequences' alone; not where a named constant did not transfer ('held_out_left_out_for').
+    No spread (fewer than two sequences count, or no per-sequence bias): {'between_sequence_rad_s': None, 'reason':
+    one sentence saying why, 'sequences', 'fit_sequences', 'held_out_left_out' (names), 'held_out_left_out_for'}."""
     b = sel.params.get("bias", {}).get("bias_per_sequence")
     if b is None or sel.design is None:
-        return None
+        return {
+            "between_sequence_rad_s": None,
+            "reason": "the fit has no per-sequence turn-on bias (no bias in the base model)",
+            "sequences": 0,
+            "fit_sequences": 0,
+            "held_out_left_out": [],
+            "held_out_left_out_for": [],
+        }
     b = np.atleast_2d(np.asarray(b, dtype=float))
     n_fit = len(b)
     reps = replicates_of(sel, holdout)
     failed = sorted(n for n, t in (sel.transfer or {}).items() if t.get("p_value", 1.0) < TRANSFER_P_MIN)
-    held = [] if failed else reps.estimates("bias", list(range(n_fit, len(reps.views))))
+    held, skipped = [], []  # a held-out sequence that does not separate the bias on its own does not count either
+    for i, fc in enumerate(holdout, start=n_fit):
+        found = [] if failed else reps.estimates("bias", [i])
+        held += found
+        skipped += [] if found else [fc.name]
     s = n_fit + len(held)
     if s < 2:
-        return None
+        return {
+            "between_sequence_rad_s": None,
+            "reason": _no_spread_reason(n_fit, skipped, failed),
+            "sequences": s,
+            "fit_sequences": n_fit,
+            "held_out_left_out": skipped,
+            "held_out_left_out_for": failed,
+        }
     cov = np.zeros((s, 3, s, 3))
     cov[:n_fit, :, :n_fit, :] = block(sel.result, sel.design.cols["bias"])[1].reshape(n_fit, 3, n_fit, 3)
     for i, (_, v) in enumerate(held, start=n_fit):  # refitted on their own data: independent of the rest
@@ -70,3 +89,18 @@ def bias_spread(sel: Selection, holdout: list[FitContext]) -> dict | None:
         "sequences": s,
         "held_out_left_out_for": failed,  # the named constants that did not transfer (then the fit sequences alone)
     }
+
+
+def _no_spread_reason(n_fit: int, skipped: list[str], failed: list[str]) -> str:
+    """Why fewer than two sequences counted, in one sentence (the report's text and the JSON's 'reason')."""
+    counted = f"only {n_fit} fit sequence{'s' if n_fit != 1 else ''} counted"
+    if not skipped:
+        left = "and no held-out sequence was given"
+    elif failed:
+        left = (
+            f"the held-out {', '.join(skipped)} left out because {', '.join(failed)} did not transfer to them "
+            f"(held-out agreement p < {TRANSFER_P_MIN:g}; refitted there it trades with their bias)"
+        )
+    else:
+        left = f"the held-out {', '.join(skipped)} left out because none separates the bias on its own"
+    return f"{counted}, {left}: a spread between sequences needs at least two"

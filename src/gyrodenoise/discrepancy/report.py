@@ -364,6 +364,13 @@ def _simulator_model_md(report: dict) -> list[str]:
         "",
     ]
     b = report.get("bias_spread")
+    if b and b.get("between_sequence_rad_s") is None:  # none estimated (`bias_spread`): one sentence on why
+        why = b.get("reason") or "fewer than two sequences counted"
+        return lines + [
+            f"No turn-on bias spread between sequences was estimated, so `bias_jitter_rad_s` is null and a "
+            f"simulation keeps its own setting: {why}.",
+            "",
+        ]
     if b:
         tau, own = np.degrees(b["between_sequence_rad_s"]), np.degrees(b["estimation_std_rad_s"])
         seen = b.get("observed_std_rad_s")

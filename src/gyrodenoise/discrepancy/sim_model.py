@@ -11,7 +11,8 @@ Nyquist frequency were never measured). The turn-on bias is the mean over the fi
 them becomes `bias_jitter_rad_s`: the report's `bias_spread` (`bias_spread.py`: over the fit and held-out sequences,
 the estimates' own errors taken out; their plain standard deviation gave ~5e-5 rad/s where every sequence had the
 same bias), or, in a report written before it, the fit sequences' plain standard deviation (null with one fitted
-sequence and no `bias_spread`: a spread it cannot measure, so the simulated dataset keeps its own setting).
+sequence and no `bias_spread`, or where `bias_spread` has no value: a spread it cannot measure, so the simulated
+dataset keeps its own setting; `bias_jitter_unset_because` then says why, from `bias_spread`'s reason).
 Lines of the raw gyro above the compared band that are in every fitted recording are added as band-limited
 vibrations (`gyro_lines.simulator_vibration`): the truth cannot judge them, but a simulator of this gyro needs them.
 """
@@ -32,14 +33,17 @@ def simulator_model(report: dict) -> dict:
     every entry is checked to build (`sim.effects.effect_from_config`)."""
     entries = []
     jitter: float | None = None  # one fitted sequence says nothing of the spread: the simulator's setting stays
+    reason: str | None = None  # why the report has no spread (`bias_spread`), beside the null
     for name, params in (report.get("base_params") or {}).items():
         params = dict(params)
         if name == "bias":  # per sequence in the data; the simulator draws it around the mean
             per_seq = np.asarray(params.pop("bias_per_sequence", [params["bias"]]), dtype=float)
             params["bias"] = per_seq.mean(0).tolist()
             spread = report.get("bias_spread")  # the estimates' own errors taken out (`bias_spread`)
-            if spread is not None:
-                jitter = float(spread["between_sequence_rad_s"])
+            if spread is not None:  # its value null where no spread could be estimated: its 'reason' says why
+                tau = spread.get("between_sequence_rad_s")
+                jitter = None if tau is None else float(tau)
+                reason = None if tau is not None else spread.get("reason")
             elif len(per_seq) > 1:  # a report written before: the plain spread, those errors included
                 jitter = float(per_seq.std(0, ddof=1).mean())
         entries.append(_entry(name, params))
@@ -51,6 +55,8 @@ def simulator_model(report: dict) -> dict:
     return {
         "error_model": entries,
         "bias_jitter_rad_s": jitter,
+        # null: the simulated dataset keeps its own setting; why the report measured none
+        **({"bias_jitter_unset_because": reason} if reason else {}),
         # the rate of the fitted recordings: what lies above its Nyquist frequency was never measured
         "rate_hz": report.get("rate_hz"),
         "source": f"{report.get('command', 'python -m gyrodenoise.discrepancy')}: {report.get('verdict', '')}",
