@@ -121,6 +121,30 @@ def test_an_existing_file_of_another_kind_is_not_replaced(tmp_path, capsys):
     assert notes.read_text() == "my notes"
 
 
+def test_an_output_path_of_another_kind_is_refused_before_any_work(tmp_path, capsys):
+    """`--onnx x.txt` (or a name without a suffix) wrote an ONNX file under that name without a word; a path that does
+    not end in the flag's suffix is refused in one line naming the flag, the path and what to give, before the model
+    is loaded (a model that is not there is not reached)."""
+    missing = str(tmp_path / "missing.pt")
+    for flag, name, fixed in (
+        ("--onnx", "x.txt", "x.onnx"),
+        ("--onnx", "model", "model.onnx"),
+        ("--pt2", "x.onnx", "x.pt2"),
+    ):
+        target = tmp_path / name
+        assert main([missing, flag, str(target), "--no-check"]) == 2
+        err = capsys.readouterr().err
+        assert err == (
+            f"error: {flag} {target}: not a {flag.replace('--', '.')} path, so nothing was written: give a path "
+            f"ending in {flag.replace('--', '.')}, e.g. {tmp_path / fixed}\n"
+        )
+        assert not target.exists()
+    # one good target beside a bad one: nothing is written for either
+    good = tmp_path / "m.onnx"
+    assert main([missing, "--onnx", str(good), "--pt2", str(tmp_path / "m.txt"), "--no-check"]) == 2
+    assert "error: --pt2 " in capsys.readouterr().err and not good.exists()
+
+
 # ---------------------------------------------------------------- the stateful (streaming) step
 CHUNKS = (1, 1, 5, 130, 2, 260, 1)  # one-sample calls, shorter and longer than the receptive field (17)
 

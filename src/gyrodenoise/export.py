@@ -235,8 +235,8 @@ def main(argv: list[str] | None = None) -> int:
         "The .onnx file's metadata_props record these and the training rate.",
     )
     ap.add_argument("model", help="shipped model name (e.g. euroc) or path of a .pt model / .ckpt checkpoint")
-    ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length)")
-    ap.add_argument("--pt2", type=Path, help="output torch.export program (.pt2)")
+    ap.add_argument("--onnx", type=Path, help="output .onnx file (dynamic batch and length; the name ends in .onnx)")
+    ap.add_argument("--pt2", type=Path, help="output torch.export program (the name ends in .pt2)")
     ap.add_argument("--opset", type=int, default=OPSET, help=f"ONNX opset of the graph (default {OPSET})")
     ap.add_argument(
         "--stateful",
@@ -274,14 +274,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {flag} {target}: cannot write: {problem}", file=sys.stderr)  # as the export's own errors
             return 2
         suffix = flag.replace("--", ".")
-        if not folder and target is not None and target.is_file() and target.suffix != suffix:
-            # a name without the suffix is allowed for a new file; an existing other file is probably a typo
+        if folder or target is None or target.suffix.lower() == suffix:
+            continue
+        if target.is_file():  # an existing other file is probably a typo: it is not replaced
             print(
                 f"error: {flag} {target}: this file exists and is not a {suffix} file, so it was left as it was: "
                 f"give a {suffix} path, or remove the file first",
                 file=sys.stderr,
             )
             return 2
+        # a new file of another name (--onnx x.txt, or no suffix) was written without a word: the tools that open
+        # these files go by the suffix
+        print(
+            f"error: {flag} {target}: not a {suffix} path, so nothing was written: give a path ending in {suffix}, "
+            f"e.g. {target.with_suffix(suffix)}",
+            file=sys.stderr,
+        )
+        return 2
     model = None
     try:
         with plain_project_warnings():  # a model-quality warning as one line, like correct and evaluate
