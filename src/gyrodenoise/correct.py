@@ -19,6 +19,13 @@ at identity unless --initial-orientation says otherwise; `correct_summary.json` 
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.correct: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("correct")  # imports this module as gyrodenoise.correct (as the console script does), runs main
+
 import argparse
 import re
 import sys
@@ -482,7 +489,3 @@ def trained_on(meta: dict) -> str | None:
     if not sensor:
         return None
     return f"the {meta['dataset']} dataset's {sensor}" if meta.get("dataset") else f"a {sensor}"
-
-
-if __name__ == "__main__":
-    sys.exit(main())

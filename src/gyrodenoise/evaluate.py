@@ -30,6 +30,13 @@ a model scored on data it was trained on (e.g. the shipped `tumvi`, fitted on th
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.evaluate: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("evaluate")  # imports this module as gyrodenoise.evaluate (as the console script does), runs main
+
 import math
 import sys
 import time
@@ -465,7 +472,3 @@ def main(cfg: DictConfig) -> None:
         # the command prints these after its table (the `warned` lines); once is enough
         warnings.simplefilter("ignore", ModelQualityWarning)
         evaluate(cfg)
-
-
-if __name__ == "__main__":
-    main()

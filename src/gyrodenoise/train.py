@@ -15,6 +15,13 @@ validation and test metrics of the kept weights).
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.train: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("train")  # imports this module as gyrodenoise.train (as the console script does), runs main
+
 import math
 import os
 import shlex
@@ -654,7 +661,3 @@ def main(cfg: DictConfig) -> float | None:
         summary = train(cfg)
     # the value an Optuna sweep minimises
     return summary["val"].get("val/aoe_deg")
-
-
-if __name__ == "__main__":
-    main()
