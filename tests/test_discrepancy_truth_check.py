@@ -250,6 +250,7 @@ def test_a_second_selection_on_other_held_out_sequences_reuses_the_null_distribu
     monkeypatch.setattr(workflow, "null_distribution", fake_null)
     monkeypatch.setattr(workflow, "select_effects", lambda *a, **k: SimpleNamespace(nuisance_refit=None))
     monkeypatch.setattr(workflow, "apply_transfer_check", lambda sel, holdout: None)
+    monkeypatch.setattr(workflow.bias_instability, "check", lambda *a, **k: None)
     cache: dict = {}
     fit = _contexts("a")
     workflow.decide(fit, _contexts("gh"), null_draws=5, null_cache=cache)
@@ -287,6 +288,7 @@ def test_a_selection_that_refitted_the_truths_error_level_is_decided_again_on_a_
     monkeypatch.setattr(workflow, "null_distribution", fake_null)
     monkeypatch.setattr(workflow, "select_effects", fake_select)
     monkeypatch.setattr(workflow, "apply_transfer_check", lambda sel, holdout: None)
+    monkeypatch.setattr(workflow.bias_instability, "check", lambda *a, **k: None)
     cache: dict = {}
     workflow.decide(_contexts("a"), _contexts("g"), null_draws=5, null_cache=cache)
     assert nulls == [0, 1] and thresholds_seen == [{"time_offset": 1.0}, {"time_offset": 2.0}]

@@ -12,8 +12,9 @@ model (a parametric bootstrap: `DRAWS` re-simulations of the fit sequences throu
 refit, the same fit), not against the least-squares standard errors: the cluster times' variances are correlated
 and a reconstructed truth's error is not exactly 3 Q^2 / tau^2. Named when the floor lies `MIN_Z` of the null's
 standard deviations above the null's mean on an axis. A random walk the selection named is then judged the same
-way against re-simulations with the floor in its place: kept when its K^2 lies `MIN_Z` above theirs, else
-replaced by the floor (the knots had stood in for the flicker).
+way against re-simulations with the floor in its place: kept when its K^2 lies `MIN_Z` above theirs and is at
+least `STANDIN_RATIO` times their mean, else replaced by the floor (the knots had stood in for the flicker); a
+band-limited vibration likewise, by its band's power.
 """
 
 from __future__ import annotations
@@ -36,6 +37,10 @@ NAME = "bias_instability"
 DRAWS = 40  # re-simulations per null distribution (each: every fit sequence once)
 MIN_Z = 3.5  # the floor (or the walk, the band) this many null standard deviations above the null's mean
 MIN_Z_HOLDOUT = 2.0  # and the floor on the held-out sequences, against their own re-simulations
+# a walk or band the floor may have stood in for stays when it stands out (MIN_Z) and its power is at least this many
+# times what re-simulations with the floor in its place make: at a high signal-to-noise ratio any small difference
+# between the floor's true shape and the simulated one stands out, and a z alone would keep the stand-in
+STANDIN_RATIO = 2.0
 TAU_MIN_S, TAU_MAX_S = 1.0, 1000.0  # the simulated floor's band: flights of minutes cannot say where it ends
 
 
@@ -118,7 +123,7 @@ def _drop(sel: Selection, name: str) -> None:
 
 
 def _band_stat(sel: Selection, residuals: list[np.ndarray], fcs: list[FitContext], band: tuple[float, float]) -> float:
-    """Log-likelihood gain of a band of fixed centre and width (levels fitted) over the floor alone."""
+    """Power (summed over the axes) of a band of fixed centre and width, its level fitted over the floor."""
     fit = fit_band(
         residuals,
         fcs[0].rate_hz,
@@ -129,17 +134,17 @@ def _band_stat(sel: Selection, residuals: list[np.ndarray], fcs: list[FitContext
         nuisance=nuisance_of(fcs, sel.corner_hz),
         fixed_band=True,
     )
-    return -np.inf if fit is None else float(fit.loglik - fit.loglik_floor)
+    return 0.0 if fit is None else float(np.clip(fit.power, 0.0, None).sum())
 
 
 def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
     """Is a named band-limited vibration more than the flicker floor's colour? Its band's likelihood gain on the
-    fit sequences against re-simulations with the floor and without the band."""
+    fit sequences against re-simulations with the floor and without the band (nor a walk, judged after it)."""
     v = sel.params["vibration"]
     band = (float(v["frequency_hz"]), float(v["bandwidth_hz"]))
     measured = _band_stat(sel, wander_residuals(sel, fcs), fcs, band)
-    alt = _without(sel, "vibration")
-    names = [n for n in alt.selected if n != "bias_random_walk"]
+    alt = _without(sel, "vibration", "bias_random_walk")
+    names = alt.selected
     pred = [per_sequence_refit(alt, fc, names) for fc in fcs]
     null = []
     for d in range(DRAWS):
@@ -150,7 +155,9 @@ def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
         null.append(_band_stat(alt, wander_residuals(alt, sims), sims, band))
     null = np.asarray(null)
     z = float((measured - null.mean()) / max(null.std(ddof=1), 1e-300))
-    return {"band_hz": list(band), "loglik_gain": measured, "z": z, "kept": bool(z >= MIN_Z)}
+    ratio = measured / max(null.mean(), 1e-300)
+    keep = z >= MIN_Z and ratio >= STANDIN_RATIO
+    return {"band_hz": list(band), "power_rad2_s2": measured, "z": z, "ratio": ratio, "kept": bool(keep)}
 
 
 def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_gain: float, seed: int = 0) -> dict:
@@ -158,7 +165,7 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
     practical share of the Allan variance at the longest compared cluster time (at least `min_gain`). When it is
     named, put it into `sel` (params, standard errors, named) and judge again what it may have stood in for: a
     random walk and a band-limited vibration the selection named are kept only when they still stand out against
-    re-simulations with the floor in their place. Returns the record the report keeps."""
+    re-simulations with the floor in their place (`MIN_Z`, `STANDIN_RATIO`). Returns the record the report keeps."""
     angle_noise = nuisance_of(fit) is not None
     measured = allan_terms(wander_residuals(sel, fit), fit, angle_noise)
     null = _null(sel, fit, angle_noise, seed, 11)
@@ -186,18 +193,25 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
         if not np.nanmax(zh) >= MIN_Z_HOLDOUT:
             return out
     out["named"] = True
+    # a first level, beyond what the model makes without the terms the floor may have stood in for
+    standins = [n for n in ("vibration", "bias_random_walk") if n in sel.selected]
+    standins = [n for n in standins if n != "vibration" or sel.band_vibration]
+    bare = _null(_without(sel, *standins), fit, angle_noise, seed, 16)["floor2"]
     band = {"tau_min": np.asarray(TAU_MIN_S), "tau_max": np.asarray(TAU_MAX_S)}
-    sel.params[NAME] = {"instability": np.sqrt(floor2), **band}
-    if "bias_random_walk" in sel.selected:
-        # the walk beside the floor: its K^2 against re-simulations with the floor and no walk
-        zk = _z(measured["walk2"], _null(_without(sel, "bias_random_walk"), fit, angle_noise, seed, 12)["walk2"])
-        out["random_walk"] = {"walk_z": zk.tolist(), "kept": bool(np.nanmax(zk) >= MIN_Z)}
-        if not out["random_walk"]["kept"]:
-            _drop(sel, "bias_random_walk")
+    sel.params[NAME] = {"instability": np.sqrt(np.clip(measured["floor2"] - bare.mean(0), 0.0, None)), **band}
     if sel.band_vibration:
-        out["vibration"] = _vibration_holds(sel, fit, seed)
+        out["vibration"] = _vibration_holds(sel, fit, seed)  # against the floor alone (no band, no walk)
         if not out["vibration"]["kept"]:
             _drop(sel, "vibration")
+    if "bias_random_walk" in sel.selected:
+        # the walk beside the floor: its K^2 against re-simulations with the floor and no walk
+        walk = _null(_without(sel, "bias_random_walk"), fit, angle_noise, seed, 12)["walk2"]
+        zk = _z(measured["walk2"], walk)
+        ratio = measured["walk2"] / np.maximum(walk.mean(0), 1e-300)
+        keep = bool(((zk >= MIN_Z) & (ratio >= STANDIN_RATIO)).any())
+        out["random_walk"] = {"walk_z": zk.tolist(), "ratio": ratio.tolist(), "kept": keep}
+        if not out["random_walk"]["kept"]:
+            _drop(sel, "bias_random_walk")
     # the floor beyond what the final model's other terms make, with the null's spread as its standard error
     rest = _null(_without(sel, NAME), fit, angle_noise, seed, 15)["floor2"]
     floor2 = np.clip(measured["floor2"] - rest.mean(0), 0.0, None)

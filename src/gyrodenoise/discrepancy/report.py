@@ -114,12 +114,15 @@ def _instability_md(report: dict) -> list[str]:
         zk = ", ".join(f"{v:.1f}" for v in rw["walk_z"])
         words += (
             f" The random walk the selection named {'stays' if rw['kept'] else 'is replaced by it'}: its K^2 against "
-            f"re-simulations with the floor and no walk, z {zk}."
+            f"re-simulations with the floor and no walk, z {zk}, "
+            + ", ".join(f"{v:.2g}" for v in rw["ratio"])
+            + " times their mean."
         )
     if vib is not None:
         words += (
             f" The band-limited vibration at {vib['band_hz'][0]:.3g} Hz {'stays' if vib['kept'] else 'is replaced'}"
-            f": its band's likelihood gain against re-simulations with the floor and no band, z {vib['z']:.1f}."
+            f": its band's power against re-simulations with the floor and no band, z {vib['z']:.1f}, "
+            f"{vib['ratio']:.2g} times their mean."
         )
     return [
         words + " The floor's band (1 to 1000 s) is the simulator's default: flights of minutes cannot say "

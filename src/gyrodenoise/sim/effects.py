@@ -769,8 +769,8 @@ class BiasInstability(Effect):
     beyond them: a sum of first-order Gauss-Markov processes with log-spaced correlation times (`sim.flicker`),
     each started in its stationary state.
 
-    Simulated only: the discrepancy workflow has no detector for it (a stationary bias wander that white noise plus
-    a bias random walk stand in for), so it is not in EFFECTS."""
+    Not in EFFECTS, the regression's vocabulary: the discrepancy workflow judges it after the selection, from the
+    Allan variance's shape against re-simulations (`discrepancy.bias_instability`)."""
 
     name = "bias_instability"
     stochastic = True
