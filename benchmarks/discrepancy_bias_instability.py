@@ -109,7 +109,8 @@ def main() -> int:
         "",
         f"`python benchmarks/{Path(__file__).name} --seeds {' '.join(map(str, args.seeds))} --jobs {args.jobs} "
         f"--duration {args.duration:g}` ({time.time() - t0:.0f} s; {machine()}). Rule and arms: the script's "
-        "docstring. greedy: what the selection named before the floor's check (it replaces a walk or band it stood in for).",
+        "docstring. greedy: what the selection named before the floor's check (it replaces a walk or band it stood "
+        "in for).",
         "",
         "| arm | seed | hidden | named | greedy | floor z (fit) | floor z (held-out) | floor deg/h (true) | "
         "Allan gap before -> after | pass |",
