@@ -70,6 +70,15 @@ def test_a_hidden_flicker_floor_is_named_with_its_level_and_replaces_the_walk_th
         assert not check["random_walk"]["kept"]
 
 
+def test_a_random_walk_in_the_base_model_stays_beside_a_named_floor(flights):
+    floor = np.full(3, 150 * DEG_H)
+    fcs = _with(flights, lambda n, fs, k: flicker_bias(n, fs, floor, 1000.0, np.random.default_rng(k)))
+    base = ["bias", "white_noise", "bias_random_walk"]
+    _, sel, _ = decide(fcs[:3], fcs[3:], base, candidates=["bias_instability"], null_draws=0)
+    assert sel.named == ["bias_instability"] and "bias_random_walk" in sel.selected
+    assert "random_walk" not in sel.instability  # a base effect is not judged as a stand-in
+
+
 def test_no_floor_is_named_on_white_noise_nor_on_a_random_walk(flights):
     _, sel, _ = decide(flights[:3], flights[3:], null_draws=0)
     assert not sel.instability["named"] and "bias_instability" not in sel.named

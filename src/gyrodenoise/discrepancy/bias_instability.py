@@ -194,16 +194,16 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
             return out
     out["named"] = True
     # a first level, beyond what the model makes without the terms the floor may have stood in for
-    standins = [n for n in ("vibration", "bias_random_walk") if n in sel.selected]
+    standins = [n for n in ("vibration", "bias_random_walk") if n in sel.named]  # a base effect stays as it is
     standins = [n for n in standins if n != "vibration" or sel.band_vibration]
     bare = _null(_without(sel, *standins), fit, angle_noise, seed, 16)["floor2"]
     band = {"tau_min": np.asarray(TAU_MIN_S), "tau_max": np.asarray(TAU_MAX_S)}
     sel.params[NAME] = {"instability": np.sqrt(np.clip(measured["floor2"] - bare.mean(0), 0.0, None)), **band}
-    if sel.band_vibration:
+    if "vibration" in standins:
         out["vibration"] = _vibration_holds(sel, fit, seed)  # against the floor alone (no band, no walk)
         if not out["vibration"]["kept"]:
             _drop(sel, "vibration")
-    if "bias_random_walk" in sel.selected:
+    if "bias_random_walk" in standins:
         # the walk beside the floor: its K^2 against re-simulations with the floor and no walk
         walk = _null(_without(sel, "bias_random_walk"), fit, angle_noise, seed, 12)["walk2"]
         zk = _z(measured["walk2"], walk)
