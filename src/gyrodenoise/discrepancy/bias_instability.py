@@ -11,7 +11,9 @@ squares over the cluster times the flights offer, and judged against its own dis
 model (a parametric bootstrap: `DRAWS` re-simulations of the fit sequences through `simulate_like`, the same
 refit, the same fit), not against the least-squares standard errors: the cluster times' variances are correlated
 and a reconstructed truth's error is not exactly 3 Q^2 / tau^2. Named when the floor lies `MIN_Z` of the null's
-standard deviations above the null's mean on an axis. A random walk the selection named is then judged the same
+standard deviations above the null's mean on an axis, with a practical share (the practical minimum of the Allan
+variance at the longest cluster time), and as far above on the held-out sequences against their own re-simulations
+(`MIN_Z_HOLDOUT`). A random walk the selection named is then judged the same
 way against re-simulations with the floor in its place: kept when its K^2 lies `MIN_Z` above theirs and is at
 least `STANDIN_RATIO` times their mean, else replaced by the floor (the knots had stood in for the flicker); a
 band-limited vibration likewise, by its band's power.
@@ -99,12 +101,16 @@ def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, t
     for d in range(DRAWS):
         sims = []
         for s, fc in enumerate(fcs):
-            y, _ = simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])
-            sims.append(dataclasses.replace(fc, gyro=y))
+            sims.append(_as_measured(fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])[0]))
         t = allan_terms(wander_residuals(sel, sims), sims, angle_noise)
         for k in terms:
             terms[k].append(t[k])
     return {k: np.asarray(v) for k, v in terms.items()}
+
+
+def _as_measured(fc: FitContext, gyro: np.ndarray) -> FitContext:
+    """Sequence `fc` with a re-simulated gyro; its own copy of `extra` (a refit may set a saturation mask there)."""
+    return dataclasses.replace(fc, gyro=gyro, extra=dict(fc.extra))
 
 
 def _z(value: np.ndarray, null: np.ndarray) -> np.ndarray:
@@ -152,7 +158,7 @@ def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
     null = []
     for d in range(DRAWS):
         sims = [
-            dataclasses.replace(fc, gyro=simulate_like(alt, fc, np.random.default_rng([seed, 13, d, s]), pred[s])[0])
+            _as_measured(fc, simulate_like(alt, fc, np.random.default_rng([seed, 13, d, s]), pred[s])[0])
             for s, fc in enumerate(fcs)
         ]
         null.append(_band_stat(alt, wander_residuals(alt, sims), sims, band))
