@@ -105,6 +105,7 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2, help="runs side by side (default 2)")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/discrepancy_bias_instability.md"))
     ap.add_argument("--rows", type=Path, help="write the table from the JSON rows a run printed (no runs)")
+    ap.add_argument("--note", default="", help="a paragraph written under the command (e.g. where the rows came from)")
     args = ap.parse_args()
     t0 = time.time()
     if args.rows is not None:  # the table again from the rows a run printed (one JSON object per line)
@@ -132,6 +133,7 @@ def render(rows: list[dict], args: argparse.Namespace, wall: str) -> str:
         "greedy: what the selection named before the floor's check (it replaces a walk or band it stood in for); "
         "exact: the named set is the hidden set (on the arms without a floor, PASS asks only that no floor is named).",
         "",
+        *([args.note, ""] if args.note else []),
         "| arm | seed | hidden | named | greedy | floor z (fit) | floor z (held-out) | floor deg/h (true) | "
         "Allan gap before -> after | exact | pass |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
