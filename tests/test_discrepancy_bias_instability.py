@@ -126,3 +126,37 @@ def test_the_cli_takes_the_floor_as_a_candidate_but_not_as_a_base_effect(tmp_pat
     ok = cli("--candidates", "bias_instability,scale_factor")
     assert "unknown effect" not in ok.stderr  # past the arguments: it fails on the missing sequences instead
     assert ok.returncode == 2 and "error:" in ok.stderr
+
+
+def test_a_model_whose_re_simulations_wander_far_more_than_the_flights_leaves_the_floor_unjudged(flights, monkeypatch):
+    """EuRoC's default split: the selected model's re-simulations made floors 67-99 of their own standard deviations
+    above the flights' (its truth follows the gyro): no null to judge a floor by, so it is not identifiable."""
+    _, sel, _ = decide(flights[:3], flights[3:], candidates=["scale_factor"], null_draws=0)  # the floor unjudged
+    rng = np.random.default_rng(0)
+    fake = {"floor2": rng.normal(1e-6, 1e-8, (40, 3)), "walk2": rng.normal(0.0, 1e-9, (40, 3))}
+    monkeypatch.setattr(bias_instability, "_null", lambda *a, **k: fake)
+    out = bias_instability.check(sel, flights[:3], flights[3:], 0.05)
+    assert out["null_mismatch"] and not out["named"] and max(out["floor_z"]) < -bias_instability.MISMATCH_Z
+    assert "bias_instability" in sel.not_identifiable and "bias_instability" not in sel.named
+
+
+def test_the_report_says_what_the_check_found():
+    from gyrodenoise.discrepancy.report import _instability_md
+
+    base = {"draws": 40, "min_z": 3.5, "min_z_holdout": 3.5, "longest_tau_s": 13.2, "floor_z": [10.0, 12.0, 9.0]}
+    named = {
+        **base,
+        "holdout_floor_z": [8.0, 7.0, 6.0],
+        "named": True,
+        "floor_rad_s": [50 * DEG_H] * 3,
+        "random_walk": {"walk_z": [0.1, -0.5, 0.3], "ratio": [0.9, 1.1, 1.0], "kept": False},
+        "vibration": {"band_hz": [1.4, 1.8], "z": 6.7, "ratio": 1.26, "kept": False},
+    }
+    text = " ".join(_instability_md({"bias_instability_check": named}))
+    assert "Named: floor [50, 50, 50] deg/h" in text
+    assert "random walk the selection named is replaced by it" in text and "1.4 Hz is replaced" in text
+    text = " ".join(_instability_md({"bias_instability_check": {**base, "named": False}}))
+    assert text.strip().endswith("Not named.")
+    mismatch = {**base, "floor_z": [-67.0, -99.0, -90.0], "named": False, "null_mismatch": True}
+    assert "Not judged (not identifiable)" in " ".join(_instability_md({"bias_instability_check": mismatch}))
+    assert _instability_md({"bias_instability_check": None}) == []

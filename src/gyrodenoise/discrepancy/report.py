@@ -106,6 +106,13 @@ def _instability_md(report: dict) -> list[str]:
             + ", ".join(f"{v:.1f}" for v in c["holdout_floor_z"])
         )
     words += "). "
+    if c.get("null_mismatch"):
+        return [
+            words + "Not judged (not identifiable): the measured floor lies far below anything the selected model's "
+            "re-simulations make, whose slow wander (the truth's reconstruction error drawn at its fitted level, the "
+            "noise) is not these flights'.",
+            "",
+        ]
     if not c["named"]:
         return [words + "Not named.", ""]
     words += f"Named: floor {_fmt(np.asarray(c['floor_rad_s']) * deg_h)} deg/h beyond what the other terms make."
