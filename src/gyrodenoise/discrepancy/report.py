@@ -108,9 +108,9 @@ def _instability_md(report: dict) -> list[str]:
     words += "). "
     if c.get("null_mismatch"):
         return [
-            words + "Not judged (not identifiable): the measured floor lies far below anything the selected model's "
-            "re-simulations make, whose slow wander (the truth's reconstruction error drawn at its fitted level, the "
-            "noise) is not these flights'.",
+            words + "Not judged (not identifiable): on some flights the measured floor lies far below anything the "
+            "selected model's re-simulations make, whose slow wander (the truth's reconstruction error drawn at its "
+            "fitted level, the noise) is not these flights'.",
             "",
         ]
     if not c["named"]:
