@@ -51,6 +51,7 @@ STANDIN_RATIO = 2.0
 # flights'): not judged, not identifiable. Test-world flights gave z >= -3.6; EuRoC's default split -67 to -99 (its
 # truth follows the gyro), fitted on V1_02 alone -127 to -529 on the held-out V2_03
 MISMATCH_Z = 2 * MIN_Z
+MIN_TAUS = 6  # cluster times the fit of 3-4 terms needs at least
 TAU_MIN_S, TAU_MAX_S = 1.0, 1000.0  # the simulated floor's band: flights of minutes cannot say where it ends
 
 
@@ -71,14 +72,20 @@ def wander_residuals(sel: Selection, fcs: list[FitContext]) -> list[np.ndarray]:
 
 def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise: bool) -> dict:
     """Weighted least-squares fit of N^2, F^2, K^2 (and Q^2) per axis to the pooled Allan variance of `residuals`,
-    in the compared band (cluster times >= 1 / band edge). Returns {'white2', 'floor2', 'walk2'} each (3,)."""
+    in the compared band (cluster times >= 1 / band edge). Returns {'white2', 'floor2', 'walk2'} each (3,), the
+    Allan variance at the longest cluster time ('longest', 'longest_tau_s'); None with fewer than `MIN_TAUS` cluster
+    times (too short, or not finite)."""
     rate = fcs[0].rate_hz
     f_max = min(fc.extra.get("band_hz") or rate / 2 for fc in fcs)
     if f_max < rate / 2:
         residuals = [band_limit(r, rate, f_max) for r in residuals]
-    taus = allan_taus(min(len(r) for r in residuals), rate, per_octave=2)
+    # cluster times up to the longest sequence's (`pooled_allan` leaves a sequence out where it is too short): one
+    # short stretch would otherwise cap every sequence's at its own
+    taus = allan_taus(max(len(r) for r in residuals), rate, per_octave=2)
     taus = taus[taus >= 1.0 / f_max]
     av = pooled_allan(residuals, rate, taus) ** 2
+    if (np.isfinite(av).all(1) & (av > 0).all(1)).sum() < MIN_TAUS:
+        return None
     span = sum(len(r) for r in residuals) / rate
     rel = np.sqrt(2 * taus / span + 2.0 / (span * rate))  # relative std of each cluster time's variance
     cols = [1 / taus, np.ones_like(taus), taus / 3] + ([3 / taus**2] if angle_noise else [])
@@ -88,7 +95,7 @@ def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise:
         ok = np.isfinite(av[:, i]) & (av[:, i] > 0)
         w = 1.0 / (rel[ok] * av[ok, i])
         coef[i], *_ = np.linalg.lstsq(A[ok] * w[:, None], av[ok, i] * w, rcond=None)
-    last = int(np.flatnonzero(np.isfinite(av).all(1))[-1])
+    last = int(np.flatnonzero(np.isfinite(av).all(1) & (av > 0).all(1))[-1])
     return {
         "white2": coef[:, 0],
         "floor2": coef[:, 1],
@@ -107,7 +114,7 @@ def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, t
         sims = []
         for s, fc in enumerate(fcs):
             sims.append(_as_measured(fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])[0]))
-        t = allan_terms(wander_residuals(sel, sims), sims, angle_noise)
+        t = allan_terms(wander_residuals(sel, sims), sims, angle_noise)  # as long as the measured: not None
         for k in terms:
             terms[k].append(t[k])
     return {k: np.asarray(v) for k, v in terms.items()}
@@ -189,6 +196,8 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
     re-simulations with the floor in their place (`MIN_Z`, `STANDIN_RATIO`). Returns the record the report keeps."""
     angle_noise = nuisance_of(fit) is not None
     measured = allan_terms(wander_residuals(sel, fit), fit, angle_noise)
+    if measured is None:
+        return {"named": False, "not_judged": f"fewer than {MIN_TAUS} cluster times in the compared band"}
     null = _null(sel, fit, angle_noise, seed, 11)
     z = _z(measured["floor2"], null["floor2"])
     floor2 = np.clip(measured["floor2"] - null["floor2"].mean(0), 0.0, None)  # beyond what the model already makes
@@ -209,8 +218,11 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
     axes = (z >= MIN_Z) & (share >= min_gain)
     if not axes.any():
         return out
-    if holdout:
+    if holdout:  # (computed only here: a held-out mismatch is seen only where the fit flights show a floor)
         held = allan_terms(wander_residuals(sel, holdout), holdout, angle_noise)
+        if held is None:
+            out["not_judged"] = f"held-out flights: fewer than {MIN_TAUS} cluster times in the compared band"
+            return out
         zh = _z(held["floor2"], _null(sel, holdout, angle_noise, seed, 14)["floor2"])
         out["holdout_floor_z"] = zh.tolist()
         if (zh <= -MISMATCH_Z).any():
@@ -218,11 +230,10 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
         axes &= zh >= MIN_Z_HOLDOUT  # the same axis: a sensor's floor shows on its axis in every flight
         if not axes.any():
             return out
-    out["named"] = True
     # a first level, beyond what the model makes without the terms the floor may have stood in for
     standins = [n for n in ("vibration", "bias_random_walk") if n in sel.named]  # a base effect stays as it is
     standins = [n for n in standins if n != "vibration" or sel.band_vibration]
-    bare = _null(_without(sel, *standins), fit, angle_noise, seed, 16)["floor2"]
+    bare = _null(_without(sel, *standins), fit, angle_noise, seed, 16)["floor2"] if standins else null["floor2"]
     band = {"tau_min": np.asarray(TAU_MIN_S), "tau_max": np.asarray(TAU_MAX_S)}
     sel.params[NAME] = {"instability": np.sqrt(np.clip(measured["floor2"] - bare.mean(0), 0.0, None)), **band}
     if "vibration" in standins:
@@ -238,9 +249,18 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
         out["random_walk"] = {"walk_z": zk.tolist(), "ratio": ratio.tolist(), "kept": keep}
         if not out["random_walk"]["kept"]:
             _drop(sel, "bias_random_walk")
-    # the floor beyond what the final model's other terms make, with the null's spread as its standard error
-    rest = _null(_without(sel, NAME), fit, angle_noise, seed, 15)["floor2"]
+    # the floor beyond what the final model's other terms make (the first null's model when nothing was dropped), with
+    # that null's spread as its standard error; on every axis (a sensor's floor is on each, if only one stood out)
+    dropped = [n for n in standins if n not in sel.selected]
+    rest = _null(_without(sel, NAME), fit, angle_noise, seed, 15)["floor2"] if dropped else null["floor2"]
     floor2 = np.clip(measured["floor2"] - rest.mean(0), 0.0, None)
+    if dropped:  # refits of the selection's sequences (bias spread) must not hold the dropped terms
+        sel.replicates = None
+    if not floor2.any():  # nothing left beyond the other terms (a kept walk makes it all)
+        del sel.params[NAME]
+        out["floor_rad_s"] = floor2.tolist()
+        return out
+    out["named"] = True
     floor, floor2_se = np.sqrt(floor2), rest.std(0, ddof=1)
     sel.params[NAME]["instability"] = floor
     sel.se[NAME] = {"instability": np.where(floor > 0, floor2_se / (2 * np.maximum(floor, 1e-300)), np.sqrt(floor2_se))}

@@ -106,6 +106,10 @@ def _instability_md(report: dict) -> list[str]:
             + ", ".join(f"{v:.1f}" for v in c["holdout_floor_z"])
         )
     words += "). "
+    if "floor_z" not in c:  # flights too short for the fit
+        return [f"Bias instability was not judged: {c.get('not_judged', 'no record')}.", ""]
+    if c.get("not_judged"):
+        words += f"Not judged on the {c['not_judged']}. "
     if c.get("null_mismatch"):
         return [
             words + "Not judged (not identifiable): on some flights the measured floor lies far below anything the "
@@ -121,9 +125,9 @@ def _instability_md(report: dict) -> list[str]:
         zk = ", ".join(f"{v:.1f}" for v in rw["walk_z"])
         words += (
             f" The random walk the selection named {'stays' if rw['kept'] else 'is replaced by it'}: its K^2 against "
-            f"re-simulations with the floor and no walk, z {zk}, "
+            f"re-simulations with the floor and no walk, z [{zk}]; K^2 ["
             + ", ".join(f"{v:.2g}" for v in rw["ratio"])
-            + " times their mean."
+            + "] times their mean."
         )
     if vib is not None:
         words += (
@@ -649,7 +653,8 @@ def _identifiability_md(report: dict) -> list[str]:
         lines += [
             "",
             f"Named without a row here: {', '.join(no_row)} (no regression coefficients to state it for: a "
-            "band-limited vibration is fitted to the spectrum, quantization read from the raw samples).",
+            "band-limited vibration is fitted to the spectrum, quantization read from the raw samples, a bias "
+            "instability from the Allan variance).",
         ]
     return lines + [""]
 

@@ -189,7 +189,8 @@ def decide(
         thresholds = null.thresholds(bic_threshold)
         sel = select_effects(fit, base, candidates, bic_threshold, min_gain, thresholds=thresholds, holdout=holdout)
     apply_transfer_check(sel, holdout)
-    if judge_floor and "white_noise" in base + (candidates or list(EFFECTS)):  # the floor is a noise term
+    vocabulary = list(EFFECTS) if candidates is None else candidates
+    if judge_floor and "white_noise" in base + vocabulary:  # the floor is judged beside white noise
         sel.instability = bias_instability.check(sel, fit, holdout, min_gain, seed)
     return sel_base, sel, null
 
