@@ -131,7 +131,7 @@ def test_the_cli_takes_the_floor_as_a_candidate_but_not_as_a_base_effect(tmp_pat
 
 
 def test_a_model_whose_re_simulations_wander_far_more_than_the_flights_leaves_the_floor_unjudged(flights, monkeypatch):
-    """EuRoC's default split: the selected model's re-simulations made floors 67-99 of their own standard deviations
+    """EuRoC's default split: the selected model's re-simulations made floors 19-50 of their own standard deviations
     above the flights' (its truth follows the gyro): no null to judge a floor by, so it is not identifiable."""
     _, sel, _ = decide(flights[:3], flights[3:], candidates=["scale_factor"], null_draws=0)  # the floor unjudged
     rng = np.random.default_rng(0)

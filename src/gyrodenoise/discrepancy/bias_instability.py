@@ -48,7 +48,7 @@ MIN_Z_HOLDOUT = MIN_Z
 STANDIN_RATIO = 2.0
 # below this, on the fit or the held-out flights, the measured floor lies far under anything the selected model's
 # re-simulations make (their slow wander, e.g. the truth's reconstruction error drawn at its fitted level, is not these
-# flights'): not judged, not identifiable. Test-world flights gave z >= -3.6; EuRoC's default split -67 to -99 (its
+# flights'): not judged, not identifiable. Test-world flights gave z >= -3.6; EuRoC's default split -19 to -50 (its
 # truth follows the gyro), fitted on V1_02 alone -127 to -529 on the held-out V2_03
 MISMATCH_Z = 2 * MIN_Z
 MIN_TAUS = 6  # cluster times the fit of 3-4 terms needs at least
