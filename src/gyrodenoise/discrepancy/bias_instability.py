@@ -22,6 +22,7 @@ band-limited vibration likewise, by its band's power.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -105,15 +106,22 @@ def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise:
     }
 
 
-def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, tag: int) -> dict:
-    """The Allan terms of DRAWS re-simulations of the fit sequences under `sel` (each term (DRAWS, 3))."""
+def _redraws(sel: Selection, fcs: list[FitContext], seed: int, tag: int) -> Iterator[list[FitContext]]:
+    """DRAWS re-simulations of sequences `fcs` under `sel` (its deterministic part refitted without the walk's knots),
+    each as the list of re-simulated sequences; draw d of sequence s from the generator (seed, tag, d, s)."""
     names = [n for n in sel.selected if n != "bias_random_walk"]
     pred = [per_sequence_refit(sel, fc, names) for fc in fcs]
-    terms: dict[str, list] = {"floor2": [], "walk2": []}
     for d in range(DRAWS):
-        sims = []
-        for s, fc in enumerate(fcs):
-            sims.append(_as_measured(fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])[0]))
+        yield [
+            _as_measured(fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])[0])
+            for s, fc in enumerate(fcs)
+        ]
+
+
+def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, tag: int) -> dict:
+    """The Allan terms of DRAWS re-simulations of the fit sequences under `sel` (each term (DRAWS, 3))."""
+    terms: dict[str, list] = {"floor2": [], "walk2": []}
+    for sims in _redraws(sel, fcs, seed, tag):
         t = allan_terms(wander_residuals(sel, sims), sims, angle_noise)  # as long as the measured: not None
         for k in terms:
             terms[k].append(t[k])
@@ -159,22 +167,14 @@ def _band_stat(sel: Selection, residuals: list[np.ndarray], fcs: list[FitContext
 
 
 def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
-    """Is a named band-limited vibration more than the flicker floor's colour? Its band's likelihood gain on the
-    fit sequences against re-simulations with the floor and without the band (nor a walk, judged after it)."""
+    """Is a named band-limited vibration more than the flicker floor's colour? Its band's power on the fit sequences
+    against re-simulations with the floor and without the band (nor a walk, judged after it)."""
     v = sel.params["vibration"]
     band = (float(v["frequency_hz"]), float(v["bandwidth_hz"]))
     measured = _band_stat(sel, wander_residuals(sel, fcs), fcs, band)
     alt = _without(sel, "vibration", "bias_random_walk")
-    names = alt.selected
-    pred = [per_sequence_refit(alt, fc, names) for fc in fcs]
-    null = []
-    for d in range(DRAWS):
-        sims = [
-            _as_measured(fc, simulate_like(alt, fc, np.random.default_rng([seed, 13, d, s]), pred[s])[0])
-            for s, fc in enumerate(fcs)
-        ]
-        null.append(_band_stat(alt, wander_residuals(alt, sims), sims, band))
-    null = np.asarray(null)
+    sims_per_draw = _redraws(alt, fcs, seed, 13)
+    null = np.asarray([_band_stat(alt, wander_residuals(alt, sims), sims, band) for sims in sims_per_draw])
     z = float((measured - null.mean()) / max(null.std(ddof=1), 1e-300))
     ratio = measured / max(null.mean(), 1e-300)
     keep = z >= MIN_Z and ratio >= STANDIN_RATIO
