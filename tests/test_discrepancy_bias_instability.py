@@ -198,3 +198,13 @@ def test_flights_too_short_for_the_fit_leave_the_floor_unjudged_and_no_white_noi
     # a base without white noise: no noise model to re-simulate a floor against
     _, sel, _ = decide(flights[:3], flights[3:], ["bias"], candidates=["bias_instability"], null_draws=0)
     assert sel.instability is None
+
+
+def test_the_report_says_when_the_flights_were_too_short_to_judge_a_floor():
+    from gyrodenoise.discrepancy.report import _instability_md
+
+    short = {"named": False, "not_judged": "fewer than 6 cluster times in the compared band"}
+    assert _instability_md({"bias_instability_check": short}) == [
+        "Bias instability was not judged: fewer than 6 cluster times in the compared band.",
+        "",
+    ]

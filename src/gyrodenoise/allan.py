@@ -39,6 +39,13 @@ def pooled_allan(residuals: list[np.ndarray], rate_hz: float, taus: np.ndarray) 
     return np.sqrt(np.where(w > 0, np.sum([a * b for a, b in zip(avs, ws, strict=True)], 0) / np.maximum(w, 1), np.nan))
 
 
+def root_with_se(square: np.ndarray, square_se: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A level and its standard error from an estimate of its square (an Allan-variance term) and that estimate's:
+    sqrt of the square clipped at 0, and the delta method's se / (2 level), or sqrt(se) where the level is 0."""
+    level = np.sqrt(np.clip(square, 0.0, None))
+    return level, np.where(level > 0, square_se / (2 * np.maximum(level, 1e-30)), np.sqrt(square_se))
+
+
 def fit_allan_noise(
     residuals: list[np.ndarray], rate_hz: float, angle_noise: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

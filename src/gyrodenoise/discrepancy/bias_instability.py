@@ -26,7 +26,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from gyrodenoise.allan import allan_taus, pooled_allan
+from gyrodenoise.allan import allan_taus, pooled_allan, root_with_se
 from gyrodenoise.discrepancy.design import band_edges, nuisance_of, row_masks
 from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
 from gyrodenoise.discrepancy.rank import Selection
@@ -175,7 +175,7 @@ def _vibration_holds(sel: Selection, fcs: list[FitContext], seed: int) -> dict:
     alt = _without(sel, "vibration", "bias_random_walk")
     sims_per_draw = _redraws(alt, fcs, seed, 13)
     null = np.asarray([_band_stat(alt, wander_residuals(alt, sims), sims, band) for sims in sims_per_draw])
-    z = float((measured - null.mean()) / max(null.std(ddof=1), 1e-300))
+    z = float(_z(measured, null))
     ratio = measured / max(null.mean(), 1e-300)
     keep = z >= MIN_Z and ratio >= STANDIN_RATIO
     return {"band_hz": list(band), "power_rad2_s2": measured, "z": z, "ratio": ratio, "kept": bool(keep)}
@@ -261,9 +261,9 @@ def check(sel: Selection, fit: list[FitContext], holdout: list[FitContext], min_
         out["floor_rad_s"] = floor2.tolist()
         return out
     out["named"] = True
-    floor, floor2_se = np.sqrt(floor2), rest.std(0, ddof=1)
+    floor, floor_se = root_with_se(floor2, rest.std(0, ddof=1))
     sel.params[NAME]["instability"] = floor
-    sel.se[NAME] = {"instability": np.where(floor > 0, floor2_se / (2 * np.maximum(floor, 1e-300)), np.sqrt(floor2_se))}
+    sel.se[NAME] = {"instability": floor_se}
     out["floor_rad_s"] = floor.tolist()
     sel.named.append(NAME)
     sel.fitted[NAME] = BiasInstability(**sel.params[NAME])

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gyrodenoise.allan import root_with_se
 from gyrodenoise.discrepancy.design import (
     Design,
     FitResult,
@@ -286,8 +287,7 @@ def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
         d, v = np.concatenate(incs), np.concatenate(noise)
         k2[a] = max(float(np.mean(d**2 - v)), 0.0) / h
         k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.mean(d**2)) / h
-    k = np.sqrt(k2)
-    se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+    k, se = root_with_se(k2, k2_se)
     return {"density": k}, {"density": se}
 
 

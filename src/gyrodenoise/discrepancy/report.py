@@ -90,6 +90,8 @@ def _instability_md(report: dict) -> list[str]:
     c = report.get("bias_instability_check")
     if not c:
         return []
+    if "floor_z" not in c:  # flights too short for the fit
+        return [f"Bias instability was not judged: {c.get('not_judged', 'no record')}.", ""]
     deg_h = 3600 * 180 / np.pi
     z = ", ".join(f"{v:.1f}" for v in c["floor_z"])
     words = (
@@ -106,8 +108,6 @@ def _instability_md(report: dict) -> list[str]:
             + ", ".join(f"{v:.1f}" for v in c["holdout_floor_z"])
         )
     words += "). "
-    if "floor_z" not in c:  # flights too short for the fit
-        return [f"Bias instability was not judged: {c.get('not_judged', 'no record')}.", ""]
     if c.get("not_judged"):
         words += f"Not judged on the {c['not_judged']}. "
     if c.get("null_mismatch"):

@@ -260,8 +260,6 @@ def run(
             entry["saturation_check"] = sel.saturation
         if name in sel.transfer:
             entry["held_out_agreement"] = sel.transfer[name]
-        if name == bias_instability.NAME:
-            entry["check"] = sel.instability
         named.append(entry)
     base_params = {n: {k: np.asarray(v).tolist() for k, v in sel.params[n].items()} for n in base if n in sel.params}
     verdict = verdict_text(sel.named, sel.equivalences, cautions)

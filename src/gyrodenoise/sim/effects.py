@@ -26,7 +26,7 @@ import numpy as np
 from scipy import signal
 
 from gyrodenoise import fft_threads
-from gyrodenoise.allan import fit_allan_noise
+from gyrodenoise.allan import fit_allan_noise, root_with_se
 from gyrodenoise.sim import flicker
 from gyrodenoise.sim.array_memo import ArrayMemo, digest
 from gyrodenoise.sim.context import FitContext, SignalContext
@@ -750,8 +750,7 @@ class BiasRandomWalk(Effect):
         self, fcs: list[FitContext], residuals: list[np.ndarray], angle_noise: bool = False
     ) -> tuple[dict, dict]:
         n2, k2, k2_se = fit_allan_noise(residuals, fcs[0].rate_hz, angle_noise)
-        k = np.sqrt(np.clip(k2, 0.0, None))
-        se = np.where(k > 0, k2_se / (2 * np.maximum(k, 1e-30)), np.sqrt(k2_se))
+        k, se = root_with_se(k2, k2_se)
         return {"density": k}, {"density": se}
 
     def params_from_fit(self, coef, se):
