@@ -4,12 +4,13 @@ data cache, and each command of the table run as the README gives it, one after 
     python benchmarks/first_hour.py --work /tmp/first_hour --data ../shared/data --out benchmarks/results/first_hour
 
 Rows: install (torch pinned, then the package), `train experiment=sim_quick`, `evaluate dataset=euroc`,
-`fit_calibrated dataset=euroc`, `train dataset=euroc`, `gyrodenoise-correct` on the first 21,000 lines of MH_01's
-IMU file (a user's own recording), the `[export]` extra and `export euroc --onnx`. The ROS-bag row is not timed
-(it needs a bag). Each row: wall time of the command (Python's start included), exit status, and the command's last
-line. Writes OUT.md and OUT.json; the work folder (clone, venv, outputs) is left for inspection. Needs the package
-registries (pip) and the data folder; CPU only. The machine should be otherwise idle for figures comparable with
-the README's.
+`fit_calibrated dataset=euroc`, `train dataset=euroc`, `gyrodenoise-correct` on the first 21,000 lines of MH_01's IMU
+file (a user's own recording), the `[rosbag]` extra and `from_bag` on a ROS 1 bag of MH_01's first 60 s (IMU and
+ground truth, written before the clock starts with rosbags' own writer, which this script's environment needs: the dev
+extra has it), the `[export]` extra and `export euroc --onnx`. Each row: wall time of the command (Python's start
+included), exit status, and the command's last line. Writes OUT.md and OUT.json; the work folder (clone, venv,
+outputs) is left for inspection. Needs the package registries (pip) and the data folder; CPU only. The machine should
+be otherwise idle for figures comparable with the README's.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -37,9 +40,65 @@ def rows(py: str, work: Path) -> list[tuple[str, list[str]]]:
         ("the 12-parameter calibrated baseline", [py, "-m", "gyrodenoise.fit_calibrated", "dataset=euroc"]),
         ("train the network on EuRoC", [py, "-m", "gyrodenoise.train", "dataset=euroc"]),
         ("correct your own recording", [str(Path(py).parent / "gyrodenoise-correct"), str(own)]),
+        ("the [rosbag] extra", [py, "-m", "pip", "install", "-q", ".[rosbag]"]),
+        (
+            "a ROS bag to a training sequence",
+            [py, "-m", "gyrodenoise.data.from_bag", str(work / "rec.bag"), "--out", str(work / "data" / "rec")],
+        ),
         ("the [export] extra", [py, "-m", "pip", "install", "-q", ".[export]"]),
         ("export for onboard use", [py, "-m", "gyrodenoise.export", "euroc", "--onnx", str(work / "euroc.onnx")]),
     ]
+
+
+def write_bag(seq: Path, bag: Path, seconds: float = 60.0) -> None:
+    """The first `seconds` of an ASL sequence as a ROS 1 bag: sensor_msgs/Imu on /imu0, the ground-truth pose as
+    geometry_msgs/PoseStamped on /vicon/body (header stamps = the files' stamps), as a recording of one's own."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from gyrodenoise.data.readers import read_groundtruth, read_imu
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    T = ts.types
+    imu = read_imu(seq / "mav0" / "imu0" / "data.csv")
+    gt = read_groundtruth(seq / "mav0" / "state_groundtruth_estimate0" / "data.csv")
+    end = imu.t_ns[0] + int(seconds * 1e9)
+
+    def header(t: int, frame: str) -> object:
+        return T["std_msgs/msg/Header"](
+            seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9), frame_id=frame
+        )
+
+    def vec(v) -> object:
+        return T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+    def quat(q) -> object:  # x, y, z, w
+        return T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+
+    none = np.zeros(9)
+    no_orientation = np.r_[-1.0, np.zeros(8)]  # REP 145: the message has no orientation estimate
+    msgs = []
+    for t, w, a in zip(imu.t_ns.tolist(), imu.gyro, imu.acc, strict=True):
+        if t <= end:
+            m = T["sensor_msgs/msg/Imu"](
+                header=header(t, "imu4"), orientation=quat([0, 0, 0, 1]), orientation_covariance=no_orientation,
+                angular_velocity=vec(w), angular_velocity_covariance=none,
+                linear_acceleration=vec(a), linear_acceleration_covariance=none,
+            )  # fmt: skip
+            msgs.append((t, "imu", ts.serialize_ros1(m, "sensor_msgs/msg/Imu")))
+    for t, p, q in zip(gt.t_ns.tolist(), gt.pos, gt.quat_xyzw, strict=True):
+        if t <= end:
+            point = T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2]))
+            pose = T["geometry_msgs/msg/Pose"](position=point, orientation=quat(q))
+            m = T["geometry_msgs/msg/PoseStamped"](header=header(t, "world"), pose=pose)
+            msgs.append((t, "gt", ts.serialize_ros1(m, "geometry_msgs/msg/PoseStamped")))
+    with Writer(bag) as w:
+        conns = {
+            "imu": w.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=ts),
+            "gt": w.add_connection("/vicon/body", "geometry_msgs/msg/PoseStamped", typestore=ts),
+        }
+        for t, kind, raw in sorted(msgs, key=lambda m: m[0]):
+            w.write(conns[kind], t, raw)
 
 
 def main() -> int:
@@ -62,6 +121,7 @@ def main() -> int:
     subprocess.run([sys.executable, "-m", "venv", str(work / "venv")], check=True)
     lines = (data / "euroc" / "MH_01_easy" / "mav0" / "imu0" / "data.csv").read_text().splitlines(keepends=True)
     (work / "my_imu.csv").write_text("".join(lines[:21001]))  # header + 21,000 samples: 105 s at 200 Hz
+    write_bag(data / "euroc" / "MH_01_easy", work / "rec.bag")
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "VIRTUAL_ENV", "OMP_"))}
     # pip's own download cache is kept (as on a machine that installed torch before): installs time the install
     env |= {"GYRODENOISE_DATA": str(data), "GYRODENOISE_CACHE": str(work / "cache")}
