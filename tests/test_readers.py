@@ -337,3 +337,22 @@ def test_a_sequence_folder_in_another_layout_is_not_called_missing(tmp_path):
     with pytest.raises(FileNotFoundError, match=said) as e:
         dm.check_sequences()
     assert "did you mean" not in str(e.value)
+
+
+def test_a_stamp_beyond_int64_names_the_line(tmp_path):
+    """A stamp with extra digits (two lines run together) raised a bare 'Python int too large to convert to C long'
+    that named neither the file nor the line."""
+    rows = imu_rows()
+    rows[5] = "99999999999999999999" + rows[5][rows[5].index(",") :]
+    with pytest.raises(DataFormatError, match=r"imu.csv:7: column 1 \(timestamp\) is 99999999999999999999"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, rows))
+
+
+def test_a_space_separated_file_is_not_called_truncated(tmp_path):
+    """A ground truth in the TUM layout (fields separated by spaces) was told to 'fix or remove the truncated line'."""
+    gt = write(tmp_path / "gt.txt", "# t tx ty tz qx qy qz qw\n", [r.replace(",", " ") for r in gt_rows()])
+    with pytest.raises(
+        DataFormatError, match=r"gt.txt:2: .*separated by spaces: the ASL format separates them by"
+    ) as e:
+        read_groundtruth(gt)
+    assert "truncated" not in str(e.value)

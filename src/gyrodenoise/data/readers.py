@@ -137,12 +137,17 @@ def read_csv_table(
                 check_header(path, *header)
         if len(fields) < min_cols:
             other = next((d for d in (";", "\t") if len(s.split(d)) >= min_cols), None) if len(fields) == 1 else None
+            spaces = len(fields) == 1 and other is None and len(s.split()) >= min_cols  # e.g. a TUM trajectory
             raise DataFormatError(
                 f"{path}:{lineno}: {what} line has {len(fields)} columns, expected at least {min_cols}. "
                 + (
                     f"Its columns are separated by {other!r}: the ASL format separates them by commas; convert the "
                     f"file (e.g. sed 's/{other}/,/g'; gyrodenoise-correct --delimiter reads it as it is)."
                     if other
+                    else "Its columns are separated by spaces: the ASL format separates them by commas (expected: "
+                    f"{expected}); convert the file (a TUM trajectory 't tx ty tz qx qy qz qw' has its time in s and "
+                    "its quaternion x, y, z, w: convert and reorder those too)."
+                    if spaces
                     else "Fix or remove the truncated line."
                 )
             )
@@ -154,6 +159,11 @@ def read_csv_table(
                 f"{path}:{lineno}: column 1 (timestamp) is {fields[0]!r}; expected an integer number of nanoseconds."
                 + (" A header line must start with '#'." if named else _decimal_stamp_hint(fields[0]))
             ) from None
+        if not -(2**63) <= stamps[-1] < 2**63:  # else np.int64 raises a bare OverflowError naming no file
+            raise DataFormatError(
+                f"{path}:{lineno}: column 1 (timestamp) is {fields[0]}, beyond what int64 nanoseconds hold (the year "
+                "2262): a stamp with extra digits (two lines run together?); fix or remove that line."
+            )
         rows.append(fields[1:min_cols])
         line_numbers.append(lineno)
     if not rows:
