@@ -146,6 +146,16 @@ def _guess_delimiter(line: str) -> str | None:
     return None  # whitespace
 
 
+def _comment_header(comments: list[str], delimiter: str | None, n_fields: int) -> list[str] | None:
+    """The header among the comment lines above the data (a note above or below it is not it): the first with as
+    many fields as the first line below them, else the first that names at least the seven columns read, else
+    None."""
+    split = [_split(c, delimiter) for c in comments]
+    return next((f for f in split if len(f) == n_fields), None) or next(
+        (f for f in split if len(f) >= len(FIELDS)), None
+    )
+
+
 def _is_number(s: str) -> bool:
     try:
         float(s)
@@ -167,6 +177,10 @@ def _resolve_columns(spec: str, header: list[str] | None, path: Path) -> list[in
     out = []
     for field, item in zip(FIELDS, items, strict=True):
         if item.isdigit():
+            if int(item) < 1:  # 0 would read the last column (Python's index -1)
+                raise ValueError(
+                    f"--columns {spec!r}: column numbers count from 1 (the first column is 1); or give header names"
+                )
             out.append(int(item) - 1)
             continue
         key = item.lower()
@@ -238,7 +252,8 @@ def read_imu_csv(
     delimiter: str | None = None,
 ) -> ImuRecording:
     """Parse the file; values in SI, time in int ns. Comment lines start with '#'; a first line
-    with non-numeric fields (or a first comment line) is taken as the header. A unit not given is the one the
+    with non-numeric fields, or a comment line above the data with as many fields as it (`_comment_header`: a note
+    above or below the header is not it), is taken as the header. A unit not given is the one the
     header's names declare for the mapped columns ('gx [deg/s]', 't (s)', 'acc_x_g'), else the ASL format's
     (ns, rad/s, m/s^2); `ImuRecording.units_from_header` names those taken from the header."""
     path = Path(path)
@@ -257,18 +272,21 @@ def read_imu_csv(
     given = {"time": time_unit, "gyro": gyro_unit, "acc": acc_unit}
     units, units_from_header = dict(DEFAULT_UNITS), []
     ns_per = TIME_UNITS[units["time"]]
+    comments: list[str] = []  # the comment lines before the first data line: one of them may be the header
     for lineno, raw in text_lines(path, CSV_LAYOUT):
         s = raw.strip()
         if not s:
             continue
-        if delimiter is None and header is None and idx is None:
-            delimiter = _guess_delimiter(s.lstrip("#"))
         if s.startswith("#"):
             if header is None and idx is None:
-                header = _split(s.lstrip("#"), delimiter)
+                comments.append(s.lstrip("#"))
             continue
+        if delimiter is None:  # from the first line that is not a comment: a note above the header has no say
+            delimiter = _guess_delimiter(s)
         fields = _split(s, delimiter)
         if idx is None:
+            if header is None:
+                header = _comment_header(comments, delimiter, len(fields))
             if header is None and not all(_is_number(f) for f in fields):
                 header = fields
                 continue
