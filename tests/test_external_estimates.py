@@ -127,6 +127,16 @@ def test_stamps_read_exactly_in_s_and_ns(tmp_path):
     assert read_tum(f)[0].tolist() == [1403636580838555648, 1403636580843555000]
 
 
+def test_a_file_saved_with_a_byte_order_mark_reads(tmp_path):
+    """A TUM file saved by a Windows editor starts with a byte-order mark: its '# t tx ...' comment line was read as
+    data ('9 fields, expected 8'), and a first pose line as 'not numbers'."""
+    body = "1403636580.838555648 0 0 0 0 0 0 1\n1403636580.843555 0 0 0 0 0 0 1\n"
+    f = tmp_path / "t.txt"
+    for text in ("# t tx ty tz qx qy qz qw\n" + body, body):
+        f.write_bytes(("\ufeff" + text).encode())
+        assert read_tum(f)[0].tolist() == [1403636580838555648, 1403636580843555000]
+
+
 def test_bad_estimate_settings_fail_before_the_work(scored, tmp_path):
     root, model, tmp, _ = scored
     with pytest.raises(FileNotFoundError, match=r"estimates.vio: no file .*nowhere/seq.txt"):

@@ -52,7 +52,7 @@ def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     x, y, z, w and of unit length (within QUAT_NORM_TOL)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # -sig: a byte-order mark (Windows editors) is not data
     except UnicodeDecodeError:
         raise TrajectoryFileError(
             f"{path}: not a text file (a TUM trajectory: 't tx ty tz qx qy qz qw' per line)"
