@@ -63,6 +63,19 @@ def test_correct_arrays_checks_units_and_shapes_and_names_its_own_arguments():
         gd.correct_arrays(t, bad, acc, "euroc-calibrated")
 
 
+def test_correct_arrays_refuses_float32_stamps_that_lost_their_time():
+    """float32 keeps 24 bits: absolute stamps in s (1.4e9) were rounded to 128 s and refused as 'duplicated timestamps'
+    with advice to drop them (drop_duplicates=True); stamps 3000 s into a recording, rounded to 244 us, were taken
+    without a word as a 200 Hz clock jittering by 5 %. Short float32 stamps, exact enough, still read."""
+    t, gyro, acc = recording()
+    with pytest.raises(ValueError, match=r"t is float32: .*rounds stamps near 1\.4e\+09 s to 128 s.*float64"):
+        gd.correct_arrays(t.astype(np.float32), gyro, acc, "euroc-calibrated")
+    with pytest.raises(ValueError, match=r"t is float32: .*to 0\.000244 s, 4\.9 % of the mean step"):
+        gd.correct_arrays((t - t[0] + 3000.0).astype(np.float32), gyro, acc, "euroc-calibrated")
+    short = gd.correct_arrays((t - t[0]).astype(np.float32), gyro, acc, "euroc-calibrated")
+    assert len(short.rec) == len(t)
+
+
 def test_the_python_api_pages_first_example_runs(monkeypatch):
     """docs/python-api.md's first block, as written (it used seq.t_ns, which Sequence lacked)."""
     from conftest import DATA_ROOT, require_data

@@ -237,7 +237,8 @@ def correct_arrays(
 ) -> Correction:
     """Correct arrays of your own IMU samples, with the sanity checks of `gyrodenoise-correct`.
 
-    t: (N,) stamps in `time_unit` (ns, us, ms, s; integer ns stay exact); gyro, acc: (N, 3) in `gyro_unit` /
+    t: (N,) stamps in `time_unit` (ns, us, ms, s; integer ns stay exact; float32 stamps rounded by over 1 % of the
+    sample period are refused); gyro, acc: (N, 3) in `gyro_unit` /
     `acc_unit` (converted here to rad/s and m/s^2). model: a shipped name, a model file or a run folder, or a loaded
     model (then without its metadata: no rate check, no quality warning). kwargs: those of `correct_recording`
     (resample_to_model, drop_duplicates, force, engine, initial). Returns the `Correction`: corrected gyro (rad/s),
@@ -258,6 +259,8 @@ def correct_arrays(
                 "of samples, so one bad sample spoils hundreds of outputs"
             )
     largest = float(np.abs(t_in).max()) if t_in.size else 0.0
+    if np.issubdtype(t_in.dtype, np.floating) and np.finfo(t_in.dtype).bits < 64 and t_in.size > 1:
+        _refuse_coarse_float_stamps(t_in, largest, time_unit)
     if largest * TIME_UNITS[time_unit] > INT64_MAX:  # would wrap around in int64 ns
         advice = beyond_int64_advice(np.diff(t_in.astype(np.float64)), time_unit)
         raise DataFormatError(python_advice(f"t: {largest:.4g} {time_unit} is {advice}."))
@@ -284,6 +287,25 @@ def correct_arrays(
         return correct_recording(rec, loaded, meta, **kwargs)
     except SanityCheckError as e:
         raise SanityCheckError(python_advice(str(e))) from None
+
+
+FLOAT_STAMP_TOL = 0.01  # float32 stamps rounded by more than this share of the sample period lost their time
+
+
+def _refuse_coarse_float_stamps(t: np.ndarray, largest: float, unit: str) -> None:
+    """ValueError when stamps held in float32 (or float16) are rounded by more than FLOAT_STAMP_TOL of their mean step:
+    absolute seconds in float32 come in steps of 128 s; seconds into a long recording jitter the sample period."""
+    spacing = float(np.spacing(t.dtype.type(largest)))
+    step = abs(float(t[-1]) - float(t[0])) / (len(t) - 1)
+    if spacing <= FLOAT_STAMP_TOL * step:
+        return
+    share = f", {100 * spacing / step:.2g} % of the mean step" if step > 0 else ", more than the steps between them"
+    raise ValueError(
+        f"t is {t.dtype}: its {np.finfo(t.dtype).nmant + 1}-bit mantissa rounds stamps near {largest:.3g} {unit} to "
+        f"{spacing:.3g} {unit}{share}, so the samples' times are lost (time is never float32: integer ns, or float64 "
+        "s). Pass t as float64 or as integer ns (time_unit='ns'), taken from the source before it was float32: a "
+        "float64 copy of these stamps keeps their rounding"
+    )
 
 
 def python_advice(message: str) -> str:
