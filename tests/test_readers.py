@@ -356,3 +356,13 @@ def test_a_space_separated_file_is_not_called_truncated(tmp_path):
     ) as e:
         read_groundtruth(gt)
     assert "truncated" not in str(e.value)
+
+
+def test_a_zero_quaternion_is_called_a_missing_pose_not_a_column_order(tmp_path):
+    """A tracker that lost the body writes 0,0,0,0: it was told to check the column order and the file's units."""
+    rows = gt_rows()
+    for k in (10, 11, 12):
+        rows[k] = rows[k].replace(",1,0,0,0", ",0,0,0,0")
+    with pytest.raises(DataFormatError, match=r"gt.csv:12: quaternion .* is zero \(3 such lines\): no pose there") as e:
+        read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, rows))
+    assert "column order" not in str(e.value)

@@ -362,6 +362,14 @@ def read_groundtruth(path: str | Path) -> GroundTruthData:
     )
     q_wxyz = v[:, 3:7]
     norm, k, count = quaternion_norms(q_wxyz)
+    zero = norm == 0.0
+    if zero.any():  # a tracker that lost the body: not a column order
+        k = int(np.argmax(zero))
+        raise DataFormatError(
+            f"{path}:{lines[k]}: quaternion (columns 5-8, w x y z) is zero ({_such_lines(int(zero.sum()))}): no pose "
+            "there (the tracker lost the body?). Remove those lines: the gap they leave is masked where it spans "
+            "more than dataset.max_gap_factor (3 by default) ground-truth periods, and bridged by SLERP where shorter."
+        )
     if k is not None:
         raise DataFormatError(
             f"{path}:{lines[k]}: quaternion (columns 5-8, w x y z) has norm {norm[k]:.6f}, more than "
