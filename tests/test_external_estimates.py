@@ -127,6 +127,20 @@ def test_stamps_read_exactly_in_s_and_ns(tmp_path):
     assert read_tum(f)[0].tolist() == [1403636580838555648, 1403636580843555000]
 
 
+def test_negative_stamps_are_written_as_their_seconds():
+    """-995,000,000 ns was written '-1.005000000' (floor division and remainder of a negative number): a recording whose
+    clock reads below zero got its orientation.txt stamps wrong and out of order."""
+    t_ns = np.array([-1_005_000_000, -995_000_000, -5_000_000, 0, 5_000_000])
+    lines = tum_text(t_ns, np.repeat(np.eye(3)[None], len(t_ns), 0), "c").splitlines()[1:]
+    assert [line.split()[0] for line in lines] == [
+        "-1.005000000",
+        "-0.995000000",
+        "-0.005000000",
+        "0.000000000",
+        "0.005000000",
+    ]
+
+
 def test_a_file_saved_with_a_byte_order_mark_reads(tmp_path):
     """A TUM file saved by a Windows editor starts with a byte-order mark: its '# t tx ...' comment line was read as
     data ('9 fields, expected 8'), and a first pose line as 'not numbers'."""

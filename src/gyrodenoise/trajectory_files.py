@@ -21,7 +21,8 @@ def tum_text(t_ns: np.ndarray, R: np.ndarray, comment: str, pos: np.ndarray | No
     trans = ["0 0 0"] * len(q) if pos is None else [f"{a:.6f} {b:.6f} {c:.6f}" for a, b, c in np.asarray(pos).tolist()]
     lines = [f"# t[s] tx ty tz qx qy qz qw ({comment})"]
     for t, xyz, (x, y, z, w) in zip(np.asarray(t_ns).tolist(), trans, q.tolist(), strict=True):
-        lines.append(f"{t // 1_000_000_000}.{t % 1_000_000_000:09d} {xyz} {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
+        sign, a = ("-" if t < 0 else ""), abs(t)  # // and % of a negative t would give -1.005 s for -0.995 s
+        lines.append(f"{sign}{a // 1_000_000_000}.{a % 1_000_000_000:09d} {xyz} {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
     return "\n".join(lines) + "\n"
 
 
