@@ -45,3 +45,12 @@ def test_column_number_zero_is_refused(tmp_path):
     f = write(tmp_path / "x.csv", rows())
     with pytest.raises(ValueError, match=r"--columns '0,1,2,3,4,5,6': column numbers count from 1"):
         read_imu_csv(f, columns="0,1,2,3,4,5,6")
+
+
+def test_a_first_line_ending_in_a_delimiter_is_data_not_a_header(tmp_path):
+    """Lines ending in a comma (a logger printing 'a,b,c,') have an empty last field: the first line of a file without
+    a header was taken for the header (it is 'not all numbers'), its sample silently dropped."""
+    f = write(tmp_path / "trailing.csv", [r + "," for r in rows()])
+    rec = read_imu_csv(f)
+    assert len(rec) == 20 and rec.t_ns[0] == T0
+    assert rec.columns["t"] == "column 1"

@@ -287,7 +287,7 @@ def read_imu_csv(
         if idx is None:
             if header is None:
                 header = _comment_header(comments, delimiter, len(fields))
-            if header is None and not all(_is_number(f) for f in fields):
+            if header is None and not all(_is_number(f) for f in fields if f):  # '' : a line ending in a delimiter
                 header = fields
                 continue
             idx = _resolve_columns(columns, header, path)
