@@ -152,6 +152,9 @@ def test_imu_rotated_in_the_mocap_body(tmp_path, sim, capsys):
     assert "--imu-in-body " + " ".join(quat) + " --overwrite" in cap.out  # the rerun as printed replaces the import
     fitted = Rotation.from_quat([float(x) for x in quat])
     assert (fitted * body.inv()).magnitude() < np.radians(1.0)
+    record = json.loads((tmp_path / "a" / "bag_import.json").read_text())  # what was printed is kept with the data
+    assert any("away from the ground truth's body axes" in w for w in record["data_warnings"])
+    assert len(record["advice"]) == 1 and "--imu-in-body " + " ".join(quat) in record["advice"][0]
     s = from_bag.import_bag(bag, tmp_path / "b", imu_in_body_xyzw=tuple(body.as_quat()))
     assert s["data_warnings"] == [] and s["advice"] == []
     gt = read_groundtruth(tmp_path / "b" / "mav0" / "state_groundtruth_estimate0" / "data.csv")

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gyrodenoise import atomic
 from gyrodenoise.data.asl_write import GT_FILE, IMU_FILE, pose_values, write_sequence
 from gyrodenoise.data.consistency import AXES_MAX_DEG, GyroUnitError, noting_data_warnings
 from gyrodenoise.data.readers import QUAT_NORM_TOL, DataFormatError, quaternion_norms
@@ -622,7 +623,9 @@ def import_bag(
     except DataFormatError as e:  # e.g. a gyro in deg/s: leave no sequence that looks usable
         shutil.rmtree(folder, ignore_errors=True)
         raise BagError(f"{e} ({folder} was not kept)") from None
-    summary.update(output=str(folder), data_warnings=warnings_found, advice=advice)
+    summary.update(data_warnings=warnings_found, advice=advice)  # kept with the data, not only printed
+    atomic.write_text(folder / IMPORT_RECORD, json.dumps(summary, indent=2) + "\n")
+    summary["output"] = str(folder)
     return summary
 
 
