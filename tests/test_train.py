@@ -243,6 +243,18 @@ def test_best_val_with_ema_scores_the_checkpoint_it_keeps(root, tmp_path):
     assert s["selected"].endswith(".ckpt") and "best-epoch" in s["selected"]
 
 
+def test_a_run_without_lightnings_checkpoint_callbacks_keeps_its_final_weights(root, tmp_path):
+    """With the best and last checkpoints turned off (e.g. to save I/O in a sweep) the only checkpoint callback left
+    is the interruption one, which has no `monitor`: the run ended in an AttributeError after the fit, without
+    model.pt. With callbacks=ema and test_other_rule the raw final weights are then simply not there to test."""
+    off = ("~callbacks.model_checkpoint", "~callbacks.last_checkpoint", "calibrated_baseline=false")
+    s = train(config(root, tmp_path / "plain", *off, "select=best_val"))
+    assert (tmp_path / "plain" / "model.pt").is_file() and s["best_checkpoint"] == ""
+    assert "no best checkpoint" in s["selected"]
+    s = train(config(root, tmp_path / "ema", *off, "callbacks=ema", "test_other_rule=true"))
+    assert (tmp_path / "ema" / "model.pt").is_file() and "test_raw_final" not in s
+
+
 def test_best_val_without_any_validation_says_so(root, tmp_path, capsys):
     s = train(
         config(

@@ -151,13 +151,15 @@ def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserMo
     """With a weight-averaging callback (callbacks=ema), `module` ends fit with the averaged weights; the
     final optimiser weights are in the last checkpoint's `current_model_state` (Lightning keeps them
     there). None without averaging or without a last checkpoint of the final epoch."""
-    from lightning.pytorch.callbacks import WeightAveraging
+    from lightning.pytorch.callbacks import ModelCheckpoint, WeightAveraging
 
     from gyrodenoise.lit import DenoiserModule
 
     if not any(isinstance(c, WeightAveraging) for c in trainer.callbacks):
         return None
-    last = next((c.last_model_path or c.best_model_path for c in trainer.checkpoint_callbacks if not c.monitor), "")
+    # ModelCheckpoint only: trainer.checkpoint_callbacks also lists the InterruptionCheckpoint (no monitor, no paths)
+    plain = [c for c in trainer.checkpoint_callbacks if isinstance(c, ModelCheckpoint) and not c.monitor]
+    last = next((c.last_model_path or c.best_model_path for c in plain), "")
     if not last:
         return None
     ckpt = torch.load(last, map_location="cpu", weights_only=True)
@@ -427,7 +429,7 @@ def _resume_point(out_dir: Path) -> Path | None:
 
 def _train(cfg: DictConfig, out_dir: Path) -> dict:
     import lightning.pytorch as L
-    from lightning.pytorch.callbacks import LearningRateMonitor, ProgressBar
+    from lightning.pytorch.callbacks import LearningRateMonitor, ModelCheckpoint, ProgressBar
     from lightning.pytorch.utilities.exceptions import SIGTERMException
 
     from gyrodenoise.data.datamodule import TAIL_NAME_NOTE
@@ -518,13 +520,21 @@ def _train(cfg: DictConfig, out_dir: Path) -> dict:
 
     # the model is chosen by a rule fixed before any test: the final weights (`select: last`, the end
     # of a cosine cycle) or the best validation checkpoint (`select: best_val`)
-    ckpt_cb = trainer.checkpoint_callback
-    best_path = ckpt_cb.best_model_path if ckpt_cb is not None and ckpt_cb.monitor else ""
+    # the monitored ModelCheckpoint (callbacks.model_checkpoint), not trainer.checkpoint_callback: without Lightning's
+    # checkpoint callbacks that is the InterruptionCheckpoint, which has no monitor
+    ckpt_cb = next((c for c in trainer.checkpoint_callbacks if isinstance(c, ModelCheckpoint) and c.monitor), None)
+    best_path = ckpt_cb.best_model_path if ckpt_cb is not None else ""
     selected = f"final weights, epoch {trainer.current_epoch}"
     alternative = None  # the model the other rule would pick, tested too when cfg.test_other_rule
     if cfg.select == "best_val" and best_path:
         alternative, module = module, DenoiserModule.load_from_checkpoint(best_path, weights_only=True)
         selected = portable_path(best_path)
+    elif cfg.select == "best_val" and ckpt_cb is None:
+        selected += " (select=best_val, but no best-validation checkpoint callback: no best checkpoint)"
+        print(
+            "warning: select=best_val, but the run has no best-validation checkpoint callback "
+            "(callbacks.model_checkpoint): the final weights are kept"
+        )
     elif cfg.select == "best_val":
         selected += " (select=best_val, but no validation ran during the fit: no best checkpoint)"
         print(
