@@ -224,6 +224,31 @@ def test_fit_calibrated_alone(asl_root, tmp_path):
     assert model_g.G is not None and model.G is None
 
 
+def test_fit_calibrated_runs_with_the_threads_it_is_given(asl_root, tmp_path, monkeypatch):
+    """threads=N (and SLURM's cpus-per-task through it) was ignored by fit_calibrated: its L-BFGS fit ran on torch's
+    default, every core of a shared node; it is applied for the fit and put back after, as train and evaluate do."""
+    import torch
+
+    from gyrodenoise import fit_calibrated as command
+
+    seen = []
+
+    def fit_calibrated(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        raise KeyboardInterrupt  # the fit itself is not what is tested
+
+    monkeypatch.setattr(command, "fit_calibrated", fit_calibrated)
+    before = torch.get_num_threads()
+    wanted = 3 if before != 3 else 2
+    overrides = [
+        "dataset=asl_folder", f"dataset.root={asl_root}", "dataset.name=my_imu", "dataset.train_seqs=[walk_1]",
+        "dataset.test_seqs=[]", "test=false", f"threads={wanted}", f"paths.output_dir={tmp_path}",
+    ]  # fmt: skip
+    with pytest.raises(KeyboardInterrupt):
+        command.fit(compose_config("fit_calibrated", overrides))
+    assert seen == [wanted] and torch.get_num_threads() == before
+
+
 def test_augmentation_noise_follows_the_data_rate_not_a_wrong_nominal_one(asl_root):
     """The per-sample std of a noise density depends on the rate: a sensor.rate_hz of 400 for 200-Hz data warns
     and uses the data's rate; one within 5 % of it is kept (so runs on EuRoC's 200.0026 Hz reproduce)."""

@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from gyrodenoise.atomic import write_json
 from gyrodenoise.baseline import evaluate_on, fit_calibrated
-from gyrodenoise.cli_errors import hydra_key_hints, user_errors
+from gyrodenoise.cli_errors import hydra_key_hints, torch_threads, user_errors
 from gyrodenoise.data.datamodule import TAIL_NAME_NOTE
 from gyrodenoise.job_log import console_to_job_log
 from gyrodenoise.metrics import AOE_DEFINITION
@@ -33,6 +33,13 @@ from gyrodenoise.provenance import machine_description
 
 
 def fit(cfg: DictConfig) -> dict:
+    """The fit, its scores and files; torch's CPU threads are `threads` (SLURM's cpus-per-task by default, as in
+    train) for its length, and as they were after."""
+    with torch_threads(cfg.get("threads")):
+        return _fit(cfg)
+
+
+def _fit(cfg: DictConfig) -> dict:
     out_dir = Path(cfg.paths.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     dm = hydra.utils.instantiate(cfg.dataset)
