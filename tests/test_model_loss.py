@@ -173,3 +173,24 @@ def test_predict_gyro_is_float64_and_restores_mode():
     model = build_model("denoiser")
     out = predict_gyro(model, np.zeros((600, 6)))
     assert out.dtype == torch.float64 and out.shape == (600, 3) and model.training
+
+
+@pytest.mark.parametrize(
+    "loss, message",
+    [
+        ({"increments": [0]}, "distinct increment lengths"),  # a ZeroDivisionError before
+        ({"increments": [16, 16]}, "distinct increment lengths"),  # the 16-sample term counted twice before
+        ({"huber_delta": 0.0}, "huber_delta=0.0"),  # torch's RuntimeError at the first step before
+        ({"weight": -1.0}, "weight=-1.0"),
+        ({"huber": 0.01}, "unexpected keyword argument 'huber'"),
+    ],
+)
+def test_bad_loss_settings_are_refused_when_the_loss_is_built(loss, message):
+    from gyrodenoise.baseline import fit_calibrated
+    from gyrodenoise.cli_errors import ConfigError
+
+    if "huber" not in loss:
+        with pytest.raises(ValueError, match=message):
+            IncrementLoss(**loss)
+    with pytest.raises(ConfigError, match=message):  # fit_calibrated's command: one line, not a traceback
+        fit_calibrated([], loss=loss)

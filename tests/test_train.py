@@ -286,6 +286,30 @@ def test_bad_choices_fail_before_the_fit(root, tmp_path, override, message):
     assert not (tmp_path / "bad" / "checkpoints").exists()  # nothing trained
 
 
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("loss.increments=[0]", r"loss.increments=\[0\]"),  # was a ZeroDivisionError traceback
+        ("loss.increments=16", "loss.increments=16"),  # was a TypeError traceback
+        ("loss.increments=[16,16]", "distinct"),  # silently counted the 16-sample term twice
+        ("loss.huber_delta=0", "loss.huber_delta=0"),  # was torch's RuntimeError at the first training step
+        ("loss.huber_delta=-0.005", "loss.huber_delta=-0.005"),
+        ("loss.weight=-1e6", "loss.weight=-1000000.0"),  # gradient ascent on the loss
+        ("+loss.huber=0.01", "loss.huber is not a setting of the loss"),  # was a TypeError traceback
+    ],
+)
+def test_bad_loss_settings_fail_before_any_data_are_read(root, tmp_path, override, message):
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.train import check_choices
+
+    cfg = config(root, tmp_path / "bad", override)
+    with pytest.raises(ConfigError, match=message):
+        check_choices(cfg)
+    with pytest.raises(ConfigError, match=message):
+        train(cfg)
+    assert not (tmp_path / "bad" / "checkpoints").exists()  # nothing trained
+
+
 def test_recompute_batch_norm_averages_the_batch_statistics():
     """The first batch norm sees the convolution of the (deterministic) input: its recomputed running mean
     is the mean over the given batches of their per-batch channel means, whatever it held before."""

@@ -69,7 +69,10 @@ def fit_calibrated(
     Each sequence's loss is weighted by its number of increments (as if they were one batch).
     Returns the model in eval mode, float32, with the training data's normalisation buffers.
     """
-    loss_fn = IncrementLoss(**dict(loss or {}))
+    try:  # python -m gyrodenoise.fit_calibrated: a bad loss setting in one line (train refuses it before any fit)
+        loss_fn = IncrementLoss(**dict(loss or {}))
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"the loss of fit_calibrated: {e}") from None
     terms = _loss_terms(sequences, loss_fn.base, max(loss_fn.increments))
     if not terms:
         raise ConfigError(  # a ValueError too

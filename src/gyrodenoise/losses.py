@@ -12,20 +12,40 @@ hyperparameter, not a cosmetic factor. Terms whose ground truth is missing (mask
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Iterable
 
 import torch
 from torch.nn import functional as F
 
 from gyrodenoise import so3
 
+_EXAMPLES = {"huber_delta": "0.005", "weight": "1e6"}
+
+
+def _items(value: object) -> list:
+    """The elements of a list-like setting; [] for a single value or a string (not a list of increments)."""
+    return [] if isinstance(value, str | bytes) or not isinstance(value, Iterable) else list(value)
+
 
 class IncrementLoss(torch.nn.Module):
     def __init__(self, increments: tuple[int, ...] = (16, 32), huber_delta: float = 0.005, weight: float = 1e6) -> None:
         super().__init__()
-        self.increments = sorted(int(j) for j in increments)
+        items = _items(increments)
+        whole = bool(items) and all(isinstance(j, numbers.Integral) and not isinstance(j, bool) for j in items)
+        # >= 1 and distinct: 0 divided by zero further on, and a repeated length counted its term twice
+        if not whole or min(items) < 1 or len(set(items)) != len(items):
+            raise ValueError(
+                f"loss.increments={increments!r}: a list of distinct increment lengths in samples, powers of two, "
+                "e.g. 'loss.increments=[16,32]'"
+            )
+        self.increments = sorted(int(j) for j in items)
         self.base = self.increments[0]
         if any(j & (j - 1) or j % self.base for j in self.increments):
             raise ValueError(f"loss.increments must be powers of two, got {self.increments}")
+        for key, value in (("huber_delta", huber_delta), ("weight", weight)):  # torch refuses delta <= 0 mid-fit
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < math.inf:
+                raise ValueError(f"loss.{key}={value!r}: give a positive number, e.g. loss.{key}={_EXAMPLES[key]}")
         self.delta, self.weight = huber_delta, weight
 
     def residuals(self, w_hat: torch.Tensor, dt: torch.Tensor, dR: torch.Tensor, mask: torch.Tensor):

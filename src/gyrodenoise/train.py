@@ -22,6 +22,7 @@ if __name__ == "__main__":  # python -m gyrodenoise.train: a Ctrl-C during the i
 
     run_as_main("train")  # imports this module as gyrodenoise.train (as the console script does), runs main
 
+import inspect
 import math
 import os
 import shlex
@@ -37,7 +38,7 @@ import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from gyrodenoise import all_folds
 from gyrodenoise.atomic import write_json
@@ -46,6 +47,7 @@ from gyrodenoise.cli_errors import ConfigError, TrainingDiverged, hydra_key_hint
 from gyrodenoise.config import with_output_dir
 from gyrodenoise.cpu_memory import retain_freed_memory
 from gyrodenoise.job_log import console_to_job_log
+from gyrodenoise.losses import IncrementLoss
 from gyrodenoise.metrics import AOE_DEFINITION
 from gyrodenoise.models.build import causality_leak
 from gyrodenoise.notices import device_lines_said, lightning_lines_once, quiet_library_notices
@@ -202,6 +204,20 @@ NUMBERS = (  # (key, whole number?, an example) of the settings a run reads as n
 )
 
 
+def check_loss(cfg: DictConfig) -> None:
+    """The `loss` node builds the loss (a ConfigError naming the setting): a key it does not take was a TypeError, a
+    scalar or a zero increment a TypeError or a ZeroDivisionError below, a huber_delta <= 0 torch's error at the
+    first training step."""
+    loss = OmegaConf.to_container(cfg.get("loss") or OmegaConf.create({}), resolve=True)
+    takes = list(inspect.signature(IncrementLoss).parameters)
+    if unknown := sorted(set(loss) - set(takes)):
+        raise ConfigError(f"loss.{unknown[0]} is not a setting of the loss; it takes {', '.join(takes)}")
+    try:
+        IncrementLoss(**loss)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+
+
 def check_choices(cfg: DictConfig) -> None:
     """The choices that need neither data nor a model (`select`, the loss increments against the crop length): a bad
     one ends the command at once, before any data is read."""
@@ -212,12 +228,15 @@ def check_choices(cfg: DictConfig) -> None:
         if value is not None and (isinstance(value, bool) or not isinstance(value, int if whole else (int, float))):
             kind = "a whole number" if whole else "a number"
             raise ConfigError(f"{key}={value!r}: give {kind}, e.g. {key}={example}")
+    check_loss(cfg)
     data_inc, loss_inc = cfg.dataset.get("increments"), cfg.get("loss", {}).get("increments")
-    if data_inc is not None and loss_inc is not None and list(data_inc) != list(loss_inc):
-        raise ConfigError(
-            f"dataset.increments={list(data_inc)} differs from loss.increments={list(loss_inc)}: set loss.increments "
-            "(the dataset follows it)"
-        )
+    if data_inc is not None and loss_inc is not None:
+        data_list = list(data_inc) if isinstance(data_inc, ListConfig) else data_inc  # a scalar is no list
+        if data_list != list(loss_inc):
+            raise ConfigError(
+                f"dataset.increments={data_list} differs from loss.increments={list(loss_inc)}: set loss.increments "
+                "(the dataset follows it)"
+            )
     window, block = cfg.dataset.get("window"), max(loss_inc or data_inc or [1])
     if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < block):
         raise ConfigError(  # a negative window passed the test below and stopped at the crops as 'too short' data
