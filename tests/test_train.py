@@ -276,6 +276,9 @@ def test_best_val_without_any_validation_says_so(root, tmp_path, capsys):
         ("select=best", "select='best'"),
         ("optim.scheduler.name=cosine", "optim.scheduler.name='cosine'"),
         ("model.act=foo", "model.act='foo'"),
+        # settings nothing reads: accepted and recorded in summary.json as if Adam or the schedule had used them
+        ("+optim.betas=[0.9,0.99]", "optim.betas is not a setting of the optimiser"),
+        ("+optim.scheduler.gamma=0.5", "optim.scheduler.gamma is not a setting of the schedule"),
     ],
 )
 def test_bad_choices_fail_before_the_fit(root, tmp_path, override, message):

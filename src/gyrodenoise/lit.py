@@ -28,6 +28,10 @@ from gyrodenoise.so3 import integrate_gyro_torch
 # Lightning hooks around the optimiser step: with the graph step, on_before_optimizer_step would not run and the
 # others would run after Adam has stepped, so a callback (or subclass) that has one trains eagerly
 STEP_HOOKS = ("on_before_zero_grad", "on_before_backward", "on_after_backward", "on_before_optimizer_step")
+# what configure_optimizers reads (Adam and the schedule): the `optim` node's keys, and its `scheduler`'s (the cosine
+# keys stay beside name: constant, from train.yaml's defaults)
+OPTIM_KEYS = ("lr", "weight_decay", "cuda_graph", "scheduler")
+SCHEDULER_KEYS = ("name", "T_0", "T_mult", "eta_min")
 
 
 class DenoiserModule(L.LightningModule):
@@ -301,6 +305,11 @@ class DenoiserModule(L.LightningModule):
 
     def configure_optimizers(self):
         o = self.hparams.optim
+        # a key nothing reads (+optim.betas=..., +optim.scheduler.gamma=...) was accepted and recorded as if used
+        for node, keys, what in ((o, OPTIM_KEYS, "optimiser"), (o.get("scheduler") or {}, SCHEDULER_KEYS, "schedule")):
+            if unknown := sorted(set(node) - set(keys)):
+                where = "optim" if node is o else "optim.scheduler"
+                raise ValueError(f"{where}.{unknown[0]} is not a setting of the {what}; it takes {', '.join(keys)}")
         opt = torch.optim.Adam(self.parameters(), lr=o["lr"], weight_decay=o.get("weight_decay", 0.0))
         sched = o.get("scheduler") or {"name": "constant"}
         if sched["name"] == "constant":  # a scheduler that changes nothing: the rate is logged under its name too
