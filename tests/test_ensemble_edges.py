@@ -126,3 +126,24 @@ def test_the_sweeps_ensemble_says_its_members_warnings_in_one_line(tmp_path, mon
     config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}, "dataset": {"_target_": "builtins.dict"}})
     ensemble_cli.BuildEnsembleCallback().on_multirun_end(config)
     assert said == ["warning: members did not beat it\n"] and (sweep / "ensemble.pt").is_file()
+
+
+@pytest.mark.parametrize("where", ["folder", "under_a_file"])
+def test_an_out_path_that_cannot_be_written_is_one_line_before_the_work(tmp_path, capsys, monkeypatch, where):
+    """`--out DIR` (a folder) ended build and scale with IsADirectoryError's traceback when the file was saved, and
+    `reference` after reading the whole training data; a path under a file likewise. Asked first, as correct and export
+    do: one line naming --out, status 2, and nothing read."""
+    members = [_member(tmp_path, 1), _member(tmp_path, 2)]
+    ens = ensemble_cli.build_ensemble(members, tmp_path / "ens.pt")
+    out = tmp_path / "outdir" if where == "folder" else tmp_path / "ens.pt" / "x.pt"
+    if where == "folder":
+        out.mkdir()
+    monkeypatch.setattr(ensemble_cli, "_save_with_reference", lambda *a: pytest.fail("the data were read"))
+    for args in (
+        ["build", *map(str, members), "--out", str(out)],
+        ["scale", str(ens), "--by", "1.5", "--fitted-by", "a test", "--out", str(out)],
+        ["reference", str(ens), "--out", str(out), "dataset=euroc"],
+    ):
+        assert ensemble_cli.main(args) == 2, args
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: --out {out}: ") and err.count("\n") == 1 and "Traceback" not in err, err

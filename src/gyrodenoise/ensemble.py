@@ -32,6 +32,7 @@ from pathlib import Path
 
 import torch
 
+from gyrodenoise.atomic import output_path_problem
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
 from gyrodenoise.notices import plain_project_warnings
@@ -413,6 +414,11 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unrecognized arguments: {' '.join(extra)}")
     if args.cmd == "reference":
         args.overrides += extra
+    # asked before the work (reading the data, for `reference`): a folder, or a path under a file, ended the command
+    # with IsADirectoryError's traceback only when the file was saved
+    if args.out is not None and (problem := output_path_problem(args.out)):
+        print(f"error: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
     command = " ".join(["python -m gyrodenoise.ensemble", *(argv if argv is not None else sys.argv[1:])])
     if args.cmd == "reference":
         from hydra.errors import ConfigCompositionException
