@@ -48,12 +48,12 @@ sys.meta_path.insert(0, CtrlCWhileImporting())
 '''
 
 
-def _started_and_interrupted(tmp_path, args: list[str]) -> subprocess.CompletedProcess:
-    """`python ARGS` with a SIGINT sent while torch is imported (a sitecustomize on PYTHONPATH sets it up, so that
+def _started_and_interrupted(tmp_path, args: list[str], hooked: str = "torch") -> subprocess.CompletedProcess:
+    """`python ARGS` with a SIGINT sent while `hooked` is imported (a sitecustomize on PYTHONPATH sets it up, so that
     `python -m` runs as a user's would); --help in ARGS: a start that is not interrupted ends at once."""
     hook = tmp_path / "hook"
     hook.mkdir(exist_ok=True)
-    (hook / "sitecustomize.py").write_text(CTRL_C_AT_IMPORT.format(module="torch"))
+    (hook / "sitecustomize.py").write_text(CTRL_C_AT_IMPORT.format(module=hooked))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(hook), *sys.path])}
     env.pop("HYDRA_FULL_ERROR", None)
     return subprocess.run([sys.executable, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
@@ -69,6 +69,23 @@ def test_ctrl_c_while_a_command_starts_is_one_line_and_status_130(module, tmp_pa
         run = _started_and_interrupted(tmp_path, args)
         assert (run.returncode, run.stdout) == (130, ""), (args, run.stderr[-2000:])
         assert run.stderr == f"gyrodenoise-{module}: interrupted while starting, before any work\n", args
+
+
+@pytest.mark.parametrize(
+    "command, hooked", [("export", "torch"), ("ensemble", "torch"), ("shipped", "torch"), ("discrepancy", "numpy")]
+)
+def test_ctrl_c_while_a_python_m_command_starts_is_one_line_and_status_130(command, hooked, tmp_path):
+    """The `python -m` commands without a console script import torch or numpy at their top too: a Ctrl-C there
+    printed KeyboardInterrupt's traceback from the import, before their `main`. They hand over to gyrodenoise.launch
+    as train does, and their line names the command as typed; uninterrupted, --help is as before."""
+    run = _started_and_interrupted(tmp_path, ["-m", f"gyrodenoise.{command}", "--help"], hooked)
+    assert (run.returncode, run.stdout) == (130, ""), run.stderr[-2000:]
+    assert run.stderr == f"python -m gyrodenoise.{command}: interrupted while starting, before any work\n"
+    plain = subprocess.run(
+        [sys.executable, "-m", f"gyrodenoise.{command}", "--help"], cwd=tmp_path, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert plain.returncode == 0 and f"python -m gyrodenoise.{command}" in plain.stdout, plain.stderr[-2000:]
 
 
 def test_console_scripts_point_to_the_launcher():

@@ -22,6 +22,13 @@ recordings, against which `correct` and `evaluate` check new recordings (`gyrode
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.ensemble: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("ensemble")  # imports this module as gyrodenoise.ensemble and runs its main
+
 import argparse
 import hashlib
 import math
@@ -35,7 +42,7 @@ import torch
 from gyrodenoise.atomic import output_path_problem
 from gyrodenoise.models.denoiser import GyroCorrection
 from gyrodenoise.models.ensemble import EnsembleCorrection
-from gyrodenoise.notices import plain_project_warnings
+from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings
 from gyrodenoise.paths import portable_path
 from gyrodenoise.pretrained import ModelQualityWarning, calibrated_beside, load_model, save_model
 from gyrodenoise.provenance import file_sha256
@@ -376,6 +383,7 @@ class BuildEnsembleCallback(_HydraCallback):
             print(f"no spread reference recorded ({e}): add it with `python -m gyrodenoise.ensemble reference`")
 
 
+@interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m gyrodenoise.ensemble",
@@ -460,7 +468,3 @@ def main(argv: list[str] | None = None) -> int:
     if len(paths) > 1:  # without a reference, correct and evaluate cannot tell data unlike the training data
         print(f"note: no spread reference yet: python -m gyrodenoise.ensemble reference {out} --out {out}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

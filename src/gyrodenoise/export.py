@@ -20,6 +20,13 @@ ONNX uses the torch.export-based exporter (`dynamo=True`, torch's default since 
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.export: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("export")  # imports this module as gyrodenoise.export and runs its main
+
 import argparse
 import copy
 import importlib.metadata
@@ -456,7 +463,3 @@ def onnx_stream_parity(model: CorrectionModel, path: str | Path, n: int = 1500) 
         ref = ExportWrapper(model)(x)
     refs = ref if isinstance(ref, tuple) else (ref,)
     return max(float(np.abs(np.concatenate(o, 1) - r.numpy()).max()) for o, r in zip(outs, refs, strict=True))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

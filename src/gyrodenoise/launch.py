@@ -8,9 +8,11 @@ while starting, before any work`) and exits with 130, the shell's status for SIG
 switch for full traces, which `user_errors` honours for Ctrl-C too) shows the traceback as before.
 
 `python -m gyrodenoise.train` (evaluate, correct) comes here as well: the module's first lines hand over to
-`run_as_main` before its own imports when it runs as `__main__`. Nothing is installed at import: `import
-gyrodenoise.train` from Python leaves sys.excepthook and the signal handlers as they were. This module imports
-the standard library only (a console script loads it first).
+`run_as_main` before its own imports when it runs as `__main__`. So do the commands that are `python -m` only and
+import torch or numpy at their top (`PYTHON_M`: export, ensemble, shipped, discrepancy); their line names the command
+as it was typed (`python -m gyrodenoise.export: interrupted while starting, before any work`). Nothing is installed
+at import: `import gyrodenoise.train` from Python leaves sys.excepthook and the signal handlers as they were. This
+module imports the standard library only (a console script loads it first).
 """
 
 from __future__ import annotations
@@ -26,10 +28,19 @@ def _interrupted(prog: str, when: str) -> SystemExit:
     return SystemExit(130)
 
 
+# the `python -m` commands without a console script that come here: module (as imported) -> how the command is typed
+PYTHON_M = {
+    "export": "python -m gyrodenoise.export",
+    "ensemble": "python -m gyrodenoise.ensemble",
+    "shipped": "python -m gyrodenoise.shipped",
+    "discrepancy.__main__": "python -m gyrodenoise.discrepancy",
+}
+
+
 def run(module: str) -> Any:
     """`gyrodenoise.<module>.main()`, its module imported here; a Ctrl-C while importing it or on the way into its
     work (Hydra composing the config, outside the command's own handling) ends with one line and status 130."""
-    prog = f"gyrodenoise-{module}"
+    prog = PYTHON_M.get(module, f"gyrodenoise-{module}")
     full = os.environ.get("HYDRA_FULL_ERROR") == "1"
     try:
         main = importlib.import_module(f"gyrodenoise.{module}").main

@@ -9,6 +9,13 @@ Every option, its unit and its default: python -m gyrodenoise.discrepancy --help
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.discrepancy: a Ctrl-C during the imports below ends in one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("discrepancy.__main__")  # imports this module as gyrodenoise.discrepancy.__main__ and runs its main
+
 import argparse
 import math
 import os
@@ -344,7 +351,3 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"report: {out / 'report.md'}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
