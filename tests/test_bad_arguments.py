@@ -207,3 +207,51 @@ def test_discrepancy_root_defaults_to_the_data_folder_like_the_other_tools(tmp_p
     with pytest.raises(SystemExit):
         parse_args(argv)
     assert "--root DIR: the folder of ASL sequences (or set GYRODENOISE_DATA" in capsys.readouterr().err
+
+
+@pytest.fixture
+def unwritable(tmp_path) -> Path:
+    """A folder no file can be made in: a read-only one, or (as root, whom permissions do not stop) /proc."""
+    import os
+    import tempfile
+
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    for candidate in (folder, Path("/proc")):
+        try:
+            os.remove(tempfile.mkstemp(dir=candidate)[1])
+        except OSError:
+            yield candidate
+            break
+    else:
+        pytest.skip("no folder here refuses a new file")
+    folder.chmod(0o755)
+
+
+def test_an_output_in_a_folder_that_cannot_be_written_is_one_line_before_the_work(
+    unwritable, tiny_asl_root, model_file, tmp_path, capsys
+):
+    """An output in a read-only or forbidden folder passed the checks and ended correct, export and ensemble with
+    PermissionError's traceback when the results were written (export after its ~20 s of export, ensemble reference
+    after reading the training data). Refused first, naming the option."""
+    from gyrodenoise import correct, ensemble, export
+
+    assert output_path_problem(unwritable / "x.csv").startswith(f"{unwritable} cannot be written (")
+    assert output_path_problem(unwritable, folder=True).startswith(f"{unwritable} cannot be written (")
+    assert output_path_problem(unwritable / "new" / "x.csv").startswith(f"{unwritable} cannot be written (")
+    imu = tiny_asl_root / "a" / "mav0" / "imu0" / "data.csv"
+    runs = [
+        (correct.main, [str(imu), "-m", str(model_file), "--out-csv", str(unwritable / "x.csv"), "-o", str(tmp_path)],
+         "--out-csv"),
+        (correct.main, [str(imu), "-m", str(model_file), "-o", str(unwritable / "out")], "-o"),
+        (export.main, [str(model_file), "--pt2", str(unwritable / "m.pt2")], "--pt2"),
+        (export.main, [str(model_file), "--onnx", str(unwritable / "m.onnx")], "--onnx"),
+        (export.main, [str(model_file), "--c", str(unwritable / "c")], "--c"),
+        (ensemble.main, ["build", str(model_file), "--out", str(unwritable / "e.pt")], "--out"),
+    ]  # fmt: skip
+    for main, args, flag in runs:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and f"{flag} {unwritable}" in err and "cannot be written" in err, err
+        assert err.count("\n") == 1 and "Traceback" not in err, err

@@ -24,16 +24,30 @@ def _umask() -> int:
 
 def output_path_problem(path: str | Path, folder: bool = False) -> str | None:
     """Why `path` cannot be written (a file, or with `folder` a folder of outputs): it is a folder where a file is
-    meant, a file where a folder is meant, or a folder above it is a file. None when it can be. The commands ask
+    meant, a file where a folder is meant, a folder above it is a file, or the nearest folder that exists cannot be
+    written (read-only, forbidden: a file is made there and removed to find out). None when it can be. The commands ask
     this before their work, so that a wrong output path is not found only when the results are written."""
     path = Path(path)
     if not folder and path.is_dir():
         return f"{path} is a folder: give a file path"
     if folder and path.exists() and not path.is_dir():
         return f"{path} is a file: give a folder"
-    for above in path.parents:
+    for above in (path, *path.parents) if folder else path.parents:
         if above.exists():
-            return None if above.is_dir() else f"{above} is a file, not a folder: {path} cannot be written under it"
+            if not above.is_dir():
+                return f"{above} is a file, not a folder: {path} cannot be written under it"
+            return _unwritable(above)
+    return None
+
+
+def _unwritable(folder: Path) -> str | None:
+    """Why no file can be made in the existing `folder`, or None (os.access says yes to root on a read-only mount)."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-check-")
+    except OSError as e:
+        return f"{folder} cannot be written ({e.strerror or e}): give a folder you can write to"
+    os.close(fd)
+    os.remove(probe)
     return None
 
 
