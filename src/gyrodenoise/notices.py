@@ -3,8 +3,9 @@
 Lightning 2.6 advertises a cloud logger at every Trainer start and notes that a ModelSummary callback is configured
 (conf/callbacks/default.yaml sets one on purpose, for a plain-text summary); Lightning 2.6 and torch.export under
 torch 2.13 warn that `isinstance(treespec, LeafSpec)` is deprecated, inside their own code; torch's ONNX exporter
-logs, once per operator, that torchvision (which no gyrodenoise model uses) is not installed. Everything else they
-log or warn is left alone.
+logs, once per operator, that torchvision (which no gyrodenoise model uses) is not installed; onnxscript logs a
+failed conversion to another ONNX opset with the ONNX C API's traceback, which `export --opset` then says in one line
+(`export.export_onnx`). Everything else they log or warn is left alone.
 """
 
 from __future__ import annotations
@@ -19,9 +20,11 @@ from typing import Any
 
 LIGHTNING_LOGGER = "lightning.pytorch.utilities.rank_zero"
 ONNX_REGISTRATION_LOGGER = "torch.onnx._internal.exporter._registration"
+ONNX_CONVERTER_LOGGER = "onnxscript.version_converter"
 NOISE_PREFIXES = {  # logger -> message starts to drop
     LIGHTNING_LOGGER: ("💡 Tip:", "Trainer already configured with model summary callbacks"),
     ONNX_REGISTRATION_LOGGER: ("torchvision is not installed",),
+    ONNX_CONVERTER_LOGGER: ("Failed to convert the model to the target version",),
 }
 LEAFSPEC_DEPRECATION = r"`isinstance\(treespec, LeafSpec\)` is deprecated"
 # LearningRateMonitor wraps each logged rate in torch.tensor(); with the CUDA-graph step the rate is already a tensor
