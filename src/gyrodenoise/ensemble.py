@@ -464,7 +464,8 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(f"wrote {out} ({len(paths)} member files)")
-    if len(paths) > 1:  # without a reference, correct and evaluate cannot tell data unlike the training data
+    members = load_model(out, warn=False)[1]["n_members"]  # an ensemble file among the paths gives all its members
+    print(f"wrote {out} ({members} members from {len(paths)} file{'s' if len(paths) > 1 else ''})")
+    if members > 1:  # without a reference, correct and evaluate cannot tell data unlike the training data
         print(f"note: no spread reference yet: python -m gyrodenoise.ensemble reference {out} --out {out}")
     return 0
