@@ -177,3 +177,16 @@ def test_onnx_metadata_carries_the_spread_check_for_onboard_code():
     props = onnx_metadata(two_members(), {"spread_reference": {"reference_rad_s": 0.0024031}})
     assert f"above {SPREAD_RATIO_LIMIT:g} x 0.0024031 rad/s" in props["gyrodenoise.spread_check"]
     assert "gyrodenoise.spread_check" not in onnx_metadata(two_members(), {})  # no reference recorded: nothing said
+
+
+def test_onnx_metadata_says_when_no_member_beat_the_calibrated_baseline():
+    """An ensemble whose members all lost to the calibrated baseline has beats_calibrated None (it is not compared as
+    a whole): `correct` and the C header warned, the ONNX file said nothing."""
+    from gyrodenoise.export import onnx_metadata
+
+    meta = {"name": "ens", "beats_calibrated": None, "members_beat_calibrated": [False, False]}
+    said = onnx_metadata(two_members(), meta)["gyrodenoise.quality_warning"]
+    assert "none of its 2 members" in said
+    assert "gyrodenoise.quality_warning" not in onnx_metadata(
+        two_members(), {**meta, "members_beat_calibrated": [True, False]}
+    )

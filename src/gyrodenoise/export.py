@@ -44,7 +44,7 @@ from gyrodenoise.atomic import atomic_path, output_path_problem
 from gyrodenoise.models.build import not_built_in
 from gyrodenoise.models.ensemble import CorrectionModel, EnsembleCorrection, has_spread
 from gyrodenoise.notices import interrupt_in_one_line, plain_project_warnings, quiet_library_notices
-from gyrodenoise.pretrained import load_model, sensor_model
+from gyrodenoise.pretrained import load_model, not_better_warning, sensor_model
 from gyrodenoise.spread_check import SPREAD_RATIO_LIMIT
 from gyrodenoise.stateful_graph import StatefulCorrection
 
@@ -183,6 +183,8 @@ def onnx_metadata(model: CorrectionModel, meta: dict | None = None, stateful: bo
     for key in ("name", "dataset", "beats_calibrated"):
         if meta.get(key) is not None:
             out[f"gyrodenoise.{key}"] = str(meta[key])
+    if warning := not_better_warning(meta):  # also an ensemble none of whose members did (beats_calibrated None)
+        out["gyrodenoise.quality_warning"] = warning
     out["gyrodenoise.exported_by"] = f"gyrodenoise {importlib.metadata.version('gyrodenoise')}"
     return out
 
