@@ -159,3 +159,16 @@ def test_a_build_from_one_ensemble_file_says_its_members_and_that_it_has_no_refe
     out = capsys.readouterr().out
     assert f"wrote {tmp_path / 'new.pt'} (2 members from 1 file)" in out, out
     assert "note: no spread reference yet" in out, out
+
+
+def test_the_default_out_of_a_multirun_build_is_checked_before_the_work(tmp_path, capsys):
+    """`build --from-multirun DIR` writes DIR/ensemble.pt unless told otherwise; where that is a folder, the build
+    ended in IsADirectoryError's traceback when the file was saved. Now one line naming the default."""
+    sweep = tmp_path / "multirun"
+    for job in (0, 1):
+        (sweep / str(job)).mkdir(parents=True)
+        _member(tmp_path, job + 1).rename(sweep / str(job) / "model.pt")
+    (sweep / "ensemble.pt").mkdir()
+    assert ensemble_cli.main(["build", "--from-multirun", str(sweep)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {sweep / 'ensemble.pt'} (the default --out): ") and "Traceback" not in err, err

@@ -457,6 +457,9 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out or (args.from_multirun / "ensemble.pt" if args.from_multirun else None)
         if out is None:
             ap.error("give --out FILE")
+        if args.out is None and (problem := output_path_problem(out)):  # the default beside the multirun's runs
+            print(f"error: {out} (the default --out): {problem}", file=sys.stderr)
+            return 2
         if not paths:
             ap.error("give member model files or --from-multirun DIR")
         with plain_project_warnings():  # the members' warnings as `warning: ...` lines
