@@ -264,6 +264,13 @@ def test_imu_stamps_that_are_not_ns_are_refused(tmp_path, dt, unit):
         read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(dt=dt)))
 
 
+def test_imu_stamps_too_far_apart_for_an_imu_are_refused(tmp_path):
+    """Only stamps too close for an IMU were checked: picoseconds read as ns (a 200 Hz IMU at 0.2 Hz) passed, and a
+    sequence built on them integrated 5 s per sample."""
+    with pytest.raises(DataFormatError, match=r"rate of 0.2 Hz.*look like ps"):
+        read_imu(write(tmp_path / "imu.csv", IMU_HEADER, imu_rows(dt=5_000_000_000)))
+
+
 def test_imu_stamps_in_bursts_are_not_called_another_unit(tmp_path):
     """A driver that stamps each FIFO read: 10 samples 1 µs apart every 50 ms (200 Hz on average)."""
     t = [1_000_000_000 + (k // 10) * 50_000_000 + (k % 10) * 1_000 for k in range(200)]

@@ -338,6 +338,13 @@ def _check_imu_period(path: Path, t_ns: np.ndarray) -> None:
             f"Hz (an IMU samples at {lo:g} Hz - {hi / 1000:g} kHz); the ASL format's stamps are integer nanoseconds"
             + (f" and these look like {guess}: convert them (and the ground truth's) to ns." if guess else ".")
         )
+    if step > 1e9 / lo:  # e.g. picoseconds read as ns: each sample would be integrated over seconds
+        ps = lo <= 1e12 / step <= hi
+        raise DataFormatError(
+            f"{path}: the median step between IMU timestamps is {step:g}, which in ns is a rate of {1e9 / step:.2g} Hz "
+            f"(an IMU samples at {lo:g} Hz - {hi / 1000:g} kHz); the ASL format's stamps are integer nanoseconds"
+            + (" and these look like ps: convert them (and the ground truth's) to ns." if ps else ".")
+        )
 
 
 def read_imu(path: str | Path) -> ImuData:
