@@ -132,6 +132,12 @@ def build_sequence(name: str, imu: ImuData, gt: GroundTruthData, max_gap_factor:
             + _clock_hint(int(t_imu[0]), int(t_gt[0]))
         )
     keep = (t_imu >= lo) & (t_imu <= hi)
+    if keep.sum() < 2:  # touching at one instant: not a sequence to integrate
+        raise DataFormatError(
+            f"{gt.path}: ground truth [{t_gt[0]}, {t_gt[-1]}] ns overlaps the IMU {imu.path} [{t_imu[0]}, {t_imu[-1]}] "
+            f"ns in {int(keep.sum())} IMU sample(s) only. Both must use the same clock (ns) and cover the same motion."
+            + _clock_hint(int(t_imu[0]), int(t_gt[0]))
+        )
     t_ns = t_imu[keep]
     t0 = int(t_ns[0])
     # float64 seconds relative to a common origin: exact enough (sub-ns for hours)
