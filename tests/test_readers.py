@@ -123,9 +123,9 @@ def test_ground_truth_not_overlapping(tmp_path):
     gt = read_groundtruth(write(tmp_path / "gt.csv", GT_HEADER, gt_rows(t0=9_000_000_000)))
     with pytest.raises(DataFormatError, match="does not overlap the IMU"):
         build_sequence("x", imu, gt)
-    # touching at one IMU sample (the truth starts at the IMU's last stamp): a one-sample sequence was built
+    # meeting it at one IMU sample (the truth starts 2 ms before the IMU's last stamp): a one-sample sequence was built
     last = int(imu.t_ns[-1])
-    gt = read_groundtruth(write(tmp_path / "gt1.csv", GT_HEADER, gt_rows(t0=last)))
+    gt = read_groundtruth(write(tmp_path / "gt1.csv", GT_HEADER, gt_rows(t0=last - 2_000_000)))
     with pytest.raises(DataFormatError, match=r"overlaps the IMU .* in 1 IMU sample\(s\) only"):
         build_sequence("x", imu, gt)
 
