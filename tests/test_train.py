@@ -243,7 +243,7 @@ def test_best_val_with_ema_scores_the_checkpoint_it_keeps(root, tmp_path):
     assert s["selected"].endswith(".ckpt") and "best-epoch" in s["selected"]
 
 
-def test_a_run_without_lightnings_checkpoint_callbacks_keeps_its_final_weights(root, tmp_path):
+def test_a_run_without_lightnings_checkpoint_callbacks_keeps_its_final_weights(root, tmp_path, capsys):
     """With the best and last checkpoints turned off (e.g. to save I/O in a sweep) the only checkpoint callback left
     is the interruption one, which has no `monitor`: the run ended in an AttributeError after the fit, without
     model.pt. With callbacks=ema and test_other_rule the raw final weights are then simply not there to test."""
@@ -253,6 +253,7 @@ def test_a_run_without_lightnings_checkpoint_callbacks_keeps_its_final_weights(r
     assert "no best checkpoint" in s["selected"]
     s = train(config(root, tmp_path / "ema", *off, "callbacks=ema", "test_other_rule=true"))
     assert (tmp_path / "ema" / "model.pt").is_file() and "test_raw_final" not in s
+    assert "test_other_rule: the final weights without averaging are not scored" in capsys.readouterr().out  # said
 
 
 def test_best_val_without_any_validation_says_so(root, tmp_path, capsys):

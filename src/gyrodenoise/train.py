@@ -152,7 +152,7 @@ def calibrated_baseline(cfg: DictConfig, dm: ImuDataModule, module: DenoiserModu
 def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserModule | None:
     """With a weight-averaging callback (callbacks=ema), `module` ends fit with the averaged weights; the
     final optimiser weights are in the last checkpoint's `current_model_state` (Lightning keeps them
-    there). None without averaging or without a last checkpoint of the final epoch."""
+    there). None without averaging, or (said in a warning) without a last checkpoint of the final epoch."""
     from lightning.pytorch.callbacks import ModelCheckpoint, WeightAveraging
 
     from gyrodenoise.lit import DenoiserModule
@@ -162,10 +162,13 @@ def _raw_final_weights(trainer: L.Trainer, module: DenoiserModule) -> DenoiserMo
     # ModelCheckpoint only: trainer.checkpoint_callbacks also lists the InterruptionCheckpoint (no monitor, no paths)
     plain = [c for c in trainer.checkpoint_callbacks if isinstance(c, ModelCheckpoint) and not c.monitor]
     last = next((c.last_model_path or c.best_model_path for c in plain), "")
-    if not last:
-        return None
-    ckpt = torch.load(last, map_location="cpu", weights_only=True)
+    ckpt = torch.load(last, map_location="cpu", weights_only=True) if last else {}
     if "current_model_state" not in ckpt or ckpt.get("epoch") != trainer.current_epoch - 1:
+        print(  # asked for with test_other_rule=true: say why it is missing from summary.json
+            "warning: test_other_rule: the final weights without averaging are not scored: no last checkpoint of the "
+            f"final epoch ({trainer.current_epoch}) holds them (make trainer.max_epochs a multiple of "
+            "callbacks.last_checkpoint.every_n_epochs)"
+        )
         return None
     raw = DenoiserModule(**module.hparams)
     raw.load_state_dict(ckpt["current_model_state"])
