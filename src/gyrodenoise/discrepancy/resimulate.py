@@ -1,7 +1,8 @@
 """Re-simulate a measured sequence's gyro under a selected error model (the held-out gap, the residual checks).
 
 The sensor's deterministic part (sensor constants and refitted per-sequence nuisances) along the measured motion, its
-fitted noise (through a named low-pass), a fresh draw of the reconstructed truth's error, then the output stage
+fitted noise (through a named low-pass) and a fresh draw of a named random walk (not the walk's refitted knots, which
+are the measured sequence's own draw), a fresh draw of the reconstructed truth's error, then the output stage
 (band-limited vibration, saturation, quantization).
 """
 
@@ -26,6 +27,7 @@ def simulate_like(
     """Re-simulate the gyro of sequence `fc` with the selected model: deterministic part (sensor
     constants + refitted nuisances; `pred` if already computed) plus the stochastic effects drawn
     from their fitted levels. Returns (simulated gyro, deterministic prediction of the residual).
+    A named random walk is drawn afresh, not taken from `pred`'s refitted knots (the prediction returned keeps them).
 
     The white noise is drawn first, so two models simulated with generators of the same seed share
     its draws (common random numbers: their gaps differ by the models, not by the draws).
@@ -33,7 +35,10 @@ def simulate_like(
     residual carries on the truth's side, not in the gyro)."""
     if pred is None:
         pred = per_sequence_refit(sel, fc)
-    y = fc.omega + pred
+    walk = "bias_random_walk" in sel.params and "bias_random_walk" in sel.selected
+    # the walk's refitted knots are this sequence's own realisation of it: the re-simulation draws a fresh one below
+    # instead (with both, the re-simulated gyro wandered sqrt(2) times as far as the measured one at long cluster times)
+    y = fc.omega + (per_sequence_refit(sel, fc, [n for n in sel.selected if n != "bias_random_walk"]) if walk else pred)
     sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
     for name in ("white_noise", "bias_random_walk"):
         if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
