@@ -171,3 +171,29 @@ def test_splits_stop_at_a_failed_split(world, tmp_path, capsys):
     assert e.value.code == 2
     assert "the split with a held out failed (above): the splits stop here" in capsys.readouterr().err
     assert not (tmp_path / "s" / "summary.json").exists()
+
+
+def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_one_line(world, tmp_path, capsys):
+    """A 100 Hz recording beside 200 Hz ones went through the run read at the first fit sequence's rate (its spectra,
+    Allan deviations and noise floor, and the simulator model's rate_hz), and a --network model trained at 200 Hz was
+    regressed on 100 Hz recordings, where its convolutions see twice the time: both without a word."""
+    from gyrodenoise.testworld import MOCAP_PRESETS, make_sequence
+
+    for name, seed in (("c", 3), ("d", 4)):
+        make_sequence(world.parent / "slow_world", "procedural", None, duration=15.0, seed=seed, name=name,
+                      imu_rate_hz=100.0, mocap=MOCAP_PRESETS["vicon"], overwrite=True)  # fmt: skip
+        (tmp_path / "data").mkdir(exist_ok=True)
+        (tmp_path / "data" / name).symlink_to(world.parent / "slow_world" / name)
+    (tmp_path / "data" / "a").symlink_to(world / "a")
+    out = tmp_path / "out"
+    assert main(["--root", str(tmp_path / "data"), "--fit", "a", "--holdout", "c", "--null-draws", "0",
+                 "--out", str(out)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "sampled at different rates (a 200 Hz, c 100 Hz)" in err and "Traceback" not in err
+    assert main(["--root", str(tmp_path / "data"), "--fit", "c", "--holdout", "d", "--null-draws", "0",
+                 "--network", "euroc", "--out", str(out)]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert err.startswith("error: --network euroc: model euroc was trained at 200 Hz but c 100 Hz, d 100 Hz") and (
+        "or leave out --network" in err
+    )
+    assert not out.exists()

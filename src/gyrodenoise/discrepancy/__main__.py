@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from gyrodenoise.atomic import output_path_problem, read_marker, remove_earlier_outputs, staged_outputs
+from gyrodenoise.data.checks import RATE_TOL
 from gyrodenoise.data.consistency import noting_data_warnings
 from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
@@ -38,7 +39,7 @@ from gyrodenoise.discrepancy.report import write_report
 from gyrodenoise.discrepancy.report_plots import PLOT_NAMES
 from gyrodenoise.discrepancy.sim_model import write_simulator_model
 from gyrodenoise.discrepancy.truth_check import check_sequence, followed_bands
-from gyrodenoise.discrepancy.truth_rule import with_truth_rule, withhold_unexplained
+from gyrodenoise.discrepancy.truth_rule import sequence_of, with_truth_rule, withhold_unexplained
 from gyrodenoise.discrepancy.workflow import run
 from gyrodenoise.notices import interrupt_in_one_line
 from gyrodenoise.paths import portable_command, portable_path
@@ -157,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="MODEL",
         help="also regress the correction of a trained denoiser (shipped name such as euroc, or a .pt/.ckpt "
-        "path) on the effect library (default: none)",
+        "path) on the effect library; one with memory must be trained at the recordings' rate (default: none)",
     )
     p.add_argument(
         "--gyro-noise-density",
@@ -263,6 +264,29 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
     return out
 
 
+def rate_problem(fit: list, holdout: list, network: str | None) -> str | None:
+    """Why these recordings cannot go through one run (None: they can): sampled at rates more than `RATE_TOL` apart
+    (the spectra, Allan deviations, noise floors and the simulator's model are read at one rate: the first fit
+    sequence's), or a `--network` model with memory trained at another rate than theirs."""
+    rates = {sequence_of(fc): fc.rate_hz for fc in [*fit, *holdout]}
+    first = fit[0].rate_hz
+    if any(abs(r / first - 1.0) > RATE_TOL for r in rates.values()):
+        listed = ", ".join(f"{n} {r:.4g} Hz" for n, r in rates.items())
+        return (
+            f"--fit and --holdout name recordings sampled at different rates ({listed}): the workflow reads them at "
+            "one rate (spectra, Allan deviations, noise floors, the simulator's model). Run the recordings of each "
+            "rate on their own, or resample them to one rate"
+        )
+    if network is None:
+        return None
+    from gyrodenoise.pretrained import load_model, other_rate_warning
+
+    model, meta = load_model(network, warn=False)
+    if said := other_rate_warning(model, meta, rates):
+        return f"--network {network}: {said.rstrip('.')}, or leave out --network"
+    return None
+
+
 OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES))
 
 
@@ -296,6 +320,9 @@ def main(argv: list[str] | None = None) -> int:
         fit, holdout = load(args.fit), load(args.holdout)
     except (FileNotFoundError, DataFormatError) as e:  # a wrong --root, sequence name or file: one line, not a trace
         said = re.sub(r"\+dataset\.gt_files\.(\S+)=", r"--gt-file \1=", str(e))  # this command's option, not training's
+        print(f"error: {said}", file=sys.stderr)
+        return 2
+    if said := rate_problem(fit, holdout, args.network):  # before the minutes of the selection
         print(f"error: {said}", file=sys.stderr)
         return 2
 
