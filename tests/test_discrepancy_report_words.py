@@ -7,6 +7,7 @@ import numpy as np
 from gyrodenoise.discrepancy.report import (
     _agreement,
     _corner_se_words,
+    _decisions_md,
     _gap_words,
     _raw_sample_evidence_md,
     _simulator_model_md,
@@ -91,3 +92,13 @@ def test_the_simulator_model_says_the_bias_spread_and_what_was_taken_out():
     assert "between the 5 sequences (fit and held-out): 0.002 deg/s" in text and "x1.76" in text
     assert "alone spread by 0.0036 deg/s" in text
     assert "turn-on bias's spread" not in " ".join(_simulator_model_md({"simulator_model": "error_model.yaml"}))
+
+
+def test_the_decisions_say_the_practical_minimum_given():
+    """--min-gain 0.005 (half a percent) was written '0%' in report.md (0.015: '2%'), while report.json held 0.005."""
+    s = {"bic_threshold": 10.0, "min_gain": 0.005, "min_drift_deg": 0.1}
+    assert "practical minimum 0.5% of the in-band" in " ".join(_decisions_md({"settings": s}))
+    null = {"draws": 20, "per_candidate": {"time_offset": {"median": 1.0, "q95": 8.0, "threshold": 10.0}}}
+    text = " ".join(_decisions_md({"settings": s | {"min_gain": 0.015}, "null": null}))
+    assert "at least 1.5% of the residual power" in text
+    assert "practical minimum 1% of" in " ".join(_decisions_md({"settings": s | {"min_gain": 0.01}}))

@@ -570,7 +570,7 @@ def _decisions_md(report: dict) -> list[str]:
             f"An effect is named when its delta BIC exceeds its threshold: the 95th percentile of its delta BIC over "
             f"{null['draws']} re-simulations of the fitted base model along these sequences (fresh sensor noise and a "
             f"fresh draw of the reconstruction error; common random numbers), and at least {s['bic_threshold']:g}; and "
-            f"when it closes at least {100 * s['min_gain']:.0f}% of the residual power in the compared band on the "
+            f"when it closes at least {100 * s['min_gain']:g}% of the residual power in the compared band on the "
             "held-out sequences (a band-limited vibration: with its level refitted there; and with the level fitted on "
             "the fit sequences, a sensor constant, it must raise their Whittle log-likelihood), or, for an effect "
             "whose coefficients are sensor constants (fitted on the fit sequences, not refitted per sequence), "
@@ -588,7 +588,7 @@ def _decisions_md(report: dict) -> list[str]:
     else:
         lines += [
             f"Fixed BIC threshold {s['bic_threshold']:g} (no null re-simulations); practical minimum "
-            f"{100 * s['min_gain']:.0f}% of the in-band residual power on the held-out sequences, or (sensor-constant "
+            f"{100 * s['min_gain']:g}% of the in-band residual power on the held-out sequences, or (sensor-constant "
             f"effects) {_min_drift(s):g} deg less held-out median 10-s drift of the model gyro."
         ]
     return lines + [""]
