@@ -32,6 +32,8 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     args, rest = p.parse_known_args(argv)
     if len(set(args.sequences)) < 2:
         p.error("--sequences needs at least 2 different sequences (one is fitted while the other is held out)")
+    if twice := sorted({n for n in args.sequences if args.sequences.count(n) > 1}):  # its split would run twice
+        p.error(f"--sequences names {', '.join(twice)} more than once: give each sequence once")
     clash = [a for a in rest if a.split("=")[0] in ("--fit", "--holdout")]
     if clash:
         p.error(f"{clash[0]}: the splits choose the fitted and held-out sequences; give --sequences only")
