@@ -53,3 +53,38 @@ def test_splits_refuse_what_they_cannot_split(argv, said, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([*argv, "--out", str(tmp_path)])
     assert said in capsys.readouterr().err
+
+
+def test_a_rerun_that_stops_leaves_no_earlier_summary_beside_its_own_reports(tmp_path, monkeypatch, capsys):
+    """A rerun whose second split failed (or was stopped) left the earlier run's summary.md and summary.json beside
+    the first split's new report: a summary that looked whole, of another run, linking to a report it did not hold."""
+    import gyrodenoise.discrepancy.splits as splits
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("summary.json", "summary.md"):
+        (out / name).write_text("the earlier run's")
+    gap = dict.fromkeys(splits.GAPS, 1.0)
+    report = {"named_effects": [], "verdict": "v", "gap_before": gap, "gap_after": gap, "wall_time_s": 1.0,
+              "machine": "m"}  # fmt: skip
+
+    def one_split(argv):
+        held = argv[argv.index("--holdout") + 1]
+        if held == "b":
+            return 2
+        (out / held).mkdir()
+        (out / held / "report.json").write_text(json.dumps(report))
+        return 0
+
+    monkeypatch.setattr(splits, "discrepancy_main", one_split)
+    with pytest.raises(SystemExit):
+        main(["--sequences", "a", "b", "--out", str(out)])
+    assert "the split with b held out failed" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["a"]
+    first = tmp_path / "first"  # a split that fails first leaves an earlier run's outputs as they were
+    first.mkdir()
+    (first / "summary.md").write_text("the earlier run's")
+    monkeypatch.setattr(splits, "discrepancy_main", lambda argv: 2)
+    with pytest.raises(SystemExit):
+        main(["--sequences", "a", "b", "--out", str(first)])
+    assert (first / "summary.md").read_text() == "the earlier run's"

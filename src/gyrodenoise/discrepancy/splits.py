@@ -40,6 +40,7 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     return args, rest
 
 
+SUMMARY_FILES = ("summary.json", "summary.md")
 GAPS = ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10", "psd_gap_log10")
 
 
@@ -52,6 +53,9 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
         if code:  # its error is above; the other splits' verdicts would not be the same workflow's
             print(f"error: the split with {held} held out failed (above): the splits stop here", file=sys.stderr)
             raise SystemExit(code)
+        if not rows:  # the first split's report is replaced: an earlier run's summary no longer describes the folder
+            for name in SUMMARY_FILES:
+                (out / name).unlink(missing_ok=True)
         report = json.loads((out / held / "report.json").read_text())
         named = [e["name"] for e in report["named_effects"]]
         tf = report.get("truth_followed") or {}
