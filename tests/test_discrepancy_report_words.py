@@ -102,3 +102,28 @@ def test_the_decisions_say_the_practical_minimum_given():
     text = " ".join(_decisions_md({"settings": s | {"min_gain": 0.015}, "null": null}))
     assert "at least 1.5% of the residual power" in text
     assert "practical minimum 1% of" in " ".join(_decisions_md({"settings": s | {"min_gain": 0.01}}))
+
+
+def test_the_plots_shade_the_band_the_gaps_compare(tmp_path, monkeypatch):
+    """allan.png and spectrum.png shaded as 'not compared' what lay beyond the widest held-out band (7 Hz), while the
+    gaps of report.json compare up to the narrowest (6 Hz, `gap_before.band_hz`)."""
+    from matplotlib.axes import Axes
+
+    from gyrodenoise.discrepancy.report_plots import plots
+
+    shaded = []
+    monkeypatch.setattr(Axes, "axvspan", lambda ax, lo, hi, **kw: shaded.append((kw["label"], lo, hi)))
+    tau, f, t = np.logspace(-2, 1, 8), np.linspace(0, 100, 50), np.linspace(0, 20, 100)
+    ones = lambda n: np.ones((n, 3))  # noqa: E731
+    arrays = {
+        "rate_hz": 200.0,
+        "allan": {"tau_s": tau, "measured": ones(8), "sim_before": ones(8), "sim_after": ones(8)},
+        "spectrum": {k: ones(50) for k in ("measured", "sim_before", "sim_after", "measured_after")} | {"f_hz": f},
+        "residual_series": {"t": t, "before": ones(100), "after": ones(100), "name": "c"},
+        "drift": {},
+    }
+    gap = {k: 1.0 for k in ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10")} | {"band_hz": 6.0}
+    rows = [{"f_max_hz": 6.0, "whole_spectrum": False}, {"f_max_hz": 7.0, "whole_spectrum": False}]
+    plots(tmp_path, arrays, {"gap_before": gap, "gap_after": gap, "reconstruction": {"holdout": rows}})
+    assert {(lo, hi) for label, lo, hi in shaded if "tau" in label} == {(tau[0], 1 / 6.0)}
+    assert {(lo, hi) for label, lo, hi in shaded if "reconstruction" in label} == {(6.0, 100.0)}

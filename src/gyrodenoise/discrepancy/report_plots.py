@@ -14,13 +14,21 @@ AXES = "xyz"
 PLOT_NAMES = ("allan", "spectrum", "residual", "drift", "gap", "unexplained")  # <name>.png beside report.md
 
 
+def gap_band_hz(report: dict, rate_hz: float) -> float | None:
+    """The band the held-out Allan and spectral gaps compare (`workflow.gap`'s `band_hz`: the narrowest held-out
+    sequence's; None: the whole spectrum). Above it the true rate is not trusted (section "Where the reconstructed
+    true rate is trusted"): the residual there is the reconstruction's error, not the sensor's."""
+    band = (report.get("gap_before") or {}).get("band_hz")
+    if band is None:  # a report without it: the held-out sequences' narrowest compared band
+        rows = (report.get("reconstruction") or {}).get("holdout", [])
+        band = min((b["f_max_hz"] for b in rows if not b.get("whole_spectrum")), default=None)
+    return None if band is None or band >= rate_hz / 2 else float(band)
+
+
 def plots(out: Path, arrays: dict, report: dict) -> list[str]:
     """Draw every figure of the report into `out`; returns their file names (for report.md)."""
     files = []
-    # above the held-out sequences' compared band the true rate is not trusted (section "Where the reconstructed
-    # true rate is trusted"): the residual there is the reconstruction's error, not the sensor's
-    bands = [b["f_max_hz"] for b in report.get("reconstruction", {}).get("holdout", []) if not b.get("whole_spectrum")]
-    f_max = max(bands) if bands else None
+    f_max = gap_band_hz(report, arrays["rate_hz"])
     al = arrays["allan"]
     held_out = ", ".join(report.get("holdout_sequences", []))
     fig, axs = subplots(1, 3, figsize=(13, 4.2), sharey=True)
