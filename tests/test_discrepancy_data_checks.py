@@ -197,3 +197,17 @@ def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_
         "or leave out --network" in err
     )
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("flag", "said"),
+    [
+        (["--seed", "-1"], "--seed -1: a non-negative integer"),  # numpy's ValueError traceback after the selection
+        (["--bic-threshold", "nan"], "--bic-threshold nan: a finite BIC decrease"),  # named nothing, without a word
+    ],
+)
+def test_a_seed_or_threshold_the_run_cannot_use_is_refused_in_one_line(flag, said, world, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main([*argv(world, tmp_path / "out"), *flag])
+    assert said in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -239,6 +239,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--knot-spacing {args.knot_spacing}: must be positive (seconds between the truth spline's knots)")
     if not 0 <= args.min_gain < 1:  # a share: 5 (meant as 5 %?) would let no effect be named, and say nothing
         p.error(f"--min-gain {args.min_gain:g}: a share between 0 and 1 (0.05 for 5 %)")
+    if not math.isfinite(args.bic_threshold):  # nan named nothing (every comparison false), without a word
+        p.error(f"--bic-threshold {args.bic_threshold}: a finite BIC decrease (default 10)")
+    if args.seed < 0:  # numpy's generators take none: it ended in a traceback after the selection
+        p.error(f"--seed {args.seed}: a non-negative integer")
     if args.null_draws < 0:
         p.error(f"--null-draws {args.null_draws}: 0 (the fixed --bic-threshold alone) or more re-simulations")
     if args.root is None:
