@@ -601,3 +601,24 @@ def test_reference_without_its_data_says_how_to_give_the_folder(tmp_path, capsys
     err = capsys.readouterr().err
     assert "data folder not found" in err and "dataset.root=FOLDER" in err and "GYRODENOISE_DATA" in err
     assert not (tmp_path / "r.pt").exists()
+
+
+def test_calibration_of_a_sequence_without_one_whole_window_of_ground_truth():
+    """A recording whose ground truth breaks off more often than once a second (occlusions) has no 1-s window to
+    score: the calibration is empty (no windows, no table, NaN figures; not a ratio of inf), and pooled with another
+    sequence's, and drawn, it works (evaluate with the shipped `euroc` ensemble stopped in numpy's ValueError)."""
+    from gyrodenoise import plots
+    from gyrodenoise.uncertainty import pooled
+
+    sigma_w = np.full((10, 3), 1e-3)
+    gyro, sigma, dt, R = synthetic_errors(sigma_w, 100, 100.0, seed=3)
+    mask = np.ones(len(gyro), dtype=bool)
+    mask[50::100] = False  # a sample without ground truth inside every window
+    empty = calibration(gyro, sigma, dt, R, gt_mask=mask, window_s=1.0)
+    s = empty.summary()
+    assert s["windows"] == 0 and s["table"] == []
+    assert np.isnan(s["spearman"]) and np.isnan(s["rms_ratio"]) and np.isnan(s["rms_actual_deg"])
+    whole = calibration(gyro, sigma, dt, R, window_s=1.0, n_bins=5)
+    both = pooled([empty, whole], n_bins=5)
+    assert both.summary()["windows"] == 10 and len(both.table) == 5
+    plots.calibration_figure(pooled([empty]), "no windows")

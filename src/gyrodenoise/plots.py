@@ -146,6 +146,11 @@ def calibration_figure(result: CalibrationResult, title: str = "") -> Figure:
     (RMS actual vs RMS predicted) and the line of a calibrated spread."""
     fig, ax = subplots(figsize=(5.5, 5))
     pred, act = np.degrees(result.predicted), np.degrees(result.actual)
+    if not len(pred):  # no window with ground truth throughout: nothing to draw on log axes (matplotlib refuses)
+        ax.text(0.5, 0.5, f"no {result.window_s:g}-s window with ground truth throughout", ha="center", va="center")
+        ax.set_axis_off()
+        ax.set_title(title)
+        return fig
     ax.scatter(pred, act, s=4, alpha=0.3, color="0.4", label=f"{len(pred)} windows of {result.window_s:g} s")
     rows = result.table
     ax.plot(

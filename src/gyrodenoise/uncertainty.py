@@ -51,7 +51,8 @@ class CalibrationResult:
             "p_value": self.p_value,
             "rms_predicted_deg": rms_p,
             "rms_actual_deg": rms_a,
-            "rms_ratio": rms_a / rms_p if rms_p > 0 else float("inf"),  # 1 when calibrated
+            # 1 when calibrated; NaN without windows (a recording whose ground truth breaks off more than once a second)
+            "rms_ratio": rms_a / rms_p if rms_p > 0 else float("inf") if rms_p == 0 else float("nan"),
             "table": self.table,
         }
 
@@ -105,6 +106,8 @@ def reliability_table(predicted: np.ndarray, actual: np.ndarray, n_bins: int = 1
     > 1 overconfident, < 1 underconfident)."""
     order = np.argsort(predicted, kind="stable")
     rows = []
+    if not len(order):  # no window with ground truth throughout: no bins (array_split refuses 0 sections)
+        return rows
     for idx in np.array_split(order, min(n_bins, len(order))):
         p, a = predicted[idx], actual[idx]
         rms_p, rms_a = np.degrees(np.sqrt(np.mean(p**2))), np.degrees(np.sqrt(np.mean(a**2)))
