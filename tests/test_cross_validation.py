@@ -421,3 +421,22 @@ def test_a_fold_beyond_the_flights_names_the_ablations_too():
         check_sequence_lists(None, [], None, 0)
     with pytest.raises(ConfigError, match=r"dataset.val_seqs=\[\] names no validation sequence"):  # crashed later
         ImuDataModule("x", "/nowhere", ["a", "b"], [], val_seqs=[])
+
+
+def test_runs_of_a_drawn_seed_count_by_the_seed_they_drew(tmp_path):
+    """seed=null draws a seed and records it in summary.json (the override stays 'seed=null'): two sweeps run that
+    way are two seeds per fold, not one seed 'null' twice (the second sweep's runs were left out as duplicates)."""
+
+    def drawn(path: Path, fold: int, val: float, seed: int) -> Path:
+        _summary(path, fold, val, 5.0, seed=seed)
+        s = json.loads(path.read_text())
+        s["overrides"] = ["seed=null", f"dataset.cv_fold={fold}"]
+        s["seed"] = seed
+        path.write_text(json.dumps(s))
+        return path
+
+    files = [drawn(tmp_path / f"f{k}_{s}.json", k, 2.0 + s, seed) for k in range(3) for s, seed in ((0, 811), (1, 97))]
+    result, _ = cv.load(files)
+    assert result.skipped == []
+    assert [sorted(f.seeds) for f in result.folds.values()] == [["811", "97"]] * 3
+    assert result.figure() == pytest.approx(2.5)

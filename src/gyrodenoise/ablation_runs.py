@@ -36,7 +36,8 @@ class Run:
 
     @property
     def seed(self) -> object:
-        if SEED_KEY in self.overrides:
+        # seed=null: the run drew its seed and recorded it in summary.json (runs of drawn seeds are not one seed)
+        if SEED_KEY in self.overrides and self.overrides[SEED_KEY] != "null":
             return self.overrides[SEED_KEY]
         if self.summary.get(SEED_KEY) is not None:
             return self.summary[SEED_KEY]
