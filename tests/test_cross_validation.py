@@ -440,3 +440,25 @@ def test_runs_of_a_drawn_seed_count_by_the_seed_they_drew(tmp_path):
     assert result.skipped == []
     assert [sorted(f.seeds) for f in result.folds.values()] == [["811", "97"]] * 3
     assert result.figure() == pytest.approx(2.5)
+
+
+def test_an_ablation_sweeps_run_folders_are_read_as_their_summaries(tmp_path):
+    """An ablation's run folder holds the config as Hydra saved it, unresolved (dataset.cv_fold: ${seed}); the run's
+    summary.json records what it trained (cv_fold 0). Given the sweep folder, the runs are cross-validation runs as
+    their summary files are (the folder was refused: 'none of the 2 runs is a cross-validation run')."""
+    import yaml
+
+    sweep = tmp_path / "multirun"
+    for job, (seed, val) in enumerate([(0, 2.0), (1, 3.0)]):
+        run = sweep / str(job)
+        (run / ".hydra").mkdir(parents=True)
+        _summary(run / "summary.json", seed, val, 4.0, seed=seed)
+        saved = json.loads((run / "summary.json").read_text())
+        saved["overrides"] = ["model.act=gelu", f"seed={seed}", "experiment=ablation_activation"]
+        (run / "summary.json").write_text(json.dumps(saved))
+        unresolved = {"seed": seed, "dataset": {**saved["config"]["dataset"], "cv_fold": "${seed}"}}
+        (run / ".hydra" / "config.yaml").write_text(yaml.safe_dump(unresolved))
+        (run / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(saved["overrides"]))
+    result, _ = cv.load([sweep])
+    assert sorted(result.folds) == [0, 1] and result.figure() == pytest.approx(2.5)
+    assert cv.load(sorted(sweep.glob("*/summary.json")))[0].per_fold() == result.per_fold()

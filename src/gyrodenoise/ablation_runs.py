@@ -230,9 +230,13 @@ def load_run(run_dir: Path) -> Run:
     if not overrides_file.is_file():
         raise FileNotFoundError(f"{run_dir}: no .hydra/overrides.yaml; is this a Hydra run folder?")
     overrides, spelled = read_overrides(yaml.safe_load(overrides_file.read_text()) or [])
-    config_file = hydra_dir / "config.yaml"
-    config = (yaml.safe_load(config_file.read_text()) or {}) if config_file.is_file() else {}
     summary = json.loads((run_dir / "summary.json").read_text())
+    # the config the run trained with, resolved (as a summary file is read): .hydra/config.yaml is Hydra's copy with
+    # its interpolations unresolved (an ablation's dataset.cv_fold: ${seed}) and seed=null's seed not drawn yet
+    config = summary.get("config") if isinstance(summary, dict) else None
+    if not isinstance(config, dict):  # a summary without one: Hydra's copy
+        config_file = hydra_dir / "config.yaml"
+        config = (yaml.safe_load(config_file.read_text()) or {}) if config_file.is_file() else {}
     return Run(run_dir, overrides, config, summary, spelled)
 
 
