@@ -480,3 +480,32 @@ def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_
         f"out_dir={tmp_path / 'out'}",
     )
     assert "walk" in summary["aoe_deg"]
+
+
+def test_split_val_without_a_validation_part_is_one_line(tmp_path, monkeypatch):
+    """Training sequences no longer than dataset.train_duration_s leave no validation part (training only warns):
+    evaluate split=val on them ended in 'IndexError: invalid index to scalar variable' from the table's average of
+    no rows, after the models were run; now one line that says why and what to give."""
+    from _asl import write_asl_sequence
+
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.models.build import build_model
+    from gyrodenoise.pretrained import save_model
+
+    write_asl_sequence(tmp_path / "data" / "walk", seconds=20.0, seed=1)
+    model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
+    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(ConfigError, match=r"split=val: no validation part.*train_duration_s"):
+        run_evaluate(
+            "dataset=asl_folder",
+            f"dataset.root={tmp_path / 'data'}",
+            "dataset.train_seqs=[walk]",
+            "split=val",
+            f"weights.proposed={model}",
+            f"weights.calibrated={model}",
+            "threads=1",
+            "figures=false",
+            "trajectories=false",
+            f"out_dir={tmp_path / 'out'}",
+        )
+    assert not (tmp_path / "out").exists()

@@ -253,6 +253,14 @@ def _evaluate(cfg: DictConfig, out: Path) -> tuple[dict, str]:
             fits=False,
         )
         dm.setup("test" if split == "test" else "fit")
+    if split == "val" and not dm.val_part:  # the table's average of no rows was numpy's IndexError, after the models
+        duration = cfg.dataset.get("train_duration_s")
+        why = "train whole" if duration is None else f"are no longer than dataset.train_duration_s={duration} s"
+        raise ConfigError(
+            f"split=val: no validation part: the training sequences ({', '.join(dm.train_names) or 'none'}) {why}, "
+            "so all of them trains; give a shorter dataset.train_duration_s, validation sequences with "
+            "'dataset.val_seqs=[...]', or score test sequences (split=test)"
+        )
     try:
         proposed, proposed_meta, proposed_warning = load_checked(cfg.weights.proposed)
         calibrated, calibrated_meta, calibrated_warning = load_checked(cfg.weights.calibrated)
