@@ -227,3 +227,14 @@ def test_an_oversampled_band_just_under_the_nyquist_frequency_is_simulated(traj)
     it was accepted before the review's change and must still be (review 63)."""
     band = build_effect("vibration", frequency_hz=99.9, bandwidth_hz=0.1, amplitude=[0.01, 0, 0])
     assert np.isfinite(simulate_imu(traj, [band], duration_s=2).gyro).all()
+
+
+@pytest.mark.parametrize("delta", [5.0, -20.0])
+def test_a_time_offset_past_the_trajectorys_ends_is_refused(traj, delta):
+    """The delayed motion was read from the spline's polynomial continuation beyond the truth's ends, silently: a
+    time offset given in ms to build_effect (SI: s), delta=5, gave gyro rates of 14 rad/s and a specific force of
+    500 m/s^2 on a hand-held flight whose rate stays under 3.6 rad/s; one past the trajectory's end did the same."""
+    with pytest.raises(ValueError, match=r"time_offset.*delta .*s.*past the trajectory"):
+        simulate_imu(traj, [build_effect("time_offset", delta=delta)], duration_s=5)
+    sim = simulate_imu(traj, [build_effect("time_offset", delta=0.4)], duration_s=5)  # within the margin: as before
+    assert np.isfinite(sim.gyro).all()

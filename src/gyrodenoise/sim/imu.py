@@ -17,7 +17,7 @@ import numpy as np
 from gyrodenoise.data.asl_write import asl_written, pose_values, write_sequence
 from gyrodenoise.sim.accel import apply_acc_error_model, check_acc_effects
 from gyrodenoise.sim.context import SignalContext
-from gyrodenoise.sim.effects import Effect, WhiteNoise
+from gyrodenoise.sim.effects import Effect, TimeOffset, WhiteNoise
 from gyrodenoise.sim.trajectory import SmoothTrajectory
 
 __all__ = ["SimulatedImu", "apply_error_model", "asl_written", "simulate_imu", "write_asl"]
@@ -89,6 +89,7 @@ def simulate_imu(
     sub = ((np.arange(m) + 0.5) / m - 0.5) * (period_ns * 1e-9)
     t_hi_rel = (t_rel[:, None] + sub[None]).ravel()
     shift = traj.t_start + margin_s
+    _check_time_offsets(effects, traj, t_hi_rel[0] + shift, t_hi_rel[-1] + shift, margin_s)
     kin_hi = traj.evaluate(t_hi_rel + shift)
     sig = SignalContext(
         t=t_hi_rel,
@@ -130,6 +131,26 @@ def simulate_imu(
             **({"acc_effects": [e.to_dict() for e in acc_effects]} if acc_effects else {}),
         },
     )
+
+
+def _check_time_offsets(
+    effects: list[Effect], traj: SmoothTrajectory, first: float, last: float, margin_s: float
+) -> None:
+    """One line for a time offset that reads the motion beyond the trajectory's ends (`first`, `last`: the internal
+    grid's first and last times on the trajectory's clock): the spline's polynomial continuation there is no motion,
+    and was taken silently (a delta meant in ms, 5 for 5 ms, gave rates of 14 rad/s)."""
+    for e in effects:
+        if not isinstance(e, TimeOffset):
+            continue
+        d = float(e.params["delta"])
+        before, after = traj.t_start - (first - d), (last - d) - traj.t_end
+        if max(before, after) > 1e-9:
+            where = f"{before:.3g} s before its start" if before > after else f"{after:.3g} s after its end"
+            raise ValueError(
+                f"effect 'time_offset': delta {d:g} s reads the motion {where}, past the trajectory "
+                f"([{traj.t_start:g}, {traj.t_end:g}] s), where the spline has no motion; delta is in s (5 ms is "
+                f"0.005), and the samples keep margin_s ({margin_s:g} s) of motion on each side for it"
+            )
 
 
 def _check_settings(
