@@ -211,3 +211,12 @@ def test_a_seed_or_threshold_the_run_cannot_use_is_refused_in_one_line(flag, sai
         main([*argv(world, tmp_path / "out"), *flag])
     assert said in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_knot_spacing_that_leaves_no_band_to_compare_is_one_line(world, tmp_path, capsys):
+    """A slow truth spline (--knot-spacing 0.5: a corner near 1 Hz) pins the trusted band at 1 Hz, where the spectral
+    rows start: the fit had no rows and ended in numpy's LinAlgError ('Eigenvalues did not converge')."""
+    assert main([*argv(world, tmp_path / "out"), "--knot-spacing", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "--knot-spacing 0.5" in err and "Traceback" not in err, err
+    assert not (tmp_path / "out" / "report.md").exists()

@@ -31,6 +31,7 @@ from gyrodenoise.data.readers import DataFormatError
 from gyrodenoise.data.sequence import sequence_folder
 from gyrodenoise.discrepancy.bias_instability import NAME as INSTABILITY
 from gyrodenoise.discrepancy.compare import MAX_GT_GAP_S, MIN_STRETCH_S, load_fit_contexts
+from gyrodenoise.discrepancy.design import NoTrustedBand
 from gyrodenoise.discrepancy.gyro_lines import add_lines_to_model, compared_band_hz, gyro_lines
 from gyrodenoise.discrepancy.gyro_lines import sentence as lines_sentence
 from gyrodenoise.discrepancy.null import DRAWS
@@ -338,7 +339,11 @@ def main(argv: list[str] | None = None) -> int:
         return out, [e["name"] for e in out[0]["named_effects"]]
 
     checks = truth_checks(args, [*args.fit, *args.holdout])
-    (report, arrays), rule, withheld = with_truth_rule(select, fit, holdout, checks, args.base, args.candidates)
+    try:
+        (report, arrays), rule, withheld = with_truth_rule(select, fit, holdout, checks, args.base, args.candidates)
+    except NoTrustedBand as e:
+        print(f"error: --knot-spacing {args.knot_spacing:g}: {e}", file=sys.stderr)
+        return 2
     withhold_unexplained(report, rule)
     if rule.note():
         report["verdict"] += "; " + rule.note()

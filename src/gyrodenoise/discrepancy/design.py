@@ -28,7 +28,7 @@ from gyrodenoise.discrepancy.reconstruction import (
     row_frequencies,
     sensor_floor,
 )
-from gyrodenoise.discrepancy.spectral import Nuisance, fit_nuisance, masked_samples, spectra
+from gyrodenoise.discrepancy.spectral import F_MIN_HZ, Nuisance, fit_nuisance, masked_samples, spectra
 from gyrodenoise.discrepancy.time_only_rows import cached_rows, rows_key
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import Effect, SensorBandwidth
@@ -58,6 +58,10 @@ def band_edges(fcs: list[FitContext]) -> list[float | None]:
     return [fc.extra.get("band_hz") for fc in fcs]
 
 
+class NoTrustedBand(ValueError):
+    """A sequence whose reconstructed true rate is trusted nowhere above the spectral rows' lowest frequency."""
+
+
 def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
     """Estimate each sequence's trusted band from its base-model residual (once; kept in extra). Samples outside
     `row_mask` (near a saturation limit: the truth beyond the range, the output clipped) are left out of its
@@ -66,6 +70,14 @@ def set_bands(fcs: list[FitContext], residuals: list[np.ndarray]) -> None:
         if "band_hz" not in fc.extra:
             x, scale = masked_samples(r, fc.extra.get("row_mask"))
             b = estimate_band(fc, x * np.sqrt(scale))
+            if b.f_max_hz <= F_MIN_HZ:  # the spectral rows start there: a fit would have no rows
+                raise NoTrustedBand(
+                    f"{fc.name}: the ground truth's rate is trusted only up to {b.f_max_hz:g} Hz (limited by "
+                    f"{b.limited_by}; the truth spline's knots {b.knot_spacing_s:g} s apart), and the comparison "
+                    f"starts at {F_MIN_HZ:g} Hz: nothing to compare. Give a smaller --knot-spacing (the default, "
+                    "0.05 s, suits a truth at 100 Hz or more) if the truth's rate allows it; a truth too slow or too "
+                    "smooth to follow the gyro above 1 Hz cannot judge its errors"
+                )
             fc.extra["band"], fc.extra["band_hz"] = b, b.f_max_hz
 
 
