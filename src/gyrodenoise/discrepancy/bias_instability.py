@@ -28,10 +28,9 @@ import numpy as np
 
 from gyrodenoise.allan import allan_taus, pooled_allan, root_with_se
 from gyrodenoise.discrepancy.design import band_edges, nuisance_of, row_masks
-from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
 from gyrodenoise.discrepancy.rank import Selection
 from gyrodenoise.discrepancy.reconstruction import band_limit
-from gyrodenoise.discrepancy.resimulate import simulate_like
+from gyrodenoise.discrepancy.resimulate import simulate_like, without_walk_knots
 from gyrodenoise.discrepancy.spectral import fit_band
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import BiasInstability
@@ -67,8 +66,7 @@ def split_candidates(candidates: list[str] | None) -> tuple[list[str] | None, bo
 def wander_residuals(sel: Selection, fcs: list[FitContext]) -> list[np.ndarray]:
     """What the deterministic model leaves on each sequence with the bias's wander kept: its constants and
     per-sequence nuisances refitted as on a held-out sequence, the random walk's knots left out."""
-    names = [n for n in sel.selected if n != "bias_random_walk"]
-    return [fc.residual - per_sequence_refit(sel, fc, names) for fc in fcs]
+    return [fc.residual - without_walk_knots(sel, fc) for fc in fcs]
 
 
 def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise: bool) -> dict:
@@ -109,11 +107,12 @@ def allan_terms(residuals: list[np.ndarray], fcs: list[FitContext], angle_noise:
 def _redraws(sel: Selection, fcs: list[FitContext], seed: int, tag: int) -> Iterator[list[FitContext]]:
     """DRAWS re-simulations of sequences `fcs` under `sel` (its deterministic part refitted without the walk's knots),
     each as the list of re-simulated sequences; draw d of sequence s from the generator (seed, tag, d, s)."""
-    names = [n for n in sel.selected if n != "bias_random_walk"]
-    pred = [per_sequence_refit(sel, fc, names) for fc in fcs]
-    for d in range(DRAWS):
+    free = [without_walk_knots(sel, fc) for fc in fcs]
+    for d in range(DRAWS):  # (only the gyro is used: the prediction given is the walk-free one too)
         yield [
-            _as_measured(fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), pred[s])[0])
+            _as_measured(
+                fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), free[s], walk_free=free[s])[0]
+            )
             for s, fc in enumerate(fcs)
         ]
 

@@ -28,7 +28,7 @@ from scipy import stats
 from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
 from gyrodenoise.discrepancy.rank import MIN_GAIN, Selection
 from gyrodenoise.discrepancy.reconstruction import band_limit, draw_error
-from gyrodenoise.discrepancy.resimulate import simulate_like
+from gyrodenoise.discrepancy.resimulate import simulate_like, walk_named, without_walk_knots
 from gyrodenoise.sim.context import FitContext
 
 BINS = 10
@@ -129,11 +129,13 @@ def lack_of_fit(
     observed = _scores(r, sig)
     null_scores = {k: np.empty(draws) for k in observed}
     null_means = {k: np.empty((draws, BINS)) for k in observed}
+    preds = [per_sequence_refit(sel, fc) for fc in fcs]  # once, not per draw
+    free = [without_walk_knots(sel, fc) if walk_named(sel) else None for fc in fcs]
     for d in range(draws):
         gyros, errors = [], []
         for s, fc in enumerate(fcs):
             rng = np.random.default_rng([seed, 7919, d, s])
-            gyros.append(simulate_like(sel, fc, rng, truth_error=False)[0])
+            gyros.append(simulate_like(sel, fc, rng, preds[s], truth_error=False, walk_free=free[s])[0])
             errors.append(draw_error(fc, rng))
         for k, v in _scores(*_world(sel, fcs, gyros, errors)).items():
             null_scores[k][d] = v["score"]

@@ -23,11 +23,13 @@ def simulate_like(
     rng: np.random.Generator,
     pred: np.ndarray | None = None,
     truth_error: bool = True,
+    walk_free: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Re-simulate the gyro of sequence `fc` with the selected model: deterministic part (sensor
     constants + refitted nuisances; `pred` if already computed) plus the stochastic effects drawn
     from their fitted levels. Returns (simulated gyro, deterministic prediction of the residual).
-    A named random walk is drawn afresh, not taken from `pred`'s refitted knots (the prediction returned keeps them).
+    A named random walk is drawn afresh, not taken from `pred`'s refitted knots (the prediction returned keeps them):
+    the gyro starts from `walk_free`, the prediction without the knots (`without_walk_knots`; computed here if None).
 
     The white noise is drawn first, so two models simulated with generators of the same seed share
     its draws (common random numbers: their gaps differ by the models, not by the draws).
@@ -35,10 +37,11 @@ def simulate_like(
     residual carries on the truth's side, not in the gyro)."""
     if pred is None:
         pred = per_sequence_refit(sel, fc)
-    walk = "bias_random_walk" in sel.params and "bias_random_walk" in sel.selected
     # the walk's refitted knots are this sequence's own realisation of it: the re-simulation draws a fresh one below
     # instead (with both, the re-simulated gyro wandered sqrt(2) times as far as the measured one at long cluster times)
-    y = fc.omega + (per_sequence_refit(sel, fc, [n for n in sel.selected if n != "bias_random_walk"]) if walk else pred)
+    if walk_named(sel) and walk_free is None:
+        walk_free = without_walk_knots(sel, fc)
+    y = fc.omega + (walk_free if walk_named(sel) else pred)
     sig = SignalContext(t=fc.t, omega=fc.omega, alpha=fc.alpha, f=fc.f, rate_hz=fc.rate_hz)
     for name in ("white_noise", "bias_random_walk"):
         if name in sel.params and (name != "bias_random_walk" or name in sel.selected):
@@ -60,6 +63,16 @@ def simulate_like(
     if "quantization" in sel.params:
         y = Quantization(step=sel.params["quantization"]["step"]).apply(sig, y, rng)
     return y, pred
+
+
+def walk_named(sel: Selection) -> bool:
+    """Whether `sel` holds a random walk that the re-simulation draws (its knots are then refitted nuisances)."""
+    return "bias_random_walk" in sel.params and "bias_random_walk" in sel.selected
+
+
+def without_walk_knots(sel: Selection, fc: FitContext) -> np.ndarray:
+    """The deterministic prediction of sequence `fc` (`per_sequence_refit`) with the random walk's knots left out."""
+    return per_sequence_refit(sel, fc, [n for n in sel.selected if n != "bias_random_walk"])
 
 
 def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:

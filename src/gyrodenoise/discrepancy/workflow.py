@@ -24,7 +24,7 @@ from gyrodenoise.discrepancy.lack_of_fit import lack_of_fit
 from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG, MIN_GAIN, Selection, residuals_after, select_effects
 from gyrodenoise.discrepancy.reconstruction import band_limit
-from gyrodenoise.discrepancy.resimulate import simulate_like
+from gyrodenoise.discrepancy.resimulate import simulate_like, walk_named, without_walk_knots
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.discrepancy.transfer import apply_transfer_check
 from gyrodenoise.sim.context import FitContext
@@ -64,8 +64,9 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
     in_band = []
     for s, fc in enumerate(fcs):
         pred = per_sequence_refit(sel, fc)
+        free = without_walk_knots(sel, fc) if walk_named(sel) else None
         for k in range(SIM_DRAWS):
-            y_sim, _ = simulate_like(sel, fc, np.random.default_rng([seed, s, k]), pred)
+            y_sim, _ = simulate_like(sel, fc, np.random.default_rng([seed, s, k]), pred, walk_free=free)
             sims.append(y_sim - fc.omega)
             sim_noise.append(y_sim - fc.omega - pred)
         e = fc.residual - pred
