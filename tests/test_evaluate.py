@@ -455,9 +455,8 @@ def test_a_model_left_out_with_null_is_one_line_before_the_data_are_read(tmp_pat
         )
 
 
-def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_path, monkeypatch):
-    """evaluate split=val with dataset.val_seqs naming its own sequences and dataset.train_seqs=[] (asl_folder's
-    lists are '???') scores them; the empty-training-list refusal meant for train and fit_calibrated stopped it."""
+def _evaluate_one_walk(tmp_path, monkeypatch, *lists: str) -> dict:
+    """evaluate split=val on one 20-s own-data sequence 'walk' (asl_folder), the calibrated model for both methods."""
     from _asl import write_asl_sequence
 
     from gyrodenoise.models.build import build_model
@@ -466,11 +465,10 @@ def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_
     write_asl_sequence(tmp_path / "data" / "walk", seconds=20.0, seed=1)
     model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
     monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
-    summary = run_evaluate(
+    return run_evaluate(
         "dataset=asl_folder",
         f"dataset.root={tmp_path / 'data'}",
-        "dataset.train_seqs=[]",
-        "dataset.val_seqs=[walk]",
+        *lists,
         "split=val",
         f"weights.proposed={model}",
         f"weights.calibrated={model}",
@@ -479,6 +477,12 @@ def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_
         "trajectories=false",
         f"out_dir={tmp_path / 'out'}",
     )
+
+
+def test_split_val_on_named_validation_sequences_needs_no_training_sequence(tmp_path, monkeypatch):
+    """evaluate split=val with dataset.val_seqs naming its own sequences and dataset.train_seqs=[] (asl_folder's
+    lists are '???') scores them; the empty-training-list refusal meant for train and fit_calibrated stopped it."""
+    summary = _evaluate_one_walk(tmp_path, monkeypatch, "dataset.train_seqs=[]", "dataset.val_seqs=[walk]")
     assert "walk" in summary["aoe_deg"]
 
 
@@ -486,26 +490,8 @@ def test_split_val_without_a_validation_part_is_one_line(tmp_path, monkeypatch):
     """Training sequences no longer than dataset.train_duration_s leave no validation part (training only warns):
     evaluate split=val on them ended in 'IndexError: invalid index to scalar variable' from the table's average of
     no rows, after the models were run; now one line that says why and what to give."""
-    from _asl import write_asl_sequence
-
     from gyrodenoise.cli_errors import ConfigError
-    from gyrodenoise.models.build import build_model
-    from gyrodenoise.pretrained import save_model
 
-    write_asl_sequence(tmp_path / "data" / "walk", seconds=20.0, seed=1)
-    model = save_model(build_model("calibrated"), {"name": "calibrated"}, tmp_path / "cal.pt", {"rate_hz": 200.0})
-    monkeypatch.setenv("GYRODENOISE_CACHE", str(tmp_path / "cache"))
     with pytest.raises(ConfigError, match=r"split=val: no validation part.*train_duration_s"):
-        run_evaluate(
-            "dataset=asl_folder",
-            f"dataset.root={tmp_path / 'data'}",
-            "dataset.train_seqs=[walk]",
-            "split=val",
-            f"weights.proposed={model}",
-            f"weights.calibrated={model}",
-            "threads=1",
-            "figures=false",
-            "trajectories=false",
-            f"out_dir={tmp_path / 'out'}",
-        )
+        _evaluate_one_walk(tmp_path, monkeypatch, "dataset.train_seqs=[walk]")
     assert not (tmp_path / "out").exists()
