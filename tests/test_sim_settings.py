@@ -238,3 +238,8 @@ def test_a_time_offset_past_the_trajectorys_ends_is_refused(traj, delta):
         simulate_imu(traj, [build_effect("time_offset", delta=delta)], duration_s=5)
     sim = simulate_imu(traj, [build_effect("time_offset", delta=0.4)], duration_s=5)  # within the margin: as before
     assert np.isfinite(sim.gyro).all()
+    # without a margin the grid itself reaches half a period past the ends: an offset of 0 adds nothing beyond it and
+    # was refused ('delta 0 s reads the motion 0.00225 s after its end'); one that reads further is still refused
+    assert np.isfinite(simulate_imu(traj, [build_effect("time_offset", delta=0.0)], margin_s=0).gyro).all()
+    with pytest.raises(ValueError, match=r"delta 0.001 s reads the motion 0.001 s before its start"):
+        simulate_imu(traj, [build_effect("time_offset", delta=1e-3)], margin_s=0)

@@ -143,7 +143,11 @@ def _check_time_offsets(
         if not isinstance(e, TimeOffset):
             continue
         d = float(e.params["delta"])
-        before, after = traj.t_start - (first - d), (last - d) - traj.t_end
+        if d == 0.0:  # reads nothing beyond what the grid itself reads
+            continue
+        # only the overshoot the offset adds: with margin_s 0 the grid itself reaches T/2 past each end
+        before = traj.t_start - (first - d) - max(0.0, traj.t_start - first)
+        after = (last - d) - traj.t_end - max(0.0, last - traj.t_end)
         if max(before, after) > 1e-9:
             where = f"{before:.3g} s before its start" if before > after else f"{after:.3g} s after its end"
             raise ValueError(
