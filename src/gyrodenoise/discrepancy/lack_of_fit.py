@@ -129,8 +129,9 @@ def lack_of_fit(
     observed = _scores(r, sig)
     null_scores = {k: np.empty(draws) for k in observed}
     null_means = {k: np.empty((draws, BINS)) for k in observed}
-    preds = [per_sequence_refit(sel, fc) for fc in fcs]  # once, not per draw
-    free = [without_walk_knots(sel, fc) if walk_named(sel) else None for fc in fcs]
+    # the prediction each re-simulated gyro starts from, once, not per draw (walk-free where a walk is drawn)
+    free = [without_walk_knots(sel, fc) for fc in fcs] if walk_named(sel) else [None] * len(fcs)
+    preds = free if walk_named(sel) else [per_sequence_refit(sel, fc) for fc in fcs]
     for d in range(draws):
         gyros, errors = [], []
         for s, fc in enumerate(fcs):
