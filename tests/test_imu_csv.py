@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from gyrodenoise.data.imu_csv import read_imu_csv
+from gyrodenoise.data.readers import read_csv_table
 
 T0 = 1_600_000_000_000_000_000  # ns
 
@@ -38,6 +39,17 @@ def test_a_note_above_the_header_does_not_take_its_place(tmp_path, hashed):
 def test_a_note_below_the_header_does_not_take_its_place(tmp_path):
     f = write(tmp_path / "below.csv", ["#t,gx [deg/s],gy [deg/s],gz [deg/s],ax,ay,az", "# sensor: X", *rows()])
     assert read_imu_csv(f).units["gyro"] == "deg/s"
+
+
+def test_both_readers_take_the_same_comment_line_for_the_header(tmp_path):
+    """Two comment lines with the data's number of fields: `correct`'s reader took the first, the ASL readers the
+    last (the nearest the data); both now take the last, so a file reads the same by either."""
+    header = "#t [ns],gx [deg/s],gy [deg/s],gz [deg/s],ax,ay,az"
+    f = write(tmp_path / "two.csv", ["# a,b,c,d,e,f,g", header, *rows()])
+    assert read_imu_csv(f).units["gyro"] == "deg/s"  # the first line gave rad/s, the ASL default
+    seen = []
+    read_csv_table(f, 7, "IMU", check_header=lambda path, line, names: seen.append((line, names)))
+    assert seen == [(2, [n.strip() for n in header.lstrip("#").split(",")])]
 
 
 def test_column_number_zero_is_refused(tmp_path):

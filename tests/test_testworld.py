@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from gyrodenoise.data.readers import read_groundtruth, read_imu
 from gyrodenoise.testworld import EffectSpecError, MocapConfig, ProceduralMotion, make_sequence
 from gyrodenoise.testworld.__main__ import main as cli
-from gyrodenoise.testworld.motion import FourierSeries
+from gyrodenoise.testworld.motion import FourierSeries, quat_product
 from gyrodenoise.testworld.sensor import Bandwidth, simulate_imu
 from gyrodenoise.testworld.spec import parse_effects, realise
 
@@ -42,6 +42,14 @@ def test_constant_rate_gives_the_expected_attitude():
     np.testing.assert_allclose(kin.alpha, 0.0)
     # at rest and spinning in place, the accelerometer reads gravity in the body frame
     np.testing.assert_allclose(kin.specific_force, expected.inv().apply([0.0, 0.0, 9.80665]), atol=1e-9)
+
+
+def test_the_quaternion_product_is_scipys_rotation_product():
+    """The prefix scan's product (numpy, for speed) composes rotations as `Rotation.__mul__` does."""
+    a, b = Rotation.random(500, random_state=1), Rotation.random(500, random_state=2)
+    got = Rotation.from_quat(quat_product(a.as_quat(), b.as_quat()))
+    np.testing.assert_allclose(got.as_matrix(), (a * b).as_matrix(), atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(quat_product(a.as_quat(), b.as_quat()), axis=1), 1.0, atol=1e-15)
 
 
 def test_magnus_integration_is_fourth_order():

@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrodenoise.data import asl_header
 from gyrodenoise.data.asl_write import IMU_HEADER as ASL_HEADER
-from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ, DataFormatError, text_lines
+from gyrodenoise.data.readers import IMU_RATE_RANGE_HZ, DataFormatError, comment_header, text_lines
 
 G0 = 9.80665  # standard gravity, m/s^2 per g
 TIME_UNITS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}  # ns per unit
@@ -147,13 +147,11 @@ def _guess_delimiter(line: str) -> str | None:
 
 
 def _comment_header(comments: list[str], delimiter: str | None, n_fields: int) -> list[str] | None:
-    """The header among the comment lines above the data (a note above or below it is not it): the first with as
-    many fields as the first line below them, else the first that names at least the seven columns read, else
-    None."""
+    """The header among the comment lines above the data (`readers.comment_header`'s rule: the nearest the data with
+    as many fields as the first line below them, else with at least the seven columns read), else None."""
     split = [_split(c, delimiter) for c in comments]
-    return next((f for f in split if len(f) == n_fields), None) or next(
-        (f for f in split if len(f) >= len(FIELDS)), None
-    )
+    k = comment_header(split, n_fields, len(FIELDS))
+    return None if k is None else split[k]
 
 
 def _is_number(s: str) -> bool:
@@ -253,9 +251,9 @@ def read_imu_csv(
 ) -> ImuRecording:
     """Parse the file; values in SI, time in int ns. Comment lines start with '#'; a first line
     with non-numeric fields, or a comment line above the data with as many fields as it (`_comment_header`: a note
-    above or below the header is not it), is taken as the header. A unit not given is the one the
-    header's names declare for the mapped columns ('gx [deg/s]', 't (s)', 'acc_x_g'), else the ASL format's
-    (ns, rad/s, m/s^2); `ImuRecording.units_from_header` names those taken from the header."""
+    above the header, or below it with another number of fields, is not it), is taken as the header. A unit not
+    given is the one the header's names declare for the mapped columns ('gx [deg/s]', 't (s)', 'acc_x_g'), else the
+    ASL format's (ns, rad/s, m/s^2); `ImuRecording.units_from_header` names those taken from the header."""
     path = Path(path)
     check_units(time_unit, gyro_unit, acc_unit)
     if isinstance(columns, list | tuple):  # from Python a list reads as naturally as the command line's string

@@ -94,6 +94,18 @@ def text_lines(path: Path, expected: str) -> Iterator[tuple[int, str]]:
         raise DataFormatError(f"{path}:{lineno}: byte 0x{byte:02x} at offset {offset} is not UTF-8. {advice}") from None
 
 
+def comment_header(comments: list[list[str]], n_fields: int, min_fields: int) -> int | None:
+    """Which of the comment lines above the data (each split into its fields) is the header: the last with as many
+    fields as the first data line, else the last with at least `min_fields` (a header naming only the columns read),
+    else None. The nearest the data wins: a note above the header is not it, nor is a note below it with another
+    number of fields. Shared by every reader of a table with '#' comments, so that they agree on a file."""
+    for ok in (lambda f: len(f) == n_fields, lambda f: len(f) >= min_fields):
+        k = next((i for i in reversed(range(len(comments))) if ok(comments[i])), None)
+        if k is not None:
+            return k
+    return None
+
+
 def read_csv_table(
     path: Path,
     min_cols: int,
@@ -130,11 +142,9 @@ def read_csv_table(
         if not rows and check_header is not None:
             # the header: the last comment line with as many fields as the data (not a note below it), else one that
             # names at least the columns read (a header of t, p, q over data with more columns: velocity, biases)
-            header = next((c for c in reversed(comments) if len(c[1]) == len(fields)), None) or next(
-                (c for c in reversed(comments) if len(c[1]) >= min_cols), None
-            )
-            if header is not None:
-                check_header(path, *header)
+            k = comment_header([c[1] for c in comments], len(fields), min_cols)
+            if k is not None:
+                check_header(path, *comments[k])
         if len(fields) < min_cols:
             other = next((d for d in (";", "\t") if len(s.split(d)) >= min_cols), None) if len(fields) == 1 else None
             spaces = len(fields) == 1 and other is None and len(s.split()) >= min_cols  # e.g. a TUM trajectory

@@ -30,7 +30,7 @@ from gyrodenoise.allan import allan_taus, pooled_allan, root_with_se
 from gyrodenoise.discrepancy.design import band_edges, nuisance_of, row_masks
 from gyrodenoise.discrepancy.rank import Selection
 from gyrodenoise.discrepancy.reconstruction import band_limit
-from gyrodenoise.discrepancy.resimulate import simulate_like, without_walk_knots
+from gyrodenoise.discrepancy.resimulate import as_measured, simulate_like, without_walk_knots
 from gyrodenoise.discrepancy.spectral import fit_band
 from gyrodenoise.sim.context import FitContext
 from gyrodenoise.sim.effects import BiasInstability
@@ -110,7 +110,7 @@ def _redraws(sel: Selection, fcs: list[FitContext], seed: int, tag: int) -> Iter
     free = [without_walk_knots(sel, fc) for fc in fcs]
     for d in range(DRAWS):  # (only the gyro is used: the prediction given is the walk-free one too)
         yield [
-            _as_measured(
+            as_measured(
                 fc, simulate_like(sel, fc, np.random.default_rng([seed, tag, d, s]), free[s], walk_free=free[s])[0]
             )
             for s, fc in enumerate(fcs)
@@ -125,11 +125,6 @@ def _null(sel: Selection, fcs: list[FitContext], angle_noise: bool, seed: int, t
         for k in terms:
             terms[k].append(t[k])
     return {k: np.asarray(v) for k, v in terms.items()}
-
-
-def _as_measured(fc: FitContext, gyro: np.ndarray) -> FitContext:
-    """Sequence `fc` with a re-simulated gyro; its own copy of `extra` (a refit may set a saturation mask there)."""
-    return dataclasses.replace(fc, gyro=gyro, extra=dict(fc.extra))
 
 
 def _z(value: np.ndarray, null: np.ndarray) -> np.ndarray:

@@ -8,6 +8,8 @@ are the measured sequence's own draw), a fresh draw of the reconstructed truth's
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from gyrodenoise.discrepancy.fitted_model import per_sequence_refit
@@ -73,6 +75,21 @@ def walk_named(sel: Selection) -> bool:
 def without_walk_knots(sel: Selection, fc: FitContext) -> np.ndarray:
     """The deterministic prediction of sequence `fc` (`per_sequence_refit`) with the random walk's knots left out."""
     return per_sequence_refit(sel, fc, [n for n in sel.selected if n != "bias_random_walk"])
+
+
+def as_measured(fc: FitContext, gyro: np.ndarray) -> FitContext:
+    """Sequence `fc` with a re-simulated gyro; its own copy of `extra` (a refit may set a saturation mask there)."""
+    return dataclasses.replace(fc, gyro=gyro, extra=dict(fc.extra))
+
+
+def left_by_model(sel: Selection, fc: FitContext, y_sim: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """What the deterministic model leaves of a re-simulated gyro `y_sim`, as it leaves of the measured one (whose
+    residual is taken minus `pred`, refitted on it). With a named walk the per-sequence nuisances are refitted on
+    the re-simulation: its walk is its own draw, which `pred`'s knots (the measured walk's) would leave in it beside
+    theirs. Without one the nuisances are a constant bias (outside the compared band) and `pred` is used as is."""
+    if walk_named(sel):
+        return y_sim - fc.omega - per_sequence_refit(sel, as_measured(fc, y_sim))
+    return y_sim - fc.omega - pred
 
 
 def shape_noise(x: np.ndarray, rate_hz: float, corner_hz: float) -> np.ndarray:

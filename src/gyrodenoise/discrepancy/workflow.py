@@ -24,7 +24,7 @@ from gyrodenoise.discrepancy.lack_of_fit import lack_of_fit
 from gyrodenoise.discrepancy.null import DRAWS, NullDistribution, null_distribution
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG, MIN_GAIN, Selection, residuals_after, select_effects
 from gyrodenoise.discrepancy.reconstruction import band_limit
-from gyrodenoise.discrepancy.resimulate import simulate_like, walk_named, without_walk_knots
+from gyrodenoise.discrepancy.resimulate import left_by_model, simulate_like, walk_named, without_walk_knots
 from gyrodenoise.discrepancy.spectral import psd_gap
 from gyrodenoise.discrepancy.transfer import apply_transfer_check
 from gyrodenoise.sim.context import FitContext
@@ -68,7 +68,7 @@ def gap(sel: Selection, fcs: list[FitContext], seed: int = 0) -> dict:
         for k in range(SIM_DRAWS):
             y_sim, _ = simulate_like(sel, fc, np.random.default_rng([seed, s, k]), pred, walk_free=free)
             sims.append(y_sim - fc.omega)
-            sim_noise.append(y_sim - fc.omega - pred)
+            sim_noise.append(left_by_model(sel, fc, y_sim, pred))
         e = fc.residual - pred
         res.append(e)
         in_band.append(band_power(fc, e, ones))
@@ -101,7 +101,7 @@ def comparisons(sel_base: Selection, sel: Selection, fcs: list[FitContext], seed
     rate = fcs[0].rate_hz
     out: dict = {"rate_hz": rate, "names": [fc.name for fc in fcs]}
     meas = [fc.residual for fc in fcs]
-    sim_b, sim_a, res_b, res_a = [], [], [], []
+    sim_b, sim_a, res_b, res_a, left_b, left_a = [], [], [], [], [], []
     for s, fc in enumerate(fcs):
         yb, pb = simulate_like(sel_base, fc, np.random.default_rng([seed + 1, s]))
         ya, pa = simulate_like(sel, fc, np.random.default_rng([seed + 1, s]))
@@ -109,6 +109,8 @@ def comparisons(sel_base: Selection, sel: Selection, fcs: list[FitContext], seed
         sim_a.append(ya - fc.omega)
         res_b.append(fc.residual - pb)
         res_a.append(fc.residual - pa)
+        left_b.append(left_by_model(sel_base, fc, yb, pb))
+        left_a.append(left_by_model(sel, fc, ya, pa))
     taus = allan_taus(min(len(r) for r in meas), rate)
     out["allan"] = {
         "tau_s": taus,
@@ -117,14 +119,12 @@ def comparisons(sel_base: Selection, sel: Selection, fcs: list[FitContext], seed
         "sim_after": pooled_allan(sim_a, rate, taus),
     }
     # spectra of what the models leave unexplained: measured vs simulated (deterministic part removed)
-    pred_b = [m - r for m, r in zip(meas, res_b, strict=True)]
-    pred_a = [m - r for m, r in zip(meas, res_a, strict=True)]
     f, pm = spectrum(np.concatenate(res_b), rate)
     out["spectrum"] = {
         "f_hz": f,
         "measured": pm,
-        "sim_before": spectrum(np.concatenate([s - p for s, p in zip(sim_b, pred_b, strict=True)]), rate)[1],
-        "sim_after": spectrum(np.concatenate([s - p for s, p in zip(sim_a, pred_a, strict=True)]), rate)[1],
+        "sim_before": spectrum(np.concatenate(left_b), rate)[1],
+        "sim_after": spectrum(np.concatenate(left_a), rate)[1],
         "measured_after": spectrum(np.concatenate(res_a), rate)[1],
     }
     out["residual_series"] = {"t": fcs[0].t, "before": res_b[0], "after": res_a[0], "name": fcs[0].name}

@@ -56,15 +56,23 @@ class FourierSeries:
     offset: np.ndarray  # (D,)
 
     def __call__(self, t: np.ndarray, order: int = 0) -> np.ndarray:
+        return self.derivatives(t, (order,))[0]
+
+    def derivatives(self, t: np.ndarray, orders: tuple[int, ...]) -> list[np.ndarray]:
+        """x(t) differentiated `orders` times each, from one evaluation of the sines and cosines (what costs)."""
         t = np.asarray(t, dtype=np.float64)
         w = 2 * np.pi * self.freq  # (K,)
-        # d^n/dt^n sin(wt + p) = w^n sin(wt + p + n pi/2); sin(x + p) = sin x cos p + cos x sin p, so the
-        # phases go into (K, D) weights and the time dependence is two (M, K) x (K, D) products
-        p = self.phase + order * np.pi / 2
-        a = self.amp * (w**order)[:, None]
         x = np.outer(t, w)
-        out = np.sin(x) @ (a * np.cos(p)) + np.cos(x) @ (a * np.sin(p))
-        return out + self.offset if order == 0 else out
+        sin_x, cos_x = np.sin(x), np.cos(x)
+        out = []
+        for order in orders:
+            # d^n/dt^n sin(wt + p) = w^n sin(wt + p + n pi/2); sin(x + p) = sin x cos p + cos x sin p, so the
+            # phases go into (K, D) weights and the time dependence is two (M, K) x (K, D) products
+            p = self.phase + order * np.pi / 2
+            a = self.amp * (w**order)[:, None]
+            d = sin_x @ (a * np.cos(p)) + cos_x @ (a * np.sin(p))
+            out.append(d + self.offset if order == 0 else d)
+        return out
 
     @classmethod
     def random(
@@ -103,9 +111,18 @@ def cumulative_rotation(steps: Rotation) -> Rotation:
     n, s = len(q), 1
     while s < n:
         q = q.copy()
-        q[s:] = (Rotation.from_quat(q[:-s]) * Rotation.from_quat(q[s:])).as_quat()
+        q[s:] = quat_product(q[:-s], q[s:])
         s *= 2
     return Rotation.from_quat(q)
+
+
+def quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a b of (N, 4) unit quaternions in scipy's (x, y, z, w) order, renormalised: what
+    `Rotation.__mul__` returns, ~20x faster on long arrays (the prefix scan above makes ~16 of them per flight)."""
+    v, w = a[:, :3], a[:, 3:]
+    u, z = b[:, :3], b[:, 3:]
+    out = np.concatenate([w * u + z * v + np.cross(v, u), w * z - np.sum(v * u, 1, keepdims=True)], 1)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 class ProceduralMotion:
@@ -139,18 +156,14 @@ class ProceduralMotion:
             raise ValueError(f"times outside the procedural trajectory [{self.t_start}, {self.t_end}] s")
         k = np.clip(np.floor(t / self.h).astype(np.int64), 0, len(self.nodes_t) - 2)
         dt = t - self.nodes_t[k]
-        return self.nodes_rot[k] * Rotation.from_rotvec(magnus4(self._rate, self.nodes_t[k], dt))
+        partial = Rotation.from_rotvec(magnus4(self._rate, self.nodes_t[k], dt)).as_quat()
+        return Rotation.from_quat(quat_product(self.nodes_rot.as_quat()[k], partial))
 
     def evaluate(self, t: np.ndarray) -> Kinematics:
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        return Kinematics(
-            t=t,
-            rot=self.attitude(t),
-            omega=self.rate(t),
-            alpha=self.rate(t, 1),
-            pos=self.position(t),
-            acc=self.position(t, 2),
-        )
+        omega, alpha = self.rate.derivatives(t, (0, 1))
+        pos, acc = self.position.derivatives(t, (0, 2))
+        return Kinematics(t=t, rot=self.attitude(t), omega=omega, alpha=alpha, pos=pos, acc=acc)
 
     @classmethod
     def random(cls, duration: float, seed: int, rate_rms: float = 0.6, pos_rms: float = 0.6) -> ProceduralMotion:
