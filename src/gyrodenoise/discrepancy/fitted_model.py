@@ -265,18 +265,18 @@ def fill_params(sel: Selection, fcs: list[FitContext]) -> None:
 
 
 def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
-    """Rate random walk K per axis from the fitted random-walk knots: the increments of the bias
-    path between knots h apart have variance K^2 h, less their estimation variance (from the fit's
-    covariance). Returns ({'density'}, {'density'} standard error)."""
+    """Rate random walk K per axis from the fitted random-walk knots: the increments of the bias path between knots h
+    apart have variance K^2 times their layout's `knot_increment_variance` (about 1.17 h), plus their estimation
+    variance (from the fit's covariance), which is taken off. Returns ({'density'}, {'density'} standard error)."""
     e, design, res = sel.effects["bias_random_walk"], sel.design, sel.result
-    h = e.knot_spacing_s
     cov = np.zeros((design.p, design.p))
     cov[np.ix_(res.idx, res.idx)] = res.cov
+    layouts = [(e.columns(fc).shape[2] // 3, knot_increment_variance(e, fc)) for fc in design.fcs]
     k2, k2_se = np.zeros(3), np.zeros(3)
     for a in range(3):
-        incs, noise = [], []
-        for cols in np.atleast_2d(design.cols["bias_random_walk"]):
-            nk = len(cols) // 3
+        incs, noise, walk_var = [], [], []
+        for cols, (nk, var) in zip(np.atleast_2d(design.cols["bias_random_walk"]), layouts, strict=True):
+            # a shorter sequence has fewer knots: its 3 nk columns come first, then the design's padding
             c = cols[a * nk : (a + 1) * nk]
             path = np.concatenate([[0.0], res.coef[c]])  # the first knot is the bias itself
             D = np.zeros((nk, nk))  # increments as a linear map of the knot coefficients
@@ -284,11 +284,39 @@ def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
             D[np.arange(1, nk), np.arange(nk - 1)] = -1.0
             incs.append(np.diff(path))
             noise.append(np.diag(D @ cov[np.ix_(c, c)] @ D.T))
-        d, v = np.concatenate(incs), np.concatenate(noise)
-        k2[a] = max(float(np.mean(d**2 - v)), 0.0) / h
-        k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.mean(d**2)) / h
+            walk_var.append(var)
+        d, v, g = np.concatenate(incs), np.concatenate(noise), np.concatenate(walk_var)
+        k2[a] = max(float(np.sum(d**2 - v)), 0.0) / float(np.sum(g))
+        k2_se[a] = float(np.sqrt(2.0 / len(d)) * np.sum(d**2)) / float(np.sum(g))
     k, se = root_with_se(k2, k2_se)
     return {"density": k}, {"density": se}
+
+
+LAYOUT_KNOTS = 16  # a longer layout takes its ends' variances from one this long, the middle's for the rest
+
+
+def knot_increment_variance(e: Effect, fc: FitContext) -> np.ndarray:
+    """E[increment^2] / K^2 (s) of each knot increment of sequence `fc` when its bias path is a random walk of density
+    K. Not the spacing h: the least-squares hats beside the bias overshoot the path's own increments (1.17 h inside an
+    even layout, up to 1.24 h at its ends; K read from h alone was ~8 % high), and h is the layout's (the recording's
+    length over the knot count), not the nominal spacing. The knots are a linear map P of the path, the path the
+    cumulative sum L of white steps: the variances are the row sums of squares of D P L (D: the increments). On a
+    uniform grid at the sequence's rate over at most LAYOUT_KNOTS knots of its spacing: a knot's estimate
+    hardly depends on knots a few spacings away."""
+    t = fc.t - fc.t[0]
+    nk = max(int(np.ceil(t[-1] / e.knot_spacing_s)), 1)  # as `BiasRandomWalk.columns`
+    m = min(nk, LAYOUT_KNOTS)
+    h = round(t[-1] / nk * fc.rate_hz) / fc.rate_hz
+    grid = np.arange(int(round(m * h * fc.rate_hz)) + 1) / fc.rate_hz
+    hats = np.clip(1.0 - np.abs(grid[:, None] - h * np.arange(1, m + 1)[None, :]) / h, 0.0, None)
+    P = np.linalg.pinv(np.concatenate([np.ones((len(grid), 1)), hats], 1))[1:]  # (m, N): the knots from the path
+    PL = np.cumsum(P[:, ::-1], 1)[:, ::-1] / np.sqrt(fc.rate_hz)  # the knots from the white steps (unit density)
+    inc = PL - np.concatenate([np.zeros((1, PL.shape[1])), PL[:-1]])  # the first increment is from 0 (the bias)
+    v = (inc**2).sum(1)
+    if nk == m:
+        return v
+    half = m // 2
+    return np.concatenate([v[:half], np.full(nk - 2 * half, v[half]), v[m - half :]])
 
 
 def _white_noise(fcs: list[FitContext], residuals: list[np.ndarray]) -> tuple[dict, dict]:
