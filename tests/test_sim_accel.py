@@ -86,10 +86,19 @@ def test_effects_given_to_the_other_sensor_are_refused(traj):
 @pytest.mark.parametrize(
     ("entry", "said"),
     [
-        ({"name": "g_sensitivity", "params": {"matrix": [0.0] * 9}}, r"acc\[0\]: 'name' 'g_sensitivity' must be"),
+        (
+            {"name": "g_sensitivity", "units": "si", "params": {"matrix": [0.0] * 9}},
+            r"acc\[0\]: 'name' 'g_sensitivity' must be",
+        ),
         ({"name": "bias_random_walk", "units": "datasheet", "params": {"density": -1}}, r"density = -1 \(mg/sqrt"),
-        ({"name": "misalignment", "params": {"angles": [1e-3] * 3}}, "angles .* has 3 values; give one number or 6"),
-        ({"name": "bias_instability", "params": {"instability": 0, "tau_min": 10, "tau_max": 1}}, "tau_max = 1 must"),
+        (
+            {"name": "misalignment", "units": "si", "params": {"angles": [1e-3] * 3}},
+            "angles .* has 3 values; give one number or 6",
+        ),
+        (
+            {"name": "bias_instability", "units": "si", "params": {"instability": 0, "tau_min": 10, "tau_max": 1}},
+            "tau_max = 1 must",
+        ),
     ],
 )
 def test_accelerometer_entries_no_sensor_has_are_named(entry, said):
@@ -109,4 +118,6 @@ def test_the_sim_dataset_takes_an_accelerometer_model_and_keeps_its_old_cache_ke
     scaled = np.loadtxt(scaled / "mav0/imu0/data.csv", delimiter=",")
     assert np.array_equal(plain[:, :4], scaled[:, :4])  # stamps and gyro
     with pytest.raises(ValueError, match="dataset.generation.acc_error_model\\[0\\]: 'name' 'scale' must be one of"):
-        generate_sequence(tmp_path / "c", "drone_00", {**gen, "acc_error_model": [{"name": "scale", "params": {}}]})
+        generate_sequence(
+            tmp_path / "c", "drone_00", {**gen, "acc_error_model": [{"name": "scale", "units": "si", "params": {}}]}
+        )

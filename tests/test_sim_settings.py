@@ -115,15 +115,32 @@ def test_duration_is_the_span_of_the_stamps(tmp_path):
     ("entry", "said"),
     [
         ({"name": "white_noise", "unit": "datasheet", "params": {"density": 0.5}}, "did you mean 'units'"),
-        ({"name": "warmup_bias", "params": {"amplitude": 0.01, "tau": 0}}, "tau = 0 .* must be above 0"),
-        ({"name": "sensor_bandwidth", "params": {"corner_hz": 0}}, "must be above 0"),
-        ({"name": "saturation", "params": {"limit": 0}}, "must be above 0"),
+        ({"name": "warmup_bias", "units": "si", "params": {"amplitude": 0.01, "tau": 0}}, "tau = 0 .* must be above 0"),
+        ({"name": "sensor_bandwidth", "units": "si", "params": {"corner_hz": 0}}, "must be above 0"),
+        ({"name": "saturation", "units": "si", "params": {"limit": 0}}, "must be above 0"),
     ],
 )
 def test_error_model_entries_no_sensor_has_are_named(entry, said):
     """A misspelt 'units' read 0.5 deg/sqrt(h) as 0.5 rad/s/sqrt(Hz) (3500x the noise) without a word."""
     with pytest.raises(ValueError, match=said):
         effect_from_config(entry)
+
+
+def test_an_entry_without_units_is_refused_not_read_as_si(tmp_path):
+    """An entry without 'units' was read as SI: the datasheet's 0.3 deg/s bias became 0.3 rad/s (57x) without a
+    word. Refused now, naming the entry and the effect's datasheet units; dataset=sim before it simulates."""
+    from gyrodenoise.cli_errors import ConfigError
+
+    entry = {"name": "bias", "params": {"bias": [0.3, -0.2, 0.4]}}
+    said = r"effect 'bias': no 'units'; add units: si \(SI\) or units: datasheet \(bias in deg/s\) to say which"
+    with pytest.raises(ValueError, match=said):
+        effect_from_config(entry)
+    generation = {"seed": 0, "duration_s": 5, "error_model": [entry]}
+    with pytest.raises(ConfigError, match=r"^dataset\.generation\.error_model\[0\]: " + said):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"], test_seqs=[])
+    assert not (tmp_path / "sim").exists()
+    with_units = effect_from_config({**entry, "units": "datasheet"})
+    assert with_units.params["bias"] == pytest.approx(np.radians([0.3, -0.2, 0.4]))
 
 
 def test_build_effect_checks_its_values_as_a_config_does():

@@ -869,8 +869,8 @@ def effect_from_config(cfg: dict, registry: Mapping[str, type[Effect]] | None = 
     Every parameter must be given (a file that omits one has most likely misspelt it), as one number or as many as
     the parameter has (a 3x3 matrix also as 9 numbers), finite, not negative where a negative value means nothing
     (densities, steps, frequencies) and above 0 where 0 does too (limits, corner frequencies, time constants). An
-    entry has no other keys than name, units and params. `registry`: the vocabulary (default: the gyro's,
-    SIM_EFFECTS)."""
+    entry has no other keys than name, units and params, and `units` is required (no unit system is assumed).
+    `registry`: the vocabulary (default: the gyro's, SIM_EFFECTS)."""
     registry = SIM_EFFECTS if registry is None else registry
     name = cfg.get("name")
     extra = [k for k in cfg if k not in ENTRY_KEYS]
@@ -881,10 +881,16 @@ def effect_from_config(cfg: dict, registry: Mapping[str, type[Effect]] | None = 
         )
     if name not in registry:
         raise ValueError(f"'name' {name!r} must be one of {', '.join(sorted(registry))}")
-    units = cfg.get("units", "si")
+    cls = registry[name]
+    if "units" not in cfg:  # read as SI, datasheet figures (deg/s, ppm, mrad) were off by orders of magnitude
+        figures = ", ".join(f"{k} in {unit}" for k, (unit, _) in cls.DATASHEET.items())
+        raise ValueError(
+            f"effect {name!r}: no 'units'; add units: si (SI) or units: datasheet ({figures or 'SI'}) to say which "
+            "units its params are in"
+        )
+    units = cfg["units"]
     if units not in ("si", "datasheet"):
         raise ValueError(f"effect {name!r}: 'units' is {units!r}; use 'si' or 'datasheet' (the datasheet units)")
-    cls = registry[name]
     params = cfg.get("params") or {}
     if not isinstance(params, dict):
         raise ValueError(f"effect {name!r}: 'params' must be a mapping of {sorted(cls.DEFAULTS)}")
