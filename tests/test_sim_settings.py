@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from scipy.signal import welch
 
 from gyrodenoise.sim import build_effect, drone_trajectory, simulate_imu
@@ -260,3 +261,53 @@ def test_a_time_offset_past_the_trajectorys_ends_is_refused(traj, delta):
     assert np.isfinite(simulate_imu(traj, [build_effect("time_offset", delta=0.0)], margin_s=0).gyro).all()
     with pytest.raises(ValueError, match=r"delta 0.001 s reads the motion 0.001 s before its start"):
         simulate_imu(traj, [build_effect("time_offset", delta=1e-3)], margin_s=0)
+
+
+def _entry(name: str, **params) -> dict:
+    return {"name": name, "units": "si", "params": params}
+
+
+def test_an_effect_given_twice_is_refused_where_its_entries_do_not_add_up(tmp_path, traj):
+    """Two time_offset entries simulated the second alone (each reads the motion at t - delta, so 2 ms then 3 ms gave
+    3 ms, not 5), without a word; noises, limits, low-passes and quantisers given twice do not add up either."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.sim.accel import acc_effects_from_config
+    from gyrodenoise.sim.effects import effects_from_config
+    from gyrodenoise.sim.error_model_file import load_error_model
+
+    noise = _entry("white_noise", density=1e-4)
+    twice = [_entry("time_offset", delta=0.002), noise, _entry("time_offset", delta=0.003)]
+    said = (r"^dataset\.generation\.error_model\[2\]: effect 'time_offset' again, after "
+            r"dataset\.generation\.error_model\[0\]: .*the second replaces the first.*; give one entry$")  # fmt: skip
+    generation = {"seed": 0, "duration_s": 5, "error_model": twice}
+    with pytest.raises(ConfigError, match=said):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"], test_seqs=[])
+    assert not (tmp_path / "sim").exists()
+    path = tmp_path / "error_model.yaml"  # a discrepancy run's file, edited by hand: named by the file
+    path.write_text(yaml.safe_dump({"error_model": [noise, _entry("white_noise", density=2e-4)]}))
+    with pytest.raises(ValueError, match=rf"^{path}: error_model\[1\]: effect 'white_noise' again, after {path}: "):
+        load_error_model(path)
+    for name, params in [("saturation", {"limit": 5.0}), ("sensor_bandwidth", {"corner_hz": 50.0}),
+                         ("quantization", {"step": 1e-3}), ("bias_random_walk", {"density": 1e-5})]:  # fmt: skip
+        with pytest.raises(ValueError, match=rf"^m\[1\]: effect '{name}' again, after m\[0\]"):
+            effects_from_config([_entry(name, **params)] * 2, "m")
+    with pytest.raises(ValueError, match=r"^acc\[1\]: effect 'bias_random_walk' again, after acc\[0\]"):
+        acc_effects_from_config([_entry("bias_random_walk", density=1e-4)] * 2, "acc")
+
+
+def test_effects_whose_entries_add_up_may_be_given_twice(traj):
+    """A scale factor, a misalignment or a bias given twice is the one with the sum (each responds to the true
+    input); several vibrations are several lines, as a discrepancy run writes them (`sim_model`)."""
+    from gyrodenoise.sim.accel import acc_effects_from_config
+    from gyrodenoise.sim.effects import effects_from_config
+
+    kw = {"duration_s": 6, "oversample": 2, "seed": 1, "acc_noise_density": 0.0}
+    split = [_entry("scale_factor", scale=[1e-3, 2e-3, -1e-3]), _entry("bias", bias=0.01),
+             _entry("scale_factor", scale=[2e-3, 1e-3, 3e-3]), _entry("bias", bias=0.02)]  # fmt: skip
+    summed = [_entry("scale_factor", scale=[3e-3, 3e-3, 2e-3]), _entry("bias", bias=0.03)]
+    a = simulate_imu(traj, effects_from_config(split, "m"), **kw).gyro
+    b = simulate_imu(traj, effects_from_config(summed, "m"), **kw).gyro
+    assert np.allclose(a, b, rtol=0, atol=1e-12)
+    lines = [_entry("vibration", frequency_hz=f, amplitude=0.01, bandwidth_hz=0.0) for f in (12.0, 31.0)]
+    assert len(effects_from_config(lines, "m")) == 2
+    assert len(acc_effects_from_config([_entry("misalignment", angles=1e-3)] * 2, "acc")) == 2

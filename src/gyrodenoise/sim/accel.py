@@ -44,6 +44,7 @@ class AccScaleFactor(AccelerometerEffect):
 
     name = "scale_factor"
     stage = 1
+    REPEATED = None  # each responds to the true specific force: the scales add
     DATASHEET = {"scale": ("ppm", 1e6)}
     DEFAULTS = {"scale": np.zeros(3)}
 
@@ -57,6 +58,7 @@ class AccMisalignment(AccelerometerEffect):
 
     name = "misalignment"
     stage = 1
+    REPEATED = None  # each responds to the true specific force: the angles add
     DATASHEET = {"angles": ("mrad", 1e3)}
     DEFAULTS = {"angles": np.zeros(6)}
 
@@ -73,6 +75,7 @@ class AccBiasRandomWalk(AccelerometerEffect):
     Datasheet unit mg/sqrt(h): the bias's standard deviation after one hour. Allan deviation K sqrt(tau / 3)."""
 
     name = "bias_random_walk"
+    REPEATED = BiasRandomWalk.REPEATED
     DATASHEET = {"density": ("mg/sqrt(h)", 60.0 / MG)}
     DEFAULTS = {"density": np.zeros(3)}
 

@@ -69,6 +69,10 @@ class Effect:
     # magnitude (SI, per coefficient) at which identifiability is stated (`discrepancy.identifiability`);
     # None: no regression coefficients to state it for
     REFERENCE: ClassVar[float | None] = None
+    # two entries of this effect in one error-model list: what they would do, which `effects_from_config` refuses as
+    # not what a user means; None where they act as one entry with their parameters added (or, vibration, as the
+    # several lines they are by design)
+    REPEATED: ClassVar[str | None] = "the second acts on the output of the first"
 
     def __init__(self, **params: Any) -> None:
         unknown = set(params) - set(self.DEFAULTS)
@@ -163,6 +167,7 @@ class Bias(Effect):
     """Constant bias b: y = w + b (per sequence: turn-on bias changes between power cycles)."""
 
     name = "bias"
+    REPEATED = None  # biases add
     per_sequence = True
     DATASHEET = {"bias": ("deg/s", 1 / DEG)}
     PRIOR = (1e-4, 0.2)
@@ -188,6 +193,7 @@ class _RateShapeEffect(Effect):
 
     stage = 1
     PARAM: ClassVar[str] = ""
+    REPEATED = None  # each responds to the true rate: the coefficients add
 
     @staticmethod
     def shape(omega: np.ndarray) -> np.ndarray:
@@ -224,6 +230,7 @@ class Misalignment(Effect):
     """Axis misalignment: y = (I + M) w with M off-diagonal; `angles` = M[xy, xz, yx, yz, zx, zy]."""
 
     name = "misalignment"
+    REPEATED = None  # each responds to the true rate: the angles add
     stage = 1
     DATASHEET = {"angles": ("mrad", 1e3)}
     PRIOR = (1e-4, 0.05)
@@ -251,6 +258,7 @@ class GSensitivity(Effect):
     """Gyro response to specific force: y = w + G f (G 3x3, row i = axis i)."""
 
     name = "g_sensitivity"
+    REPEATED = None  # each responds to the true specific force: the matrices add
     stage = 1
     DATASHEET = {"matrix": ("deg/s/g", G0 / DEG)}
     PRIOR = (1e-5, 2e-3)
@@ -275,6 +283,7 @@ class TimeOffset(Effect):
     """The IMU sample stamped t holds the motion of t - delta (delta > 0: IMU stamps late)."""
 
     name = "time_offset"
+    REPEATED = "the second replaces the first (each reads the motion at t - delta): offsets do not add up"
     stage = 0
     DATASHEET = {"delta": ("ms", 1e3)}
     PRIOR = (2e-4, 0.05)
@@ -363,6 +372,7 @@ class WarmupBias(Effect):
     """Bias settling after power-on: y = w + A exp(-t / tau), t from the sequence start."""
 
     name = "warmup_bias"
+    REPEATED = "two decays, not one with the amplitudes added"
     DATASHEET = {"amplitude": ("deg/s", 1 / DEG), "tau": ("s", 1.0)}
     PRIOR = (1e-4, 0.2)
     DEFAULTS = {"amplitude": np.zeros(3), "tau": 30.0}
@@ -418,6 +428,7 @@ class Vibration(Effect):
     Nyquist frequency, or a band reaching past it, is refused at every oversampling (`rate_problem`)."""
 
     name = "vibration"
+    REPEATED = None  # several lines or bands (`sim_model` writes one per line of the gyro)
     per_sequence = True
     DATASHEET = {"frequency_hz": ("Hz", 1.0), "amplitude": ("deg/s", 1 / DEG), "bandwidth_hz": ("Hz", 1.0)}
     PRIOR = (1e-4, 0.5)
@@ -559,6 +570,7 @@ class Saturation(Effect):
     true rate goes beyond it. Saturated samples carry no other information and leave the fits."""
 
     name = "saturation"
+    REPEATED = "only the lower limit clips"
     stage = 3
     stochastic = True  # no regressor: detected by its plateau
     DATASHEET = {"limit": ("deg/s", 1 / DEG)}
@@ -597,6 +609,7 @@ class SensorBandwidth(Effect):
     with no free coefficient. corner_hz = inf: no filter."""
 
     name = "sensor_bandwidth"
+    REPEATED = "two low-passes in series, not one corner"
     stage = 3
     stochastic = True
     DATASHEET = {"corner_hz": ("Hz", 1.0)}
@@ -676,6 +689,7 @@ class WhiteNoise(Effect):
     """Rate white noise of density N (rad/s/sqrt(Hz)): per-sample std N sqrt(rate) at any rate."""
 
     name = "white_noise"
+    REPEATED = "independent noises add in power, not in density"
     stochastic = True
     DATASHEET = {"density": ("deg/sqrt(h)", 60 / DEG)}  # angle random walk
     PRIOR = (1e-5, 1e-2)
@@ -698,6 +712,7 @@ class BiasRandomWalk(Effect):
     """Rate random walk K (rad/s/sqrt(s) = rad/s^2/sqrt(Hz)): db/dt = K xi(t)."""
 
     name = "bias_random_walk"
+    REPEATED = "independent walks add in power, not in density"
     stochastic = False  # detected with piecewise-linear bias columns; K from the Allan variance
     per_sequence = True
     DATASHEET = {"density": ("deg/h/sqrt(h)", 3600 * 60 / DEG)}
@@ -772,6 +787,7 @@ class BiasInstability(Effect):
     Allan variance's shape against re-simulations (`discrepancy.bias_instability`)."""
 
     name = "bias_instability"
+    REPEATED = "independent floors add in power, not in value"
     stochastic = True
     DATASHEET = {"instability": ("deg/h", 3600 / DEG), "tau_min": ("s", 1.0), "tau_max": ("s", 1.0)}
     PRIOR = (1e-7, 1e-3)
@@ -811,6 +827,7 @@ class Quantization(Effect):
     """Output quantisation: y = q round(y / q) (the LSB, applied at the output rate)."""
 
     name = "quantization"
+    REPEATED = "the output is quantised twice"
     stage = 4
     stochastic = True
     DATASHEET = {"step": ("deg/s", 1 / DEG)}
@@ -907,15 +924,24 @@ def effect_from_config(cfg: dict, registry: Mapping[str, type[Effect]] | None = 
 
 def effects_from_config(entries: list, where: str, registry: Mapping[str, type[Effect]] | None = None) -> list[Effect]:
     """Every entry of an error-model list through `effect_from_config`; an error names `where[i]` (the file or the
-    config key) and the field."""
-    out = []
+    config key) and the field. An effect given twice is refused unless its entries add up (`Effect.REPEATED`)."""
+    out: list[Effect] = []
+    first: dict[str, int] = {}  # effect name -> its first entry's index
     for i, entry in enumerate(entries):
         if not isinstance(entry, dict):
             raise ValueError(f"{where}[{i}] is {entry!r}; expected a mapping {{name, units, params}}")
         try:
-            out.append(effect_from_config(entry, registry))
+            effect = effect_from_config(entry, registry)
         except (TypeError, ValueError) as err:
             raise ValueError(f"{where}[{i}]: {err}") from None
+        # a second entry was applied after the first: a second time offset silently replaced the first
+        if effect.name in first and effect.REPEATED is not None:
+            raise ValueError(
+                f"{where}[{i}]: effect {effect.name!r} again, after {where}[{first[effect.name]}]: two entries do not "
+                f"act as one with their parameters added ({effect.REPEATED}); give one entry"
+            )
+        first.setdefault(effect.name, i)
+        out.append(effect)
     return out
 
 
