@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import json
+import warnings
+
 import numpy as np
 import pytest
 import yaml
@@ -311,3 +314,66 @@ def test_effects_whose_entries_add_up_may_be_given_twice(traj):
     lines = [_entry("vibration", frequency_hz=f, amplitude=0.01, bandwidth_hz=0.0) for f in (12.0, 31.0)]
     assert len(effects_from_config(lines, "m")) == 2
     assert len(acc_effects_from_config([_entry("misalignment", angles=1e-3)] * 2, "acc")) == 2
+
+
+def _sim_data(generation: dict, root, names=("drone_00",)) -> SimDataModule:
+    return SimDataModule(generation, root=str(root), name="sim", train_seqs=list(names), test_seqs=[])
+
+
+def test_an_explicit_root_simulated_with_other_settings_is_refused(tmp_path):
+    """dataset.root (a folder simulated before: here a cache folder sim-<hash>) was taken whatever settings made it:
+    a run said seed 1 and a white noise, and trained on seed 0 without one. A mismatch with the folder's record is
+    one line naming each setting that differs, before anything is simulated."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.sim.dataset import ensure_generated
+
+    generation = {"seed": 0, "duration_s": 3, "rate_hz": 200.0, "error_model": []}
+    root = ensure_generated(generation, ["drone_00"], tmp_path / "cache")
+    _sim_data({**generation, "rate_hz": 200}, root, ["drone_00", "hand_00"])  # the same settings: more sequences
+    other = {**generation, "seed": 1, "error_model": [_entry("white_noise", density=1e-4)]}
+    said = (rf"^dataset\.root={root} was simulated with other settings than dataset\.generation \(error_model \(0 "
+            r"entries there, 1 in the config\); seed 0 there, 1 in the config; its generation\.json\): delete the "
+            r"folder to simulate it anew there, drop dataset\.root to use the cache folder of these settings, or give "
+            r"dataset\.generation the folder's settings$")  # fmt: skip
+    with pytest.raises(ConfigError, match=said):
+        _sim_data(other, root, ["drone_00", "drone_01"])
+    assert not (root / "drone_01").exists()  # refused before it simulated
+    with pytest.raises(ConfigError, match=r"\(duration_s 3 there, 4 in the config; its generation\.json\)"):
+        _sim_data({**generation, "duration_s": 4}, root)
+
+
+def test_an_explicit_root_records_the_settings_it_was_simulated_with(tmp_path):
+    """A folder simulated through dataset.root had no record, so nothing could hold a later run to its settings."""
+    from gyrodenoise.cli_errors import ConfigError
+    from gyrodenoise.sim.dataset import GENERATOR_VERSION
+
+    root = tmp_path / "sim"
+    generation = {"seed": 0, "duration_s": 3, "error_model": []}
+    _sim_data(generation, root)
+    record = json.loads((root / "generation.json").read_text())
+    assert record == {"generator_version": GENERATOR_VERSION, "generation": generation, "names": ["drone_00"]}
+    _sim_data(generation, root, ["drone_00", "hand_00"])
+    assert json.loads((root / "generation.json").read_text())["names"] == ["drone_00", "hand_00"]
+    with pytest.raises(ConfigError, match=r"\(seed 0 there, 2 in the config; its generation\.json\)"):
+        _sim_data({**generation, "seed": 2}, root)
+
+
+def test_an_explicit_root_without_a_record_is_warned_about_once(tmp_path):
+    """A folder simulated before the record was written (or elsewhere) cannot be checked: a warning, once per
+    folder, and no record written for it (it would vouch for sequences nobody checked). An empty one is recorded."""
+    from gyrodenoise.sim.dataset import SimSettingsWarning
+
+    root = tmp_path / "sim"
+    generation = {"seed": 0, "duration_s": 3, "error_model": []}
+    generate_sequence(root, "drone_00", generation)  # as the code before the record left it
+    with pytest.warns(SimSettingsWarning, match=rf"^dataset\.root={root} has no generation\.json .* unchecked"):
+        _sim_data(generation, root)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimSettingsWarning)
+        _sim_data({**generation, "seed": 1}, root)  # said once; the other seed cannot be told from the folder
+    assert not (root / "generation.json").exists()
+    (tmp_path / "empty").mkdir()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimSettingsWarning)
+        _sim_data(generation, tmp_path / "empty")
+    assert (tmp_path / "empty" / "generation.json").is_file()

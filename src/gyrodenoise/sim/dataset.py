@@ -4,12 +4,17 @@ generated on first use into the cache and then read through the normal ASL loade
 The cache folder is keyed by a hash of the generation settings ($GYRODENOISE_CACHE or
 ~/.cache/gyrodenoise, folder sim-<hash>), so changing any setting gives a new data set and an
 unchanged one is never regenerated. Sequence names say the trajectory kind: drone_*, hand_*.
+
+Every folder it generates records its settings (generation.json). An explicit `dataset.root` is held to them: a
+folder simulated with other settings than the config's is refused, naming the settings that differ, and one without
+a record (simulated before it was written, or not simulated here) is taken with a warning.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -34,6 +39,27 @@ KINDS = {"drone": drone_trajectory, "hand": handheld_trajectory}
 # settings added since, at the value that simulates what was simulated before them: left out of the key, so the data
 # sets generated before they existed keep their folders
 NEUTRAL_SETTINGS = {"acc_error_model": ([], None)}
+
+
+# what generate_sequence takes for a setting left out: a folder whose record leaves one out was simulated at it
+GENERATION_DEFAULTS = {
+    "seed": 0,
+    "duration_s": 120.0,
+    "rate_hz": 200.0,
+    "acc_noise_density": 2.0e-3,
+    "acc_bias": [0.0, 0.0, 0.0],
+    "bias_jitter_rad_s": 0.0,
+    "error_model": [],
+    "acc_error_model": [],
+}
+RECORD = "generation.json"  # a generated folder's settings, beside its sequences
+
+
+class SimSettingsWarning(UserWarning):
+    """A folder of simulated sequences whose generation settings cannot be checked against the config's."""
+
+
+_UNRECORDED_WARNED: set[Path] = set()  # folders without a record already warned about: once per process
 
 
 def generation_key(generation: Mapping, names: list[str]) -> str:
@@ -126,11 +152,88 @@ def ensure_generated(generation: Mapping, names: list[str], cache_dir: str | Pat
     for name in missing:
         if not asl_written(root / name):  # another job on the same cache may have written it meanwhile
             generate_sequence(root, name, generation)
-    record = json.dumps({"generation": generation, "names": names}, indent=2)
-    settings = root / "generation.json"
+    _write_record(root, generation, names)
+    return root
+
+
+def _write_record(root: Path, generation: Mapping, names: list[str]) -> None:
+    """The folder's settings record (atomically: a job reading it never sees half of one), rewritten only when it
+    changes (many jobs of an array may use one folder)."""
+    record = json.dumps({"generator_version": GENERATOR_VERSION, "generation": generation, "names": names}, indent=2)
+    settings = root / RECORD
     if not settings.is_file() or settings.read_text() != record:
         write_text(settings, record)
-    return root
+
+
+def _comparable(generation: Mapping) -> dict:
+    """The settings that make the data: defaults filled in, neutral settings at their neutral value, and an entry
+    without 'units' as SI (how the records written before units was required read it)."""
+    out = {**GENERATION_DEFAULTS, **generation}
+    out.pop("error_model_file", None)  # replaced by its content (`with_error_model_file`)
+    for key, neutral in NEUTRAL_SETTINGS.items():
+        if out.get(key) in neutral:
+            out[key] = neutral[0]
+    for key in ("error_model", "acc_error_model"):
+        if isinstance(out[key], list):
+            out[key] = [{"units": "si", **e} if isinstance(e, dict) else e for e in out[key]]
+    return out
+
+
+def _differences(recorded: dict, config: dict) -> list[str]:
+    """The settings that differ, each in a few words ('seed 0 there, 1 in the config', 'error_model[2]')."""
+    out = []
+    for key in sorted(set(recorded) | set(config)):
+        was, now = recorded.get(key), config.get(key)
+        if was == now:
+            continue
+        if key.endswith("error_model") and isinstance(was, list) and isinstance(now, list):
+            if len(was) != len(now):
+                out.append(f"{key} ({len(was)} entries there, {len(now)} in the config)")
+            else:
+                i = next(i for i, (a, b) in enumerate(zip(was, now, strict=True)) if a != b)
+                name = now[i].get("name") if isinstance(now[i], dict) else None
+                out.append(f"{key}[{i}]" + (f" ({name})" if name else ""))
+            continue
+        there, here = json.dumps(was), json.dumps(now)
+        out.append(f"{key} {there} there, {here} in the config" if len(there + here) < 60 else key)
+    return out
+
+
+def check_recorded(root: Path, generation: Mapping) -> bool:
+    """Whether the explicit folder `root` records settings, which must be `generation`'s (ConfigError naming those
+    that differ). False where it records none: a folder with sequences in it is then warned about once (they may
+    have been simulated with any settings), an empty or new one is not (it will be simulated here)."""
+    path = root / RECORD
+    if not path.is_file():
+        if root.is_dir() and any(root.iterdir()) and root.resolve() not in _UNRECORDED_WARNED:
+            _UNRECORDED_WARNED.add(root.resolve())
+            warnings.warn(
+                f"dataset.root={root} has no {RECORD} (simulated before it was recorded, or elsewhere): its sequences "
+                "are taken as simulated with dataset.generation's settings, unchecked; delete the folder to simulate "
+                "it anew with them",
+                SimSettingsWarning,
+                stacklevel=3,
+            )
+        return False
+    try:
+        record = json.loads(path.read_text())
+        recorded = _comparable(record["generation"])
+    except (ValueError, KeyError, TypeError):
+        raise ConfigError(
+            f"dataset.root={root}: {path} is not a generation record (JSON with 'generation'); delete the folder to "
+            "simulate it anew, or drop dataset.root to use the cache"
+        ) from None
+    differ = _differences(recorded, _comparable(generation))
+    version = record.get("generator_version")
+    if version is not None and version != GENERATOR_VERSION:  # records before it was written: the settings alone
+        differ.insert(0, f"generator_version {version} there, {GENERATOR_VERSION} in this code")
+    if differ:
+        raise ConfigError(
+            f"dataset.root={root} was simulated with other settings than dataset.generation ({'; '.join(differ)}; "
+            f"its {RECORD}): delete the folder to simulate it anew there, drop dataset.root to use the cache folder "
+            "of these settings, or give dataset.generation the folder's settings"
+        )
+    return True
 
 
 def with_error_model_file(gen: dict) -> dict:
@@ -166,11 +269,17 @@ class SimDataModule(ImuDataModule):
         if sensor.get("gyro_noise_density") is None:  # the simulated gyro's own, for the training's noise augmentation
             sensor["gyro_noise_density"] = white_noise_density(gen.get("error_model", []))
             kwargs["sensor"] = sensor
-        if root:  # an explicit folder: generate the missing sequences there
+        if root:  # an explicit folder: held to its record of settings, then the missing sequences generated there
             data_root = Path(root)
+            recorded = check_recorded(data_root, gen)
+            # a folder with unrecorded sequences is not given a record: it would vouch for data it never checked
+            unrecorded = not recorded and data_root.is_dir() and any(data_root.iterdir())
             for name in names:
                 if not asl_written(data_root / name):
                     generate_sequence(data_root, name, gen)
+            if not unrecorded:
+                before = json.loads((data_root / RECORD).read_text()).get("names", []) if recorded else []
+                _write_record(data_root, gen, sorted(set(before) | set(names)))
         else:
             data_root = ensure_generated(gen, names, cache_dir)
         super().__init__(root=str(data_root), cache_dir=cache_dir, **kwargs)
