@@ -72,7 +72,14 @@ def test_ctrl_c_while_a_command_starts_is_one_line_and_status_130(module, tmp_pa
 
 
 @pytest.mark.parametrize(
-    "command, hooked", [("export", "torch"), ("ensemble", "torch"), ("shipped", "torch"), ("discrepancy", "numpy")]
+    "command, hooked",
+    [
+        ("export", "torch"),
+        ("ensemble", "torch"),
+        ("shipped", "torch"),
+        ("discrepancy", "numpy"),
+        ("discrepancy.splits", "numpy"),
+    ],
 )
 def test_ctrl_c_while_a_python_m_command_starts_is_one_line_and_status_130(command, hooked, tmp_path):
     """The `python -m` commands without a console script import torch or numpy at their top too: a Ctrl-C there

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -55,6 +57,26 @@ def test_splits_refuse_what_they_cannot_split(argv, said, tmp_path, capsys):
     assert said in capsys.readouterr().err
 
 
+def fake_split(out: Path, failing: str | None = None) -> Callable[[list[str]], int]:
+    """A stand-in for one split's run (`splits.discrepancy_main`): writes a report.json into OUT/<held out>, or returns
+    2 where the sequence held out is `failing`."""
+    from gyrodenoise.discrepancy.splits import GAPS
+
+    gap = dict.fromkeys(GAPS, 1.0)
+    report = {"named_effects": [], "verdict": "v", "gap_before": gap, "gap_after": gap, "wall_time_s": 1.0,
+              "machine": "m"}  # fmt: skip
+
+    def one_split(argv: list[str]) -> int:
+        held = argv[argv.index("--holdout") + 1]
+        if held == failing:
+            return 2
+        (out / held).mkdir(parents=True, exist_ok=True)
+        (out / held / "report.json").write_text(json.dumps(report))
+        return 0
+
+    return one_split
+
+
 def test_a_rerun_that_stops_leaves_no_earlier_summary_beside_its_own_reports(tmp_path, monkeypatch, capsys):
     """A rerun whose second split failed (or was stopped) left the earlier run's summary.md and summary.json beside
     the first split's new report: a summary that looked whole, of another run, linking to a report it did not hold."""
@@ -64,21 +86,9 @@ def test_a_rerun_that_stops_leaves_no_earlier_summary_beside_its_own_reports(tmp
     out.mkdir()
     for name in ("summary.json", "summary.md"):
         (out / name).write_text("the earlier run's")
-    gap = dict.fromkeys(splits.GAPS, 1.0)
-    report = {"named_effects": [], "verdict": "v", "gap_before": gap, "gap_after": gap, "wall_time_s": 1.0,
-              "machine": "m"}  # fmt: skip
-
-    def one_split(argv):
-        held = argv[argv.index("--holdout") + 1]
-        if held == "b":
-            return 2
-        (out / held).mkdir()
-        (out / held / "report.json").write_text(json.dumps(report))
-        return 0
-
-    monkeypatch.setattr(splits, "discrepancy_main", one_split)
+    monkeypatch.setattr(splits, "discrepancy_main", fake_split(out, failing="b"))
     with pytest.raises(SystemExit):
-        main(["--sequences", "a", "b", "--out", str(out)])
+        main(["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(out)])
     assert "the split with b held out failed" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["a"]
     first = tmp_path / "first"  # a split that fails first leaves an earlier run's outputs as they were
@@ -86,5 +96,40 @@ def test_a_rerun_that_stops_leaves_no_earlier_summary_beside_its_own_reports(tmp
     (first / "summary.md").write_text("the earlier run's")
     monkeypatch.setattr(splits, "discrepancy_main", lambda argv: 2)
     with pytest.raises(SystemExit):
-        main(["--sequences", "a", "b", "--out", str(first)])
+        main(["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(first)])
     assert (first / "summary.md").read_text() == "the earlier run's"
+
+
+@pytest.mark.parametrize(
+    ("passed_on", "said"),
+    [(["--min-gain", "5"], "--min-gain 5: a share between 0 and 1"), (["--no-such-option"], "unrecognized arguments")],
+)
+def test_an_option_passed_on_is_refused_under_the_splits_name(passed_on, said, tmp_path, capsys):
+    """A wrong option for the splits' runs was refused by the first split's parser: `python -m gyrodenoise.discrepancy:
+    error: ...` under its usage, which asks for --fit and --holdout (options the splits refuse)."""
+    with pytest.raises(SystemExit) as e:
+        main(["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(tmp_path / "out"), *passed_on])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and f"python -m gyrodenoise.discrepancy.splits: error: {said}" in err, err
+    assert err.startswith("usage: python -m gyrodenoise.discrepancy.splits ") and "--fit" not in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_is_one_line_and_status_130(tmp_path, monkeypatch, capsys):
+    """Ctrl-C in a split's run was said by the run and followed by 'error: the split with a held out failed'; between
+    the runs (writing the summary) it ended in KeyboardInterrupt's traceback. Now one line and 130, as the others."""
+    import gyrodenoise.discrepancy.splits as splits
+    from gyrodenoise.notices import INTERRUPTED, interrupt_in_one_line
+
+    def interrupted(argv: list[str]) -> int:
+        raise KeyboardInterrupt
+
+    argv = ["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(tmp_path / "out")]
+    monkeypatch.setattr(splits, "discrepancy_main", interrupt_in_one_line(interrupted))
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 130 and capsys.readouterr().err == f"{INTERRUPTED}\n"
+    monkeypatch.setattr(splits, "discrepancy_main", fake_split(tmp_path / "out"))
+    monkeypatch.setattr(splits, "agreement", lambda rows: interrupted([]))
+    assert main(argv) == 130 and capsys.readouterr().err == f"{INTERRUPTED}\n"
+    assert not (tmp_path / "out" / "summary.json").exists()

@@ -9,10 +9,10 @@ switch for full traces, which `user_errors` honours for Ctrl-C too) shows the tr
 
 `python -m gyrodenoise.train` (evaluate, correct) comes here as well: the module's first lines hand over to
 `run_as_main` before its own imports when it runs as `__main__`. So do the commands that are `python -m` only and
-import torch or numpy at their top (`PYTHON_M`: export, ensemble, shipped, discrepancy); their line names the command
-as it was typed (`python -m gyrodenoise.export: interrupted while starting, before any work`). Nothing is installed
-at import: `import gyrodenoise.train` from Python leaves sys.excepthook and the signal handlers as they were. This
-module imports the standard library only (a console script loads it first).
+import torch or numpy at their top (`PYTHON_M`: export, ensemble, shipped, discrepancy, discrepancy.splits); their
+line names the command as it was typed (`python -m gyrodenoise.export: interrupted while starting, before any work`).
+Nothing is installed at import: `import gyrodenoise.train` from Python leaves sys.excepthook and the signal handlers
+as they were. This module imports the standard library only (a console script loads it first).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ PYTHON_M = {
     "ensemble": "python -m gyrodenoise.ensemble",
     "shipped": "python -m gyrodenoise.shipped",
     "discrepancy.__main__": "python -m gyrodenoise.discrepancy",
+    "discrepancy.splits": "python -m gyrodenoise.discrepancy.splits",
 }
 
 

@@ -22,7 +22,9 @@ import os
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 from gyrodenoise.atomic import output_path_problem, read_marker, remove_earlier_outputs, staged_outputs
 from gyrodenoise.data.checks import RATE_TOL
@@ -218,8 +220,12 @@ def noise_density(text: str) -> float:
     return sigma
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None, error: Callable[[str], NoReturn] | None = None) -> argparse.Namespace:
+    """The options, checked; `error`: what says a wrong one and exits (default: this parser's `error`; the splits
+    pass their own parser's, so that their errors carry their name and usage)."""
     p = build_parser()
+    if error is not None:
+        p.error = error  # type: ignore[method-assign]  # argparse's own errors (a bad value, an unknown option) too
     args = p.parse_args(argv)
     overlap = set(args.fit) & set(args.holdout)
     if overlap:

@@ -11,19 +11,30 @@ verdicts and gaps and the effects named in every split.
 
 from __future__ import annotations
 
+# ruff: noqa: E402
+# (the imports follow the hand-over below)
+if __name__ == "__main__":  # python -m gyrodenoise.discrepancy.splits: a Ctrl-C in the imports below is one line
+    from gyrodenoise.launch import run_as_main
+
+    run_as_main("discrepancy.splits")  # imports this module as gyrodenoise.discrepancy.splits and runs its main
+
 import argparse
 import json
 import sys
 from pathlib import Path
 
-from gyrodenoise.atomic import write_text
+from gyrodenoise.atomic import output_path_problem, write_text
 from gyrodenoise.discrepancy.__main__ import main as discrepancy_main
+from gyrodenoise.discrepancy.__main__ import parse_args as discrepancy_args
+from gyrodenoise.notices import interrupt_in_one_line
 from gyrodenoise.paths import portable_command
+
+PROG = "python -m gyrodenoise.discrepancy.splits"
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     p = argparse.ArgumentParser(
-        prog="python -m gyrodenoise.discrepancy.splits",
+        prog=PROG,
         description=__doc__.split("\n")[0],
         epilog="every other option is passed to each split's run: python -m gyrodenoise.discrepancy --help",
     )
@@ -37,6 +48,12 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     clash = [a for a in rest if a.split("=")[0] in ("--fit", "--holdout")]
     if clash:
         p.error(f"{clash[0]}: the splits choose the fitted and held-out sequences; give --sequences only")
+    if problem := output_path_problem(args.out, folder=True):
+        p.error(f"--out {args.out}: {problem}")
+    # the options passed on, checked now as the first split reads them, and said under this command's name and usage
+    # (in the first split's run they were `python -m gyrodenoise.discrepancy`'s, whose usage asks for --fit)
+    held, *fit = args.sequences
+    discrepancy_args([*rest, "--fit", *fit, "--holdout", held, "--out", str(args.out / held)], error=p.error)
     return args, rest
 
 
@@ -50,6 +67,8 @@ def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[
     for held in sequences:
         fit = [s for s in sequences if s != held]
         code = discrepancy_main([*passthrough, "--fit", *fit, "--holdout", held, "--out", str(out / held)])
+        if code == 130:  # Ctrl-C: the split's run has said it in its line; the others are not run
+            raise SystemExit(130)
         if code:  # its error is above; the other splits' verdicts would not be the same workflow's
             print(f"error: the split with {held} held out failed (above): the splits stop here", file=sys.stderr)
             raise SystemExit(code)
@@ -124,11 +143,12 @@ def summary_md(rows: list[dict], agree: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+@interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
     args, rest = parse_args(argv)
     rows = run_splits(args.sequences, args.out, rest)
     agree = agreement(rows)
-    command = "python -m gyrodenoise.discrepancy.splits " + portable_command(sys.argv[1:] if argv is None else argv)
+    command = f"{PROG} " + portable_command(sys.argv[1:] if argv is None else argv)
     summary = {"command": command, "splits": rows, **agree}
     write_text(args.out / "summary.json", json.dumps(summary, indent=2) + "\n")
     write_text(args.out / "summary.md", summary_md(rows, agree, command))
