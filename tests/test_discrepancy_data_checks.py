@@ -173,11 +173,18 @@ def test_splits_stop_at_a_failed_split(world, tmp_path, capsys):
     assert not (tmp_path / "s" / "summary.json").exists()
 
 
-def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_one_line(world, tmp_path, capsys):
+def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_one_line(
+    world, tmp_path, capsys, monkeypatch
+):
     """A 100 Hz recording beside 200 Hz ones went through the run read at the first fit sequence's rate (its spectra,
     Allan deviations and noise floor, and the simulator model's rate_hz), and a --network model trained at 200 Hz was
-    regressed on 100 Hz recordings, where its convolutions see twice the time: both without a word."""
+    regressed on 100 Hz recordings, where its convolutions see twice the time: both without a word. The model is read
+    once (the option check, the rate check and the regression each read the file)."""
+    import gyrodenoise.pretrained as pretrained
     from gyrodenoise.testworld import MOCAP_PRESETS, make_sequence
+
+    loads, load = [], pretrained.load_model
+    monkeypatch.setattr(pretrained, "load_model", lambda model, *a, **kw: loads.append(model) or load(model, *a, **kw))
 
     for name, seed in (("c", 3), ("d", 4)):
         make_sequence(world.parent / "slow_world", "procedural", None, duration=15.0, seed=seed, name=name,
@@ -196,7 +203,7 @@ def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_
     assert err.startswith("error: --network euroc: model euroc was trained at 200 Hz but c 100 Hz, d 100 Hz") and (
         "or leave out --network" in err
     )
-    assert not out.exists()
+    assert not out.exists() and loads == ["euroc"]
 
 
 @pytest.mark.parametrize(

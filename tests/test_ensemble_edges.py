@@ -149,13 +149,17 @@ def test_an_out_path_that_cannot_be_written_is_one_line_before_the_work(tmp_path
         assert err.startswith(f"error: --out {out}: ") and err.count("\n") == 1 and "Traceback" not in err, err
 
 
-def test_a_build_from_one_ensemble_file_says_its_members_and_that_it_has_no_reference(tmp_path, capsys):
+def test_a_build_from_one_ensemble_file_says_its_members_and_that_it_has_no_reference(tmp_path, capsys, monkeypatch):
     """`build ENS.pt --out NEW.pt` (one file of several members: re-saved under another name, say) wrote no spread
     reference (the new file records none) but said "(1 member files)" and left out the note that says how to add it:
-    correct and evaluate then cannot tell a recording unlike the training data. The count is the members'."""
+    correct and evaluate then cannot tell a recording unlike the training data. The count is the members', taken
+    from what was built (the file just written was read back for it)."""
     ens = ensemble_cli.build_ensemble([_member(tmp_path, 1), _member(tmp_path, 2)], tmp_path / "ens.pt")
     capsys.readouterr()
+    loads = []
+    monkeypatch.setattr(ensemble_cli, "load_model", lambda p, **kw: loads.append(str(p)) or load_model(p, **kw))
     assert ensemble_cli.main(["build", str(ens), "--out", str(tmp_path / "new.pt")]) == 0
+    assert loads == [str(ens)]
     out = capsys.readouterr().out
     assert f"wrote {tmp_path / 'new.pt'} (2 members from 1 file)" in out, out
     assert "note: no spread reference yet" in out, out

@@ -346,10 +346,17 @@ def build_ensemble(
     command: str | None = None,
 ) -> Path:
     """Write the ensemble of the member files to `out` (same file format as any model)."""
+    return _write_ensemble(paths, out, name, allow_mixed, command)[0]
+
+
+def _write_ensemble(
+    paths: list[str | Path], out: str | Path, name: str | None, allow_mixed: bool, command: str | None
+) -> tuple[Path, dict]:
+    """`build_ensemble`, and the metadata it wrote (its member count, without reading the file back)."""
     model, cfg, meta = make_ensemble(paths, allow_mixed)
     meta["name"] = name or Path(out).stem
     meta["command"] = command
-    return save_model(model, cfg, out, meta)
+    return save_model(model, cfg, out, meta), meta
 
 
 try:  # the Hydra hook of experiment=ensemble; Hydra is a dependency, the guard keeps this module light
@@ -463,11 +470,11 @@ def main(argv: list[str] | None = None) -> int:
         if not paths:
             ap.error("give member model files or --from-multirun DIR")
         with plain_project_warnings():  # the members' warnings as `warning: ...` lines
-            build_ensemble(paths, out, args.name, args.allow_mixed, command)
+            _, meta = _write_ensemble(paths, out, args.name, args.allow_mixed, command)
     except (FileNotFoundError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    members = load_model(out, warn=False)[1]["n_members"]  # an ensemble file among the paths gives all its members
+    members = meta["n_members"]  # an ensemble file among the paths gives all its members
     print(f"wrote {out} ({members} members from {len(paths)} file{'s' if len(paths) > 1 else ''})")
     if members > 1:  # without a reference, correct and evaluate cannot tell data unlike the training data
         print(f"note: no spread reference yet: python -m gyrodenoise.ensemble reference {out} --out {out}")

@@ -24,7 +24,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from gyrodenoise.atomic import output_path_problem, read_marker, remove_earlier_outputs, staged_outputs
 from gyrodenoise.data.checks import RATE_TOL
@@ -256,11 +256,14 @@ def parse_args(argv: list[str] | None = None, error: Callable[[str], NoReturn] |
         p.error("--root DIR: the folder of ASL sequences (or set GYRODENOISE_DATA to the folder that holds euroc/)")
     if problem := output_path_problem(args.out, folder=True):  # found before the minutes of work, not after
         p.error(f"--out {args.out}: {problem}")
+    # (model, metadata), loaded once, here, for the rate check and the regression (each loaded it again); a model
+    # that did not beat the calibrated baseline is said now, not after the minutes of the selection
+    args.network_model = None
     if args.network is not None:  # a wrong model is said now, not after the minutes of the effects' selection
         from gyrodenoise.pretrained import ModelFileError, load_model
 
         try:
-            load_model(args.network, warn=False)
+            args.network_model = load_model(args.network)
         except (ModelFileError, FileNotFoundError, ValueError) as e:
             p.error(f"--network: {e}")
     return args
@@ -275,10 +278,13 @@ def truth_checks(args: argparse.Namespace, names: list[str]) -> dict:
     return out
 
 
-def rate_problem(fit: list, holdout: list, network: str | None) -> str | None:
+def rate_problem(
+    fit: list, holdout: list, network: str | None = None, network_model: tuple[Any, dict] | None = None
+) -> str | None:
     """Why these recordings cannot go through one run (None: they can): sampled at rates more than `RATE_TOL` apart
     (the spectra, Allan deviations, noise floors and the simulator's model are read at one rate: the first fit
-    sequence's), or a `--network` model with memory trained at another rate than theirs."""
+    sequence's), or the `--network` model (`network` as given, `network_model` as `parse_args` loaded it) has memory
+    and was trained at another rate than theirs."""
     rates = {sequence_of(fc): fc.rate_hz for fc in [*fit, *holdout]}
     first = fit[0].rate_hz
     if any(abs(r / first - 1.0) > RATE_TOL for r in rates.values()):
@@ -288,11 +294,11 @@ def rate_problem(fit: list, holdout: list, network: str | None) -> str | None:
             "one rate (spectra, Allan deviations, noise floors, the simulator's model). Run the recordings of each "
             "rate on their own, or resample them to one rate"
         )
-    if network is None:
+    if network_model is None:
         return None
-    from gyrodenoise.pretrained import load_model, other_rate_warning
+    from gyrodenoise.pretrained import other_rate_warning
 
-    model, meta = load_model(network, warn=False)
+    model, meta = network_model
     if said := other_rate_warning(model, meta, rates):
         return f"--network {network}: {said.rstrip('.')}, or leave out --network"
     return None
@@ -333,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
         said = re.sub(r"\+dataset\.gt_files\.(\S+)=", r"--gt-file \1=", str(e))  # this command's option, not training's
         print(f"error: {said}", file=sys.stderr)
         return 2
-    if said := rate_problem(fit, holdout, args.network):  # before the minutes of the selection
+    if said := rate_problem(fit, holdout, args.network, args.network_model):  # before the minutes of the selection
         print(f"error: {said}", file=sys.stderr)
         return 2
 
@@ -365,7 +371,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.network:
         from gyrodenoise.discrepancy.network import network_effects
 
-        report["network"] = network_effects(args.network, fit + holdout, args.bic_threshold)
+        report["network"] = network_effects(args.network_model, fit + holdout, args.bic_threshold)
     report["wall_time_s"] = time.time() - t0
     report["machine"] = machine_description()
     report["code"] = code

@@ -9,6 +9,8 @@ parameters carry the opposite sign of the sensor's.
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,11 +33,12 @@ DETERMINISTIC = [
 ]
 
 
-def network_effects(model: str, fcs: list[FitContext], bic_threshold: float = 10.0) -> dict:
+def network_effects(model: str | Path | tuple[Any, dict], fcs: list[FitContext], bic_threshold: float = 10.0) -> dict:
+    """`model`: a shipped name or a model file, or (model, metadata) as `pretrained.load_model` gave them."""
     from gyrodenoise.models.denoiser import predict_gyro
     from gyrodenoise.pretrained import load_model
 
-    net, meta = load_model(model)
+    net, meta = load_model(model) if isinstance(model, str | Path) else model
     C = net.C_hat.detach().double().cpu().numpy()
     wrapped, explained = [], []
     for fc in fcs:
