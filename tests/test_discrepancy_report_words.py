@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from gyrodenoise.discrepancy.report import (
@@ -104,6 +106,23 @@ def test_the_decisions_say_the_practical_minimum_given():
     assert "practical minimum 1% of" in " ".join(_decisions_md({"settings": s | {"min_gain": 0.01}}))
 
 
+PLOT_TAU = np.logspace(-2, 1, 8)
+
+
+def plot_arrays() -> dict:
+    """The comparisons' arrays (`workflow.comparisons`) the plots draw, flat: 200 Hz, Allan deviation at `PLOT_TAU`,
+    spectrum to 100 Hz, a 20-s residual series, no drift windows."""
+    f, t = np.linspace(0, 100, 50), np.linspace(0, 20, 100)
+    ones = lambda n: np.ones((n, 3))  # noqa: E731
+    return {
+        "rate_hz": 200.0,
+        "allan": {"tau_s": PLOT_TAU, "measured": ones(8), "sim_before": ones(8), "sim_after": ones(8)},
+        "spectrum": {k: ones(50) for k in ("measured", "sim_before", "sim_after", "measured_after")} | {"f_hz": f},
+        "residual_series": {"t": t, "before": ones(100), "after": ones(100), "name": "c"},
+        "drift": {},
+    }
+
+
 def test_the_plots_shade_the_band_the_gaps_compare(tmp_path, monkeypatch):
     """allan.png and spectrum.png shaded as 'not compared' what lay beyond the widest held-out band (7 Hz), while the
     gaps of report.json compare up to the narrowest (6 Hz, `gap_before.band_hz`)."""
@@ -113,17 +132,42 @@ def test_the_plots_shade_the_band_the_gaps_compare(tmp_path, monkeypatch):
 
     shaded = []
     monkeypatch.setattr(Axes, "axvspan", lambda ax, lo, hi, **kw: shaded.append((kw["label"], lo, hi)))
-    tau, f, t = np.logspace(-2, 1, 8), np.linspace(0, 100, 50), np.linspace(0, 20, 100)
-    ones = lambda n: np.ones((n, 3))  # noqa: E731
-    arrays = {
-        "rate_hz": 200.0,
-        "allan": {"tau_s": tau, "measured": ones(8), "sim_before": ones(8), "sim_after": ones(8)},
-        "spectrum": {k: ones(50) for k in ("measured", "sim_before", "sim_after", "measured_after")} | {"f_hz": f},
-        "residual_series": {"t": t, "before": ones(100), "after": ones(100), "name": "c"},
-        "drift": {},
-    }
     gap = {k: 1.0 for k in ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10")} | {"band_hz": 6.0}
     rows = [{"f_max_hz": 6.0, "whole_spectrum": False}, {"f_max_hz": 7.0, "whole_spectrum": False}]
-    plots(tmp_path, arrays, {"gap_before": gap, "gap_after": gap, "reconstruction": {"holdout": rows}})
-    assert {(lo, hi) for label, lo, hi in shaded if "tau" in label} == {(tau[0], 1 / 6.0)}
+    plots(tmp_path, plot_arrays(), {"gap_before": gap, "gap_after": gap, "reconstruction": {"holdout": rows}})
+    assert {(lo, hi) for label, lo, hi in shaded if "tau" in label} == {(PLOT_TAU[0], 1 / 6.0)}
     assert {(lo, hi) for label, lo, hi in shaded if "reconstruction" in label} == {(6.0, 100.0)}
+
+
+def test_the_gap_plot_draws_one_metric_and_says_which_were_not_measured(tmp_path, monkeypatch):
+    """gap.png with one metric in the gap (one axis: a bare Axes, not an array) ended the report in TypeError ('Axes'
+    object is not iterable), and none in ValueError; a metric that is NaN (no 10-s window for the drift) was an
+    empty axis, read as 0."""
+    from gyrodenoise.discrepancy import report_plots
+
+    figures, save = {}, report_plots.save_figure
+
+    def kept(fig, path, **kw):
+        figures[path.name] = fig
+        save(fig, path, **kw)
+
+    monkeypatch.setattr(report_plots, "save_figure", kept)
+    one = {"residual_rms_rad_s": 0.01}
+    assert "gap.png" in report_plots.plots(tmp_path, plot_arrays(), {"gap_before": one, "gap_after": one})
+    assert (tmp_path / "gap.png").stat().st_size > 0 and len(figures["gap.png"].axes) == 1
+
+    nan = float("nan")
+    before = {"residual_rms_rad_s": 0.01, "drift_10s_median_deg": nan, "allan_gap_log10": nan, "psd_gap_log10": 0.2}
+    after = before | {"psd_gap_log10": nan}
+    with warnings.catch_warnings():  # a NaN bar set no place on the x axis: the text ran off, tight_layout gave up
+        warnings.simplefilter("error", UserWarning)
+        report_plots.plots(tmp_path, plot_arrays(), {"gap_before": before, "gap_after": after})
+    axes = figures["gap.png"].axes
+    said = {ax.get_title(): [(t.get_position()[0], t.get_text()) for t in ax.texts] for ax in axes}
+    assert said == {
+        "residual RMS (rad/s)": [],
+        "median 10-s drift (deg)": [(0, "not measured"), (1, "not measured")],
+        "Allan gap (log10)": [(0, "not measured"), (1, "not measured")],
+        "spectral gap (log10)": [(1, "not measured")],
+    }
+    assert "gap.png" not in report_plots.plots(tmp_path, plot_arrays(), {"gap_before": {}, "gap_after": {}})

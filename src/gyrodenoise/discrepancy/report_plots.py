@@ -102,14 +102,23 @@ def plots(out: Path, arrays: dict, report: dict) -> list[str]:
         ("psd_gap_log10", "spectral gap (log10)"),
     ]
     metrics = [(k, lab) for k, lab in metrics if k in gb and k in ga]
-    fig, axs = subplots(1, len(metrics), figsize=(3.7 * len(metrics), 3.2))
-    for ax, (k, lab) in zip(axs, metrics, strict=True):
-        ax.bar(["base", "final"], [gb[k], ga[k]], color=["C0", "C3"])
-        ax.set_title(lab, fontsize=9)
-    fig.suptitle("held-out gap before / after adding the named effects", fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, out / "gap.png", dpi=90)
-    files.append("gap.png")
+    if metrics:  # squeeze=False: one metric's one axis in an array too; at least the title's width
+        fig, axs = subplots(1, len(metrics), figsize=(max(3.7 * len(metrics), 5.0), 3.2), squeeze=False)
+        for ax, (k, lab) in zip(axs[0], metrics, strict=True):
+            values = [np.nan if v is None else float(v) for v in (gb[k], ga[k])]
+            ax.bar(["base", "final"], values, color=["C0", "C3"])  # a NaN bar is not drawn: said in words below
+            ax.set_xlim(-0.5, 1.5)  # both places, also where a NaN bar set none
+            at_foot = ax.get_xaxis_transform()  # x: the bar's place; y: a share of the axis' height
+            for x, v in enumerate(values):
+                if not np.isfinite(v):  # e.g. no 10-s window to take a drift over: an empty place reads as 0
+                    ax.text(x, 0.02, "not measured", ha="center", va="bottom", fontsize=8, transform=at_foot)
+            if not np.isfinite(values).any():
+                ax.set_yticks([])  # no value: the scale would be matplotlib's default around 0
+            ax.set_title(lab, fontsize=9)
+        fig.suptitle("held-out gap before / after adding the named effects", fontsize=10)
+        fig.tight_layout()
+        save_figure(fig, out / "gap.png", dpi=90)
+        files.append("gap.png")
     if report.get("lack_of_fit"):
         files.append(_lack_of_fit_plot(out, report["lack_of_fit"], held_out))
     return files
