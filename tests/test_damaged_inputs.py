@@ -73,6 +73,52 @@ def test_a_damaged_cache_file_is_rebuilt(root, tmp_path):
     np.testing.assert_array_equal(load_sequence(root, "a", cache_dir=cache).gyro, first.gyro)  # rewritten whole
 
 
+def test_a_sequence_cached_by_other_readers_is_read_again(root, tmp_path, monkeypatch):
+    """A sequence cached before a reader changed (a check added since, a column read otherwise) was served as the old
+    code had read it: the key held the files and the settings, not the readers. Their source is in the key now."""
+    from gyrodenoise.data import cache
+
+    monkeypatch.setattr(cache, "reader_digest", lambda: "the readers of an earlier version")
+    first = load_sequence(root, "a", cache_dir=tmp_path / "cache")
+    (npz,) = (tmp_path / "cache").glob("a-*.npz")
+    with np.load(npz) as z:
+        stale = dict(z)
+    cache.atomic_save_npz(npz, **(stale | {"gyro": stale["gyro"] + 1.0}))  # what the earlier readers made of the file
+    np.testing.assert_array_equal(load_sequence(root, "a", cache_dir=tmp_path / "cache").gyro, first.gyro + 1.0)
+    monkeypatch.undo()  # the readers of this version
+    np.testing.assert_array_equal(load_sequence(root, "a", cache_dir=tmp_path / "cache").gyro, first.gyro)
+    assert len(list((tmp_path / "cache").glob("a-*.npz"))) == 2
+
+
+def _package_imports(module: str) -> set[str]:
+    """The modules of this package that `module` imports, at its top or in a function (`from gyrodenoise.data import
+    asl_header` imports the module asl_header; `from gyrodenoise.data.readers import ImuData`, readers)."""
+    import ast
+    import importlib
+
+    found = set()
+    for node in ast.walk(ast.parse(Path(importlib.import_module(module).__file__).read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.startswith("gyrodenoise")}
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("gyrodenoise"):
+            package = hasattr(importlib.import_module(node.module), "__path__")
+            for a in node.names:
+                sub = f"{node.module}.{a.name}"
+                found.add(sub if package and importlib.util.find_spec(sub) else node.module)
+    return found
+
+
+def test_the_cache_key_holds_every_module_the_readers_import():
+    """`cache.READER_MODULES` (whose source is in the cache key) holds the modules of the functions the cache calls to
+    read a sequence and every module of this package they import: one left out could change unseen by the key."""
+    from gyrodenoise.data import cache
+
+    listed = set(cache.READER_MODULES)
+    assert {f.__module__ for f in (cache.read_imu, cache.read_groundtruth, cache.build_sequence)} <= listed
+    missing = set().union(*map(_package_imports, listed)) - listed
+    assert not missing, f"the readers import {sorted(missing)}: add them to cache.READER_MODULES"
+
+
 def test_a_truncated_checkpoint_to_resume_from_is_refused(root, tmp_path):
     bad = tmp_path / "last.ckpt"
     bad.write_bytes(b"PK\x03\x04" + b"\0" * 100)

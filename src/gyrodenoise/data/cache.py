@@ -1,12 +1,14 @@
-"""Load sequences through a preprocessing cache keyed by the source files' content and the settings.
+"""Load sequences through a preprocessing cache keyed by the source files' content, the settings and the readers' code.
 
-A changed data file or setting gives a new key and so a rebuild; files are written atomically
+A changed data file, setting or reader gives a new key and so a rebuild; files are written atomically
 (temporary file + rename), so an interrupted run never leaves a cache file that looks whole.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib
 import json
 import os
 import warnings
@@ -19,7 +21,12 @@ from gyrodenoise.atomic import atomic_path
 from gyrodenoise.data.readers import DataFormatWarning, find_groundtruth_file, read_groundtruth, read_imu
 from gyrodenoise.data.sequence import Sequence, build_sequence, sequence_folder
 
-CACHE_VERSION = 2  # 2: the reader warnings kept in meta (read_warnings)
+CACHE_VERSION = 2  # this module's layout of a cache file; 2: the reader warnings kept in meta (read_warnings)
+# the modules whose code decides what a cached sequence holds: read_imu, read_groundtruth, build_sequence and what
+# they import of this package. Their source is in the key (`reader_digest`): a sequence cached before a reader
+# changed (a check added, a column read otherwise) was served as the old code had read it. tests/test_damaged_inputs
+# checks that the list holds every module they import.
+READER_MODULES = ("gyrodenoise.data.readers", "gyrodenoise.data.asl_header", "gyrodenoise.data.sequence")
 # a sequence's meta key: the reader's warnings about its files (a repeated line kept once, a last line without a
 # line break), replayed whenever the sequence is loaded from the cache: the files still have what they warned of
 READ_WARNINGS = "read_warnings"
@@ -38,9 +45,19 @@ def _file_digest(path: Path) -> str:
     return h.hexdigest()
 
 
+@functools.cache  # ~40 kB read once per process
+def reader_digest() -> str:
+    """sha1 of the source of `READER_MODULES`: it changes whenever the readers' code does, with nothing to bump."""
+    h = hashlib.sha1()
+    for name in READER_MODULES:
+        h.update(Path(importlib.import_module(name).__file__).read_bytes())
+    return h.hexdigest()
+
+
 def cache_key(files: list[Path], settings: dict) -> str:
     h = hashlib.sha1()
-    h.update(json.dumps({"v": CACHE_VERSION, "settings": settings}, sort_keys=True).encode())
+    key = {"v": CACHE_VERSION, "readers": reader_digest(), "settings": settings}
+    h.update(json.dumps(key, sort_keys=True).encode())
     for f in files:
         h.update(_file_digest(f).encode())
     return h.hexdigest()[:16]
