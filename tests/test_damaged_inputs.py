@@ -94,7 +94,7 @@ def _package_imports(module: str) -> set[str]:
     """The modules of this package that `module` imports, at its top or in a function (`from gyrodenoise.data import
     asl_header` imports the module asl_header; `from gyrodenoise.data.readers import ImuData`, readers)."""
     import ast
-    import importlib
+    import importlib.util
 
     found = set()
     for node in ast.walk(ast.parse(Path(importlib.import_module(module).__file__).read_text())):

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrodenoise.discrepancy.__main__ import main
+from gyrodenoise.discrepancy.__main__ import main, rate_problem
+from gyrodenoise.discrepancy.compare import load_fit_context
 
 
 @pytest.fixture(scope="module")
@@ -204,6 +205,9 @@ def test_recordings_of_other_rates_and_a_network_of_another_rate_are_refused_in_
         "or leave out --network" in err
     )
     assert not out.exists() and loads == ["euroc"]
+    # called without the loaded model (a script's own check), the model is loaded, not the check skipped
+    slow = [load_fit_context(tmp_path / "data", n) for n in ("c", "d")]
+    assert "trained at 200 Hz but c 100 Hz" in rate_problem(slow[:1], slow[1:], "euroc")
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 from decimal import Decimal, InvalidOperation
@@ -146,12 +147,25 @@ def _guess_delimiter(line: str) -> str | None:
     return None  # whitespace
 
 
-def _comment_header(comments: list[str], delimiter: str | None, n_fields: int) -> list[str] | None:
-    """The header among the comment lines above the data (`readers.comment_header`'s rule: the nearest the data with
-    as many fields as the first line below them, else with at least the seven columns read), else None."""
-    split = [_split(c, delimiter) for c in comments]
+def _comment_header(
+    comments: list[tuple[int, str]], delimiter: str | None, n_fields: int, path: Path
+) -> list[str] | None:
+    """The header among the comment lines (line number, text) above the data (`readers.comment_header`'s rule: the
+    nearest the data with as many fields as the first line below them, else with at least the seven columns read),
+    else None. Warns when another comment line has as many fields: which one declares the units is then a guess."""
+    split = [_split(c, delimiter) for _, c in comments]
     k = comment_header(split, n_fields, len(FIELDS))
-    return None if k is None else split[k]
+    if k is None:
+        return None
+    others = [comments[i][0] for i, f in enumerate(split) if i != k and len(f) == len(split[k])]
+    if others:
+        warnings.warn(
+            f"{path}: comment lines {', '.join(map(str, others))} and {comments[k][0]} have as many fields as the "
+            f"header; line {comments[k][0]}, the nearest the data, is taken as it. If it is not, give the units "
+            "(--gyro-unit, --time-unit, --acc-unit) and --columns by number",
+            stacklevel=3,
+        )
+    return split[k]
 
 
 def _is_number(s: str) -> bool:
@@ -270,21 +284,21 @@ def read_imu_csv(
     given = {"time": time_unit, "gyro": gyro_unit, "acc": acc_unit}
     units, units_from_header = dict(DEFAULT_UNITS), []
     ns_per = TIME_UNITS[units["time"]]
-    comments: list[str] = []  # the comment lines before the first data line: one of them may be the header
+    comments: list[tuple[int, str]] = []  # the comment lines before the first data line: one may be the header
     for lineno, raw in text_lines(path, CSV_LAYOUT):
         s = raw.strip()
         if not s:
             continue
         if s.startswith("#"):
             if header is None and idx is None:
-                comments.append(s.lstrip("#"))
+                comments.append((lineno, s.lstrip("#")))
             continue
         if delimiter is None:  # from the first line that is not a comment: a note above the header has no say
             delimiter = _guess_delimiter(s)
         fields = _split(s, delimiter)
         if idx is None:
             if header is None:
-                header = _comment_header(comments, delimiter, len(fields))
+                header = _comment_header(comments, delimiter, len(fields), path)
             if header is None and not all(_is_number(f) for f in fields if f):  # '' : a line ending in a delimiter
                 header = fields
                 continue

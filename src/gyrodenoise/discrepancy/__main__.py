@@ -294,9 +294,12 @@ def rate_problem(
             "one rate (spectra, Allan deviations, noise floors, the simulator's model). Run the recordings of each "
             "rate on their own, or resample them to one rate"
         )
-    if network_model is None:
+    if network is None and network_model is None:
         return None
-    from gyrodenoise.pretrained import other_rate_warning
+    from gyrodenoise.pretrained import load_model, other_rate_warning
+
+    if network_model is None:  # a caller that did not load it: the check is not skipped
+        network_model = load_model(network)
 
     model, meta = network_model
     if said := other_rate_warning(model, meta, rates):

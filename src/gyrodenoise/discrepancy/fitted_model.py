@@ -271,7 +271,7 @@ def _walk_from_knots(sel: Selection) -> tuple[dict, dict]:
     e, design, res = sel.effects["bias_random_walk"], sel.design, sel.result
     cov = np.zeros((design.p, design.p))
     cov[np.ix_(res.idx, res.idx)] = res.cov
-    layouts = [(e.columns(fc).shape[2] // 3, knot_increment_variance(e, fc)) for fc in design.fcs]
+    layouts = [(e.n_knots(fc), knot_increment_variance(e, fc)) for fc in design.fcs]
     k2, k2_se = np.zeros(3), np.zeros(3)
     for a in range(3):
         incs, noise, walk_var = [], [], []
@@ -303,10 +303,9 @@ def knot_increment_variance(e: Effect, fc: FitContext) -> np.ndarray:
     cumulative sum L of white steps: the variances are the row sums of squares of D P L (D: the increments). On a
     uniform grid at the sequence's rate over at most LAYOUT_KNOTS knots of its spacing: a knot's estimate
     hardly depends on knots a few spacings away."""
-    t = fc.t - fc.t[0]
-    nk = max(int(np.ceil(t[-1] / e.knot_spacing_s)), 1)  # as `BiasRandomWalk.columns`
+    nk = e.n_knots(fc)
     m = min(nk, LAYOUT_KNOTS)
-    h = round(t[-1] / nk * fc.rate_hz) / fc.rate_hz
+    h = round((fc.t[-1] - fc.t[0]) / nk * fc.rate_hz) / fc.rate_hz
     grid = np.arange(int(round(m * h * fc.rate_hz)) + 1) / fc.rate_hz
     hats = np.clip(1.0 - np.abs(grid[:, None] - h * np.arange(1, m + 1)[None, :]) / h, 0.0, None)
     P = np.linalg.pinv(np.concatenate([np.ones((len(grid), 1)), hats], 1))[1:]  # (m, N): the knots from the path

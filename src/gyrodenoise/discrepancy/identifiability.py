@@ -218,7 +218,7 @@ def random_walk_identifiability(
         k = 0
         for s, fc in enumerate(fcs):
             t = fc.t - fc.t[0]
-            nk = rw.columns(fc).shape[2] // 3
+            nk = rw.n_knots(fc)
             knots = np.linspace(0.0, t[-1], nk + 1)[1:]
             base = s * cols.shape[1]
             for a in range(3):

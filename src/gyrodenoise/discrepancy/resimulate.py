@@ -86,7 +86,8 @@ def left_by_model(sel: Selection, fc: FitContext, y_sim: np.ndarray, pred: np.nd
     """What the deterministic model leaves of a re-simulated gyro `y_sim`, as it leaves of the measured one (whose
     residual is taken minus `pred`, refitted on it). With a named walk the per-sequence nuisances are refitted on
     the re-simulation: its walk is its own draw, which `pred`'s knots (the measured walk's) would leave in it beside
-    theirs. Without one the nuisances are a constant bias (outside the compared band) and `pred` is used as is."""
+    theirs. Without one `pred` is used as is: the other nuisances, a constant bias and a named vibration's phase, take
+    from the measured residual the noise of one or two of its Fourier bins (0 Hz, the line's), not a process's power."""
     if walk_named(sel):
         return y_sim - fc.omega - per_sequence_refit(sel, as_measured(fc, y_sim))
     return y_sim - fc.omega - pred

@@ -749,10 +749,14 @@ class BiasRandomWalk(Effect):
     def time_only_key(self):
         return (self.knot_spacing_s,)
 
+    def n_knots(self, fc) -> int:
+        """Knots of sequence `fc`: its length over the spacing, rounded up (so they fall at most the spacing apart)."""
+        return max(int(np.ceil((fc.t[-1] - fc.t[0]) / self.knot_spacing_s)), 1)
+
     def columns(self, fc):
         # hat functions on knots every knot_spacing_s (the first knot left to the bias)
         t = fc.t - fc.t[0]
-        n_knots = max(int(np.ceil(t[-1] / self.knot_spacing_s)), 1)
+        n_knots = self.n_knots(fc)
         knots = np.linspace(0.0, t[-1], n_knots + 1)
         h = knots[1] - knots[0]
         hats = np.clip(1.0 - np.abs(t[:, None] - knots[None, 1:]) / h, 0.0, None)  # (N, n_knots)
