@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -132,6 +133,15 @@ def test_a_rerun_into_the_same_folder_leaves_none_of_the_earlier_files(world, tm
     )
     assert (out / "mine.txt").read_text() == "the user's"
     assert not (out / "drift.png").is_file() or (out / "drift.png").read_bytes() != b"earlier"
+    # report.md links the figures this run drew, and only them (it linked drift.png and gap.png whether drawn or not)
+    linked = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", (out / "report.md").read_text())
+    drawn = json.loads((out / "report.json").read_text())["plots"]
+    assert linked and sorted(linked) == sorted(drawn) and all((out / f).is_file() for f in linked)
+    from gyrodenoise.discrepancy.report import markdown
+
+    rep = json.loads((out / "report.json").read_text())  # a run whose recordings held no drift window to draw
+    rep["plots"] = [f for f in drawn if f != "drift.png"]
+    assert "drift.png" not in markdown(rep) and "(gap.png)" in markdown(rep)
 
 
 def test_a_failed_rerun_leaves_the_earlier_outputs_as_they_were(world, tmp_path, monkeypatch):

@@ -659,6 +659,16 @@ def _identifiability_md(report: dict) -> list[str]:
     return lines + [""]
 
 
+PLOT_ALT = {  # the figures `report_plots.plots` may draw, in report.md's order, with their alt text
+    "allan.png": "Allan deviation",
+    "spectrum.png": "spectrum",
+    "residual.png": "residual",
+    "drift.png": "drift",
+    "gap.png": "gap",
+    "unexplained.png": "unexplained",
+}
+
+
 def markdown(report: dict) -> str:
     lines = ["# Discrepancy report: simulation vs measurement", ""]
     lines += [
@@ -790,15 +800,11 @@ def markdown(report: dict) -> str:
             parts.append(txt)
         added = s.get("added", "stop") + (f" ({s['added_variant']})" if s.get("added_variant") else "")
         lines.append(f"- model [{', '.join(s['model'])}] -> {added}; best delta BIC: {', '.join(parts)}")
-    lines += [
-        "",
-        "## Plots",
-        "",
-        "![Allan deviation](allan.png) ![spectrum](spectrum.png)",
-        "![residual](residual.png) ![drift](drift.png) ![gap](gap.png)",
-        *(["![unexplained](unexplained.png)"] if report.get("lack_of_fit") else []),
-        "",
-    ]
+    # only the figures drawn (`report["plots"]`): a figure with nothing to draw (no drift window as long as the
+    # recordings, no gap measured) is not written, and a link to it would be a broken image
+    drawn = report.get("plots") or []
+    links = [f"![{alt}]({name})" for name, alt in PLOT_ALT.items() if name in drawn]
+    lines += ["", "## Plots", "", *([" ".join(links)] if links else ["(none drawn)"]), ""]
     if report.get("network"):
         lines += _network_md(report["network"])
     if report.get("command"):
