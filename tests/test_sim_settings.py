@@ -92,6 +92,28 @@ def test_the_sim_dataset_checks_its_lists_before_it_simulates(tmp_path):
     assert not (tmp_path / "sim").exists()
 
 
+@pytest.mark.parametrize(
+    ("content", "said"),
+    [
+        (None, "not found"),
+        ("error_model: [{name: bias, params: {bias: 0.3}}", "while parsing"),  # malformed YAML
+        ("error_model: [{name: bias, params: {bias: [0.3, 0.3, 0.3]}}]", "no 'units'"),
+    ],
+)
+def test_a_bad_error_model_file_is_one_config_error(tmp_path, content, said):
+    """A missing, malformed or refused error_model_file reached the user as a bare ValueError inside Hydra's 'Error in
+    call to target' block: its reading ran before the settings' check that turns errors into one line."""
+    from gyrodenoise.cli_errors import ConfigError
+
+    path = tmp_path / "error_model.yaml"
+    if content is not None:
+        path.write_text(content)
+    generation = {"seed": 0, "duration_s": 5, "error_model": [], "error_model_file": str(path)}
+    with pytest.raises(ConfigError, match=rf"^dataset.generation.error_model_file={path}: .*{said}"):
+        SimDataModule(generation, root=str(tmp_path / "sim"), name="sim", train_seqs=["drone_00"], test_seqs=[])
+    assert not (tmp_path / "sim").exists()
+
+
 def test_a_time_offset_delays_the_accelerometer_too(traj):
     """It is the IMU's stamps that are late: both sensors hold the motion of t - delta."""
     delta = 0.005

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from gyrodenoise.atomic import write_text
 from gyrodenoise.cli_errors import ConfigError
@@ -263,8 +264,12 @@ class SimDataModule(ImuDataModule):
         check_sequence_lists(*lists)  # before minutes of simulation, not after them
         names = sorted(set(kwargs.get("train_seqs", [])) | set(kwargs.get("test_seqs", [])))
         names = sorted(set(names) | set(kwargs.get("val_seqs") or []))
-        gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
-        check_generation(gen, generation.get("error_model_file"))
+        model_file = generation.get("error_model_file")
+        try:
+            gen = with_error_model_file(json.loads(json.dumps(dict(generation))))  # plain data for hashing
+        except (ValueError, TypeError, OSError, yaml.YAMLError) as e:  # one line, not Hydra's instantiation block
+            raise ConfigError(f"dataset.generation.error_model_file={model_file}: {e}") from None
+        check_generation(gen, model_file)
         sensor = dict(kwargs.get("sensor") or {})
         if sensor.get("gyro_noise_density") is None:  # the simulated gyro's own, for the training's noise augmentation
             sensor["gyro_noise_density"] = white_noise_density(gen.get("error_model", []))
