@@ -57,16 +57,18 @@ def test_splits_refuse_what_they_cannot_split(argv, said, tmp_path, capsys):
     assert said in capsys.readouterr().err
 
 
-def fake_split(out: Path, failing: str | None = None) -> Callable[[list[str]], int]:
+def fake_split(out: Path, failing: str | None = None, models: list | None = None) -> Callable[..., int]:
     """A stand-in for one split's run (`splits.discrepancy_main`): writes a report.json into OUT/<held out>, or returns
-    2 where the sequence held out is `failing`."""
+    2 where the sequence held out is `failing`; the `--network` model each run was given goes into `models`."""
     from gyrodenoise.discrepancy.splits import GAPS
 
     gap = dict.fromkeys(GAPS, 1.0)
     report = {"named_effects": [], "verdict": "v", "gap_before": gap, "gap_after": gap, "wall_time_s": 1.0,
               "machine": "m"}  # fmt: skip
 
-    def one_split(argv: list[str]) -> int:
+    def one_split(argv: list[str], network_model=None) -> int:
+        if models is not None:
+            models.append(network_model)
         held = argv[argv.index("--holdout") + 1]
         if held == failing:
             return 2
@@ -94,7 +96,7 @@ def test_a_rerun_that_stops_leaves_no_earlier_summary_beside_its_own_reports(tmp
     first = tmp_path / "first"  # a split that fails first leaves an earlier run's outputs as they were
     first.mkdir()
     (first / "summary.md").write_text("the earlier run's")
-    monkeypatch.setattr(splits, "discrepancy_main", lambda argv: 2)
+    monkeypatch.setattr(splits, "discrepancy_main", lambda argv, network_model=None: 2)
     with pytest.raises(SystemExit):
         main(["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(first)])
     assert (first / "summary.md").read_text() == "the earlier run's"
@@ -121,7 +123,7 @@ def test_ctrl_c_is_one_line_and_status_130(tmp_path, monkeypatch, capsys):
     import gyrodenoise.discrepancy.splits as splits
     from gyrodenoise.notices import INTERRUPTED, interrupt_in_one_line
 
-    def interrupted(argv: list[str]) -> int:
+    def interrupted(argv: list[str], network_model=None) -> int:
         raise KeyboardInterrupt
 
     argv = ["--sequences", "a", "b", "--root", str(tmp_path), "--out", str(tmp_path / "out")]
@@ -133,3 +135,17 @@ def test_ctrl_c_is_one_line_and_status_130(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(splits, "agreement", lambda rows: interrupted([]))
     assert main(argv) == 130 and capsys.readouterr().err == f"{INTERRUPTED}\n"
     assert not (tmp_path / "out" / "summary.json").exists()
+
+
+def test_the_network_is_loaded_once_for_all_the_splits(tmp_path, monkeypatch):
+    """Each split's run loaded --network again (and said its warnings again): N + 1 loads for N splits."""
+    import gyrodenoise.discrepancy.splits as splits
+    import gyrodenoise.pretrained as pretrained
+
+    loads, load = [], pretrained.load_model
+    monkeypatch.setattr(pretrained, "load_model", lambda model, *a, **kw: loads.append(model) or load(model, *a, **kw))
+    models: list = []
+    monkeypatch.setattr(splits, "discrepancy_main", fake_split(tmp_path / "out", models=models))
+    argv = ["--sequences", "a", "b", "c", "--network", "euroc", "--root", str(tmp_path), "--out", str(tmp_path / "out")]
+    assert main(argv) == 0
+    assert loads == ["euroc"] and len(models) == 3 and all(m is models[0] and m is not None for m in models)

@@ -220,9 +220,14 @@ def noise_density(text: str) -> float:
     return sigma
 
 
-def parse_args(argv: list[str] | None = None, error: Callable[[str], NoReturn] | None = None) -> argparse.Namespace:
+def parse_args(
+    argv: list[str] | None = None,
+    error: Callable[[str], NoReturn] | None = None,
+    network_model: tuple[Any, dict] | None = None,
+) -> argparse.Namespace:
     """The options, checked; `error`: what says a wrong one and exits (default: this parser's `error`; the splits
-    pass their own parser's, so that their errors carry their name and usage)."""
+    pass their own parser's, so that their errors carry their name and usage). `network_model`: the `--network`
+    model already loaded (the splits load it once for all their runs, and say its warnings once)."""
     p = build_parser()
     if error is not None:
         p.error = error  # type: ignore[method-assign]  # argparse's own errors (a bad value, an unknown option) too
@@ -258,8 +263,8 @@ def parse_args(argv: list[str] | None = None, error: Callable[[str], NoReturn] |
         p.error(f"--out {args.out}: {problem}")
     # (model, metadata), loaded once, here, for the rate check and the regression (each loaded it again); a model
     # that did not beat the calibrated baseline is said now, not after the minutes of the selection
-    args.network_model = None
-    if args.network is not None:  # a wrong model is said now, not after the minutes of the effects' selection
+    args.network_model = network_model if args.network is not None else None
+    if args.network is not None and network_model is None:  # a wrong model is said now, not after the minutes
         from gyrodenoise.pretrained import ModelFileError, load_model
 
         try:
@@ -311,8 +316,9 @@ OWN_OUTPUTS = ("report.md", "error_model.yaml", *(f"{n}.png" for n in PLOT_NAMES
 
 
 @interrupt_in_one_line
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+def main(argv: list[str] | None = None, network_model: tuple[Any, dict] | None = None) -> int:
+    """The command; `network_model`: the `--network` model already loaded (`parse_args`)."""
+    args = parse_args(argv, network_model=network_model)
     t0 = time.time()
     if (earlier := read_marker(args.out / "report.json")) is not None:  # replaced when this run has finished
         said = earlier.get("command", "?")

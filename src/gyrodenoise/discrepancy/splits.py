@@ -22,6 +22,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from gyrodenoise.atomic import output_path_problem, write_text
 from gyrodenoise.discrepancy.__main__ import main as discrepancy_main
@@ -32,7 +33,8 @@ from gyrodenoise.paths import portable_command
 PROG = "python -m gyrodenoise.discrepancy.splits"
 
 
-def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
+def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str], tuple[Any, dict] | None]:
+    """The splits' options, the options passed on (checked), and the `--network` model loaded for all the runs."""
     p = argparse.ArgumentParser(
         prog=PROG,
         description=__doc__.split("\n")[0],
@@ -53,20 +55,24 @@ def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str]]:
     # the options passed on, checked now as the first split reads them, and said under this command's name and usage
     # (in the first split's run they were `python -m gyrodenoise.discrepancy`'s, whose usage asks for --fit)
     held, *fit = args.sequences
-    discrepancy_args([*rest, "--fit", *fit, "--holdout", held, "--out", str(args.out / held)], error=p.error)
-    return args, rest
+    checked = discrepancy_args([*rest, "--fit", *fit, "--holdout", held, "--out", str(args.out / held)], error=p.error)
+    return args, rest, checked.network_model
 
 
 SUMMARY_FILES = ("summary.json", "summary.md")
 GAPS = ("residual_rms_rad_s", "drift_10s_median_deg", "allan_gap_log10", "psd_gap_log10")
 
 
-def run_splits(sequences: list[str], out: Path, passthrough: list[str]) -> list[dict]:
-    """Run the workflow once per held-out sequence; returns the per-split summaries."""
+def run_splits(
+    sequences: list[str], out: Path, passthrough: list[str], network_model: tuple[Any, dict] | None = None
+) -> list[dict]:
+    """Run the workflow once per held-out sequence; returns the per-split summaries. `network_model`: the
+    `--network` model, loaded once (None: each run loads what its options name)."""
     rows = []
     for held in sequences:
         fit = [s for s in sequences if s != held]
-        code = discrepancy_main([*passthrough, "--fit", *fit, "--holdout", held, "--out", str(out / held)])
+        argv = [*passthrough, "--fit", *fit, "--holdout", held, "--out", str(out / held)]
+        code = discrepancy_main(argv, network_model=network_model)
         if code == 130:  # Ctrl-C: the split's run has said it in its line; the others are not run
             raise SystemExit(130)
         if code:  # its error is above; the other splits' verdicts would not be the same workflow's
@@ -145,8 +151,8 @@ def summary_md(rows: list[dict], agree: dict, command: str) -> str:
 
 @interrupt_in_one_line
 def main(argv: list[str] | None = None) -> int:
-    args, rest = parse_args(argv)
-    rows = run_splits(args.sequences, args.out, rest)
+    args, rest, network_model = parse_args(argv)
+    rows = run_splits(args.sequences, args.out, rest, network_model)
     agree = agreement(rows)
     command = f"{PROG} " + portable_command(sys.argv[1:] if argv is None else argv)
     summary = {"command": command, "splits": rows, **agree}
