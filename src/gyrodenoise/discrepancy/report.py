@@ -9,7 +9,7 @@ import numpy as np
 from gyrodenoise.atomic import write_json, write_text
 from gyrodenoise.discrepancy.gyro_lines import LINE_RATIO, NEIGHBOURS_HZ
 from gyrodenoise.discrepancy.rank import MIN_DRIFT_DEG
-from gyrodenoise.discrepancy.report_plots import plots
+from gyrodenoise.discrepancy.report_plots import PLOT_NAMES, plots
 from gyrodenoise.discrepancy.truth_check import BANDS_HZ, FOLLOWS_RATIO, TRUTH_FREE
 from gyrodenoise.discrepancy.workflow import NO_EFFECT
 
@@ -659,14 +659,7 @@ def _identifiability_md(report: dict) -> list[str]:
     return lines + [""]
 
 
-PLOT_ALT = {  # the figures `report_plots.plots` may draw, in report.md's order, with their alt text
-    "allan.png": "Allan deviation",
-    "spectrum.png": "spectrum",
-    "residual.png": "residual",
-    "drift.png": "drift",
-    "gap.png": "gap",
-    "unexplained.png": "unexplained",
-}
+PLOT_ALT = {"allan": "Allan deviation"}  # a figure's alt text in report.md, where it is not its name
 
 
 def markdown(report: dict) -> str:
@@ -803,7 +796,7 @@ def markdown(report: dict) -> str:
     # only the figures drawn (`report["plots"]`): a figure with nothing to draw (no drift window as long as the
     # recordings, no gap measured) is not written, and a link to it would be a broken image
     drawn = report.get("plots") or []
-    links = [f"![{alt}]({name})" for name, alt in PLOT_ALT.items() if name in drawn]
+    links = [f"![{PLOT_ALT.get(n, n)}]({n}.png)" for n in PLOT_NAMES if f"{n}.png" in drawn]
     lines += ["", "## Plots", "", *([" ".join(links)] if links else ["(none drawn)"]), ""]
     if report.get("network"):
         lines += _network_md(report["network"])

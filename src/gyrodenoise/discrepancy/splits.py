@@ -27,10 +27,11 @@ from typing import Any
 from gyrodenoise.atomic import output_path_problem, write_text
 from gyrodenoise.discrepancy.__main__ import main as discrepancy_main
 from gyrodenoise.discrepancy.__main__ import parse_args as discrepancy_args
+from gyrodenoise.launch import PYTHON_M
 from gyrodenoise.notices import interrupt_in_one_line
 from gyrodenoise.paths import portable_command
 
-PROG = "python -m gyrodenoise.discrepancy.splits"
+PROG = PYTHON_M["discrepancy.splits"]  # as the command is typed
 
 
 def parse_args(argv: list[str] | None) -> tuple[argparse.Namespace, list[str], tuple[Any, dict] | None]:

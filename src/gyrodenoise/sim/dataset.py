@@ -42,7 +42,7 @@ KINDS = {"drone": drone_trajectory, "hand": handheld_trajectory}
 NEUTRAL_SETTINGS = {"acc_error_model": ([], None)}
 
 
-# what generate_sequence takes for a setting left out: a folder whose record leaves one out was simulated at it
+# what the generation takes for a setting left out (and a folder whose record leaves one out was simulated at)
 GENERATION_DEFAULTS = {
     "seed": 0,
     "duration_s": 120.0,
@@ -85,7 +85,8 @@ def _error_models(generation: Mapping) -> tuple[list[Effect], list, float]:
         )
     acc_entries = [dict(c) if hasattr(c, "keys") else c for c in acc_entries]
     acc_effects = acc_effects_from_config(acc_entries, "dataset.generation.acc_error_model")
-    jitter = float(generation.get("bias_jitter_rad_s", 0.0))  # turn-on bias: differs per sequence
+    # the turn-on bias: differs per sequence
+    jitter = float(generation.get("bias_jitter_rad_s", GENERATION_DEFAULTS["bias_jitter_rad_s"]))
     if not jitter >= 0:  # NaN included
         raise ValueError(f"dataset.generation.bias_jitter_rad_s={jitter!r}: the turn-on bias spread in rad/s, >= 0")
     return effects, acc_effects, jitter
@@ -96,12 +97,12 @@ def check_generation(generation: Mapping, model_file: str | None = None) -> None
     from the commands, not Hydra's 'Error in call to target' block) naming the dataset.generation setting
     (`model_file`: the error_model_file its error model was read from)."""
     values = {}
-    for key, default in (("rate_hz", 200.0), ("duration_s", 120.0), ("acc_noise_density", 2.0e-3)):
+    for key in ("rate_hz", "duration_s", "acc_noise_density"):
         try:
-            values[key] = float(generation.get(key, default))
+            values[key] = float(generation.get(key, GENERATION_DEFAULTS[key]))
         except (ValueError, TypeError):
             raise ConfigError(f"dataset.generation.{key}={generation.get(key)!r}: give a number") from None
-    acc_bias = generation.get("acc_bias", (0.0, 0.0, 0.0))
+    acc_bias = generation.get("acc_bias", GENERATION_DEFAULTS["acc_bias"])
     try:
         np.asarray(acc_bias, dtype=np.float64)
     except (ValueError, TypeError):
@@ -123,9 +124,9 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     kind = name.split("_")[0]
     if kind not in KINDS:
         raise ValueError(f"simulated sequence {name!r}: the name must start with one of {sorted(KINDS)} + '_'")
-    seed = _sequence_seed(int(generation.get("seed", 0)), name)
+    seed = _sequence_seed(int(generation.get("seed", GENERATION_DEFAULTS["seed"])), name)
     rng = np.random.default_rng(seed)
-    duration = float(generation.get("duration_s", 120.0))
+    duration = float(generation.get("duration_s", GENERATION_DEFAULTS["duration_s"]))
     traj = KINDS[kind](duration + 2.0, int(rng.integers(1 << 30)))
     effects, acc_effects, jitter = _error_models(generation)
     if jitter > 0:
@@ -133,11 +134,11 @@ def generate_sequence(folder: Path, name: str, generation: Mapping) -> Path:
     sim = simulate_imu(
         traj,
         effects,
-        rate_hz=float(generation.get("rate_hz", 200.0)),
+        rate_hz=float(generation.get("rate_hz", GENERATION_DEFAULTS["rate_hz"])),
         duration_s=duration,
         seed=int(rng.integers(1 << 30)),
-        acc_noise_density=float(generation.get("acc_noise_density", 2.0e-3)),
-        acc_bias=tuple(generation.get("acc_bias", (0.0, 0.0, 0.0))),
+        acc_noise_density=float(generation.get("acc_noise_density", GENERATION_DEFAULTS["acc_noise_density"])),
+        acc_bias=tuple(generation.get("acc_bias", GENERATION_DEFAULTS["acc_bias"])),
         acc_effects=acc_effects,
     )
     # several jobs may generate the same data set at once (a job array on a fresh cache): the first copy stays
@@ -200,9 +201,9 @@ def _differences(recorded: dict, config: dict) -> list[str]:
     return out
 
 
-def check_recorded(root: Path, generation: Mapping) -> bool:
-    """Whether the explicit folder `root` records settings, which must be `generation`'s (ConfigError naming those
-    that differ). False where it records none: a folder with sequences in it is then warned about once (they may
+def check_recorded(root: Path, generation: Mapping) -> list[str] | None:
+    """The sequences the explicit folder `root` records, whose settings must be `generation`'s (ConfigError naming
+    those that differ). None where it records none: a folder with sequences in it is then warned about once (they may
     have been simulated with any settings), an empty or new one is not (it will be simulated here)."""
     path = root / RECORD
     if not path.is_file():
@@ -215,7 +216,7 @@ def check_recorded(root: Path, generation: Mapping) -> bool:
                 SimSettingsWarning,
                 stacklevel=3,
             )
-        return False
+        return None
     try:
         record = json.loads(path.read_text())
         recorded = _comparable(record["generation"])
@@ -234,7 +235,7 @@ def check_recorded(root: Path, generation: Mapping) -> bool:
             f"its {RECORD}): delete the folder to simulate it anew there, drop dataset.root to use the cache folder "
             "of these settings, or give dataset.generation the folder's settings"
         )
-    return True
+    return list(record.get("names", []))
 
 
 def with_error_model_file(gen: dict) -> dict:
@@ -243,7 +244,7 @@ def with_error_model_file(gen: dict) -> dict:
     path = gen.pop("error_model_file", None)
     if path is None:
         return gen
-    gen["error_model"], jitter = load_error_model(path, float(gen.get("rate_hz", 200.0)))
+    gen["error_model"], jitter = load_error_model(path, float(gen.get("rate_hz", GENERATION_DEFAULTS["rate_hz"])))
     if jitter is not None:
         gen["bias_jitter_rad_s"] = float(jitter)
     return gen
@@ -278,13 +279,12 @@ class SimDataModule(ImuDataModule):
             data_root = Path(root)
             recorded = check_recorded(data_root, gen)
             # a folder with unrecorded sequences is not given a record: it would vouch for data it never checked
-            unrecorded = not recorded and data_root.is_dir() and any(data_root.iterdir())
+            unrecorded = recorded is None and data_root.is_dir() and any(data_root.iterdir())
             for name in names:
                 if not asl_written(data_root / name):
                     generate_sequence(data_root, name, gen)
             if not unrecorded:
-                before = json.loads((data_root / RECORD).read_text()).get("names", []) if recorded else []
-                _write_record(data_root, gen, sorted(set(before) | set(names)))
+                _write_record(data_root, gen, sorted(set(recorded or []) | set(names)))
         else:
             data_root = ensure_generated(gen, names, cache_dir)
         super().__init__(root=str(data_root), cache_dir=cache_dir, **kwargs)
